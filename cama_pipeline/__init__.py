@@ -1,0 +1,1 @@
+"""CAMA Studio reconstruction pipeline: from nuScenes-layout driving data to BEV rasters."""
