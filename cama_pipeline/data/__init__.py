@@ -1,0 +1,36 @@
+"""Loading nuScenes-layout data sets (real nuScenes or the synthetic one) into typed, validated objects."""
+
+from cama_pipeline.data.errors import DatasetError
+from cama_pipeline.data.loader import find_version, load_can, load_dataset
+from cama_pipeline.data.model import (
+    CameraCalibration,
+    CameraImage,
+    CanData,
+    Dataset,
+    Frame,
+    GnssSeries,
+    ImuSeries,
+    Pose,
+    Scene,
+    WheelSeries,
+)
+from cama_pipeline.data.tables import read_table, read_tables
+
+__all__ = [
+    "CameraCalibration",
+    "CameraImage",
+    "CanData",
+    "Dataset",
+    "DatasetError",
+    "Frame",
+    "GnssSeries",
+    "ImuSeries",
+    "Pose",
+    "Scene",
+    "WheelSeries",
+    "find_version",
+    "load_can",
+    "load_dataset",
+    "read_table",
+    "read_tables",
+]

@@ -51,7 +51,15 @@ OPTIONAL_TABLES: tuple[str, ...] = (
 """Tables nuScenes has that CAMA Studio writes (mostly empty) but does not need."""
 
 TABLE_FIELDS: dict[str, tuple[str, ...]] = {
-    "scene": ("token", "log_token", "nbr_samples", "first_sample_token", "last_sample_token", "name", "description"),
+    "scene": (
+        "token",
+        "log_token",
+        "nbr_samples",
+        "first_sample_token",
+        "last_sample_token",
+        "name",
+        "description",
+    ),
     "sample": ("token", "timestamp", "prev", "next", "scene_token"),
     "sample_data": (
         "token",
@@ -86,7 +94,13 @@ IMU_FIELDS: tuple[str, ...] = ("utime", "linear_accel", "rotation_rate", "q")
 
 WHEEL_MESSAGE = "zoe_veh_info"
 """100 Hz: utime, {FL,FR,RL,RR}_wheel_speed [rpm]; wheel radius in WHEEL_RADIUS_M."""
-WHEEL_FIELDS: tuple[str, ...] = ("utime", "FL_wheel_speed", "FR_wheel_speed", "RL_wheel_speed", "RR_wheel_speed")
+WHEEL_FIELDS: tuple[str, ...] = (
+    "utime",
+    "FL_wheel_speed",
+    "FR_wheel_speed",
+    "RL_wheel_speed",
+    "RR_wheel_speed",
+)
 WHEEL_RADIUS_M = 0.305
 """nuScenes' Renault Zoe wheel radius, as the nuScenes CAN bus tutorial uses."""
 

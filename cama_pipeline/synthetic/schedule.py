@@ -1,0 +1,48 @@
+"""When each camera fires in a clip: 12 Hz sweeps with per-camera offsets, 2 Hz samples, key-frame choice."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cama_pipeline.synthetic.rig import RigCamera
+
+
+@dataclass(frozen=True)
+class CameraShot:
+    """One camera image of a clip."""
+
+    channel: str
+    timestamp_us: int
+    sample_index: int
+    """The sample (key frame) this image belongs to: its key frame if `is_key_frame`, else the nearest."""
+    is_key_frame: bool
+    sweep_index: int
+
+
+@dataclass(frozen=True)
+class ClipSchedule:
+    """Sample timestamps and every camera shot of a clip, in time order per camera."""
+
+    sample_times_us: tuple[int, ...]
+    shots: tuple[CameraShot, ...]
+
+
+def schedule_clip(
+    start_time_us: int, duration_s: float, rig: tuple[RigCamera, ...], sweep_hz: float, sample_hz: float
+) -> ClipSchedule:
+    """Sweeps every 1/sweep_hz (plus each camera's offset), samples every 1/sample_hz; per camera and sample,
+    the shot nearest the sample time is its key frame, as in nuScenes."""
+    n_samples = int(np.floor(duration_s * sample_hz)) + 1
+    sample_times = [start_time_us + int(round(k * 1e6 / sample_hz)) for k in range(n_samples)]
+    n_sweeps = int(np.floor(duration_s * sweep_hz)) + 1
+    shots: list[CameraShot] = []
+    for cam in rig:
+        times = np.array(
+            [start_time_us + int(round(j * 1e6 / sweep_hz)) + cam.offset_us for j in range(n_sweeps)]
+        )
+        key_sweeps = {int(np.argmin(np.abs(times - ts))): k for k, ts in enumerate(sample_times)}
+        for j, ts in enumerate(times):
+            nearest_sample = int(np.argmin(np.abs(np.asarray(sample_times) - ts)))
+            is_key = j in key_sweeps
+            shots.append(CameraShot(cam.channel, int(ts), key_sweeps.get(j, nearest_sample), is_key, j))
+    return ClipSchedule(tuple(sample_times), tuple(shots))
