@@ -30,19 +30,22 @@ class ClipSchedule:
 def schedule_clip(
     start_time_us: int, duration_s: float, rig: tuple[RigCamera, ...], sweep_hz: float, sample_hz: float
 ) -> ClipSchedule:
-    """Sweeps every 1/sweep_hz (plus each camera's offset), samples every 1/sample_hz; per camera and sample,
-    the shot nearest the sample time is its key frame, as in nuScenes."""
+    """Sweeps every 1/sweep_hz (plus each camera's offset), samples every 1/sample_hz."""
     n_samples = int(np.floor(duration_s * sample_hz)) + 1
     sample_times = [start_time_us + int(round(k * 1e6 / sample_hz)) for k in range(n_samples)]
     n_sweeps = int(np.floor(duration_s * sweep_hz)) + 1
+    nominal = start_time_us + np.round(np.arange(n_sweeps) * 1e6 / sweep_hz).astype(np.int64)
+    samples = np.asarray(sample_times)
+    # A sample's key frames are one sweep of all cameras (the sweep nominally nearest to it), so the six
+    # key-frame images of a sample fire within the rig's trigger spread, as nuScenes' do.
+    key_sweeps = {int(np.argmin(np.abs(nominal - ts))): k for k, ts in enumerate(sample_times)}
+    nearest_sample = np.abs(nominal[:, None] - samples[None, :]).argmin(axis=1)
     shots: list[CameraShot] = []
     for cam in rig:
-        times = np.array(
-            [start_time_us + int(round(j * 1e6 / sweep_hz)) + cam.offset_us for j in range(n_sweeps)]
-        )
-        key_sweeps = {int(np.argmin(np.abs(times - ts))): k for k, ts in enumerate(sample_times)}
-        for j, ts in enumerate(times):
-            nearest_sample = int(np.argmin(np.abs(np.asarray(sample_times) - ts)))
-            is_key = j in key_sweeps
-            shots.append(CameraShot(cam.channel, int(ts), key_sweeps.get(j, nearest_sample), is_key, j))
+        for j, ts in enumerate(nominal + cam.offset_us):
+            shots.append(
+                CameraShot(
+                    cam.channel, int(ts), key_sweeps.get(j, int(nearest_sample[j])), j in key_sweeps, j
+                )
+            )
     return ClipSchedule(tuple(sample_times), tuple(shots))

@@ -1,0 +1,31 @@
+"""A tiny synthetic site, generated once per test session, shared read-only by the tests."""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from cama_pipeline.synthetic.config import SynthConfig, preset
+from cama_pipeline.synthetic.generate import SynthResult, run
+
+
+@dataclass(frozen=True)
+class GeneratedSite:
+    """A generated site and the config that made it."""
+
+    config: SynthConfig
+    result: SynthResult
+
+
+@pytest.fixture(scope="session")
+def tiny_site(tmp_path_factory: pytest.TempPathFactory) -> GeneratedSite:
+    """The `tiny` preset generated with two render processes."""
+    cfg = preset("tiny")
+    out = tmp_path_factory.mktemp("synth") / "tiny"
+    return GeneratedSite(cfg, run(cfg, out, workers=2, show_progress=False))
+
+
+@pytest.fixture()
+def site_root(tiny_site: GeneratedSite) -> Path:
+    """Root folder of the tiny site."""
+    return tiny_site.result.out_dir
