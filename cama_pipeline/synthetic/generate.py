@@ -94,7 +94,7 @@ def run(
     dataset_root = staging / DATASET_DIR
     true_poses = _write_tables_and_can(site, dataset_root)
     n_images = _render_all(site, dataset_root, workers, show_progress)
-    _write_ground_truth(site, staging / GROUND_TRUTH_DIR, true_poses, dataset_root)
+    _write_ground_truth(site, staging / GROUND_TRUTH_DIR, true_poses, dataset_root, show_progress)
     scenes = {clip.name: clip.kind for clip in site.clips}
     manifest = {
         "fingerprint": fingerprint(cfg),
@@ -283,25 +283,32 @@ def _key_frame_cameras(site: SyntheticSite) -> list[tuple[np.ndarray, np.ndarray
 
 
 def _write_ground_truth(
-    site: SyntheticSite, gt_dir: Path, true_poses: dict[str, dict], dataset_root: Path
+    site: SyntheticSite, gt_dir: Path, true_poses: dict[str, dict], dataset_root: Path, show_progress: bool
 ) -> None:
     """Vector map, baseline map, true poses and BEV rasters; also the data set's drivable-area prior."""
     cfg = site.config
-    atomic_write_json(
-        gt_dir / "vector_map.json", {"elements": gt.vector_map(site.layout, site.world, cfg.site_origin_xy)}
-    )
-    atomic_write_json(
-        gt_dir / "baseline_map.json", gt.baseline_map(site.layout, cfg.site_origin_xy, sub_rng(cfg.seed, 21))
-    )
-    atomic_write_json(gt_dir / "poses.json", true_poses)
-    grid = gt.bev_grid_for(site.world, cfg.bev_resolution_m)
-    semantic, photometric, elevation = gt.render_bev(site.world, grid)
-    count = gt.observation_count(grid, elevation, _key_frame_cameras(site))
-    bev = gt_dir / "bev"
-    atomic_write_image(bev / "semantic.png", gt.unobserved_to_255(semantic, count))
-    atomic_write_image(bev / "photometric.png", cv2.cvtColor(photometric, cv2.COLOR_RGB2BGR))
-    atomic_write_npy(bev / "elevation.npy", elevation)
-    atomic_write_image(bev / "observation_count.png", count)
-    atomic_write_json(bev / "georeference.json", grid.georeference(cfg.site_origin_xy), indent=2)
-    drivable = np.isin(semantic, [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)])
-    atomic_write_image(dataset_root / "maps" / "drivable_area.png", drivable.astype(np.uint8) * 255)
+    columns = (TextColumn("ground truth: {task.description}"), BarColumn(), MofNCompleteColumn())
+    with Progress(*columns, disable=not show_progress) as progress:
+        bar = progress.add_task("vector maps", total=4)
+        vectors = gt.vector_map(site.layout, site.world, cfg.site_origin_xy)
+        atomic_write_json(gt_dir / "vector_map.json", {"elements": vectors})
+        baseline = gt.baseline_map(site.layout, cfg.site_origin_xy, sub_rng(cfg.seed, 21))
+        atomic_write_json(gt_dir / "baseline_map.json", baseline)
+        atomic_write_json(gt_dir / "poses.json", true_poses)
+        progress.update(bar, advance=1, description="BEV rasters")
+        grid = gt.bev_grid_for(site.world, cfg.bev_resolution_m)
+        semantic, photometric, elevation = gt.render_bev(site.world, grid)
+        progress.update(bar, advance=1, description="observation count")
+        count = gt.observation_count(grid, elevation, _key_frame_cameras(site))
+        progress.update(bar, advance=1, description="writing rasters")
+        bev = gt_dir / "bev"
+        atomic_write_image(bev / "semantic.png", gt.unobserved_to_255(semantic, count))
+        atomic_write_image(bev / "photometric.png", cv2.cvtColor(photometric, cv2.COLOR_RGB2BGR))
+        atomic_write_npy(bev / "elevation.npy", elevation)
+        atomic_write_image(bev / "observation_count.png", count)
+        atomic_write_json(bev / "georeference.json", grid.georeference(cfg.site_origin_xy), indent=2)
+        drivable = np.isin(
+            semantic, [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
+        )
+        atomic_write_image(dataset_root / "maps" / "drivable_area.png", drivable.astype(np.uint8) * 255)
+        progress.update(bar, advance=1, description="done")

@@ -179,7 +179,7 @@ def _shade_ground(
     """Colour and labels of the pixels whose nearest surface is the ground."""
     x = float(origin[0]) + t * d[:, 0]
     y = float(origin[1]) + t * d[:, 1]
-    footprint = t / focal / d[:, 2].abs().clamp(min=0.08)
+    footprint = t / focal / d[:, 2].abs().clamp(min=0.05).sqrt()  # geometric mean of the footprint axes
     albedo, label, inst = ground_color(world.atlas, world.noise, x, y, footprint)
     gx, gy = world.terrain.gradient(x, y)
     normal = torch.stack([-gx, -gy, torch.ones_like(gx)], dim=1)

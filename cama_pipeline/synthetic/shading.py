@@ -95,7 +95,7 @@ def ground_color(
     label = atlas.nearest(atlas.label, x, y)
     instance = atlas.nearest(atlas.instance, x, y)
     raised = atlas.nearest(atlas.raised, x, y) > 127
-    grain = noise.fbm(x, y, footprint_m, ((4.0, 0.07), (1.0, 0.06), (0.25, 0.08), (0.06, 0.10)))
+    grain = noise.fbm(x, y, footprint_m, ((4.0, 0.05), (1.0, 0.06), (0.3, 0.10), (0.12, 0.12), (0.05, 0.16)))
     is_curb = label == Semantic.CURB
     is_background = label == Semantic.BACKGROUND
     sidewalk = is_background & raised
@@ -113,13 +113,24 @@ def ground_color(
         & sidewalk
         & (footprint_m < 0.05)
     )
-    color = base * (1.0 + strength * grain + specks - 0.25 * joints.float())[:, None]
+    wear = _wear_marks(noise, x, y, footprint_m) * (~is_background & ~is_curb).float()
+    color = base * (1.0 + strength * grain + specks - 0.25 * joints.float() - wear)[:, None]
     painted = torch.nonzero(atlas.nearest(atlas.paint_alpha, x, y) > 0).squeeze(1)
     if painted.numel():
         color[painted] = _paint_over(
             atlas, noise, x[painted], y[painted], footprint_m[painted], color[painted]
         )
     return color.clamp(0.0, 1.0), label.to(torch.uint8), instance.to(torch.int32)
+
+
+def _wear_marks(noise: NoiseBank, x: torch.Tensor, y: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
+    """Darkening by crisp-edged repair patches, oil stains and sealed cracks: the corners and blobs that
+    give real asphalt its matchable features."""
+    patches = (noise.octave(14, x, y, 3.0, footprint) > 1.0).float() * 0.16
+    stains = (noise.octave(15, x, y, 0.7, footprint) > 1.3).float() * 0.12
+    crack_field = noise.octave(6, x, y, 2.5, footprint).abs()
+    cracks = (crack_field < 0.05).float() * 0.3 * (footprint < 0.04).float()
+    return patches + stains + cracks
 
 
 def _paint_over(
