@@ -1,0 +1,66 @@
+"""The vector annotation model: schema, geometry (shapely), coordinate transforms and the 2D -> 3D lift."""
+
+from annotations.geometry import (
+    MAPTR_RANGE,
+    Box,
+    clip_to_box,
+    densify,
+    is_closed,
+    resample_fixed,
+    resample_spacing,
+    simplify,
+    validate_geometry,
+)
+from annotations.lift import LiftError, LiftResult, lift_element, lift_points
+from annotations.schema import (
+    ELEMENT_CLASSES,
+    AnnotationSet,
+    ElementClass,
+    Georeference,
+    MapElement,
+    ReviewState,
+    Source,
+)
+from annotations.transforms import (
+    ego_from_global_points,
+    global_from_ego_points,
+    global_from_pixel_points,
+    global_from_site_points,
+    pixel_from_global_points,
+    pixel_from_site_points,
+    rotation_from_quaternion,
+    site_from_global_points,
+    site_from_pixel_points,
+)
+
+__all__ = [
+    "ELEMENT_CLASSES",
+    "MAPTR_RANGE",
+    "AnnotationSet",
+    "Box",
+    "ElementClass",
+    "Georeference",
+    "LiftError",
+    "LiftResult",
+    "MapElement",
+    "ReviewState",
+    "Source",
+    "clip_to_box",
+    "densify",
+    "ego_from_global_points",
+    "global_from_ego_points",
+    "global_from_pixel_points",
+    "global_from_site_points",
+    "is_closed",
+    "lift_element",
+    "lift_points",
+    "pixel_from_global_points",
+    "pixel_from_site_points",
+    "resample_fixed",
+    "resample_spacing",
+    "rotation_from_quaternion",
+    "simplify",
+    "site_from_global_points",
+    "site_from_pixel_points",
+    "validate_geometry",
+]

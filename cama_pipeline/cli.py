@@ -68,5 +68,14 @@ def synth(
     console.print(f"  {result.images} camera images with semantic and lane-instance masks")
 
 
+def _register_stage_commands() -> None:
+    """Commands whose implementation lives beside their stage (imported here, registered by name)."""
+    from cama_pipeline.evaluate.command import eval_command
+
+    app.command("eval")(eval_command)
+
+
+_register_stage_commands()
+
 if __name__ == "__main__":
     app()

@@ -1,0 +1,96 @@
+"""`cama eval`: SRE / precision / recall / F1 of a vector map over a data set, printed and written as JSON."""
+
+import logging
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from cama_pipeline.data import DatasetError, load_dataset
+from cama_pipeline.evaluate.inputs import EvaluationInputError, load_true_poses, load_vector_map
+from cama_pipeline.evaluate.projection import ProjectionConfig
+from cama_pipeline.evaluate.sre import SreConfig
+from cama_pipeline.evaluate.sre_dataset import evaluate_sre
+from cama_pipeline.evaluate.sre_report import SreReport, SreSummary
+from cama_pipeline.io import atomic_write_json
+from cama_pipeline.semantics import Semantic
+
+logger = logging.getLogger(__name__)
+console = Console()
+
+
+class PoseSource(StrEnum):
+    """Which ego poses project the map."""
+
+    true = "true"
+    coarse = "coarse"
+
+
+def eval_command(
+    dataset: Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")],
+    vector_map: Annotated[
+        Path, typer.Argument(help="Vector map JSON ({'elements': [...]}, 3D or 2D points).")
+    ],
+    out: Annotated[Path, typer.Option(help="Where to write the JSON report.")] = Path("sre_report.json"),
+    poses: Annotated[
+        PoseSource, typer.Option(help="true (needs --true-poses) or coarse (the logged ego_pose).")
+    ] = PoseSource.coarse,
+    true_poses: Annotated[
+        Path | None, typer.Option(help="Ground-truth poses.json (for --poses true).")
+    ] = None,
+    boundaries: Annotated[bool, typer.Option(help="Also match boundaries against curb instances.")] = False,
+    scene: Annotated[list[str] | None, typer.Option(help="Evaluate only this scene (repeatable).")] = None,
+    gate_px: Annotated[float, typer.Option(help="Matching gate in pixels at 960 px width.")] = 30.0,
+    range_m: Annotated[float, typer.Option(help="Crop the map to this distance from each camera.")] = 50.0,
+) -> None:
+    """Semantic reprojection error (CAMAv2 Algorithm 2) of a vector map against the image lane instances."""
+    try:
+        pairs = [("divider", int(Semantic.LANE_MARKING))] + (
+            [("boundary", int(Semantic.CURB))] if boundaries else []
+        )
+        config = SreConfig(
+            class_pairs=tuple(pairs), gate_px=gate_px, projection=ProjectionConfig(range_m=range_m)
+        )
+        if poses is PoseSource.true and true_poses is None:
+            raise EvaluationInputError("--poses true needs --true-poses PATH (the ground-truth poses.json)")
+        pose_table = load_true_poses(true_poses) if poses is PoseSource.true and true_poses else None
+        elements = load_vector_map(vector_map)
+        data = load_dataset(dataset)
+        report = evaluate_sre(data, elements, config, true_poses=pose_table, scenes=scene, show_progress=True)
+    except (EvaluationInputError, DatasetError, FileNotFoundError, ValueError) as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(code=2) from err
+    atomic_write_json(out, report.to_json(), indent=1)
+    console.print(report_table(report, f"SRE of {vector_map.name} ({poses.value} poses)"))
+    console.print(f"report written to {out}")
+
+
+def report_table(report: SreReport, title: str) -> Table:
+    """A rich table: overall, per scene and per camera rows."""
+    table = Table(title=title)
+    for name in (
+        "",
+        "SRE px",
+        "SRE @960 px",
+        "precision",
+        "recall",
+        "F1",
+        "matched",
+        "projected",
+        "image inst.",
+    ):
+        table.add_column(name, justify="left" if not name else "right")
+    rows = [("overall", report.overall)] + list(report.per_scene.items()) + list(report.per_camera.items())
+    for name, summary in rows:
+        table.add_row(name, *_cells(summary))
+    return table
+
+
+def _cells(summary: SreSummary) -> list[str]:
+    """Formatted figures of one summary row."""
+    figures = [summary.sre_px, summary.sre_ref_px, summary.precision, summary.recall, summary.f1]
+    formatted = ["-" if v is None else f"{v:.2f}" if i < 2 else f"{v:.3f}" for i, v in enumerate(figures)]
+    return formatted + [str(summary.matched), str(summary.projected), str(summary.image_instances)]

@@ -1,0 +1,103 @@
+"""SRE over a data set: every key-frame camera image of the chosen scenes, with coarse or true poses."""
+
+import logging
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from cama_pipeline.data import CameraImage, Dataset, Pose
+from cama_pipeline.evaluate.inputs import EvaluationInputError, VectorElement
+from cama_pipeline.evaluate.projection import PinholeCamera, project_polyline
+from cama_pipeline.evaluate.sre import ProjectedInstance, SreConfig, extract_instances, match_image
+from cama_pipeline.evaluate.sre_report import ImageSre, SreReport
+
+logger = logging.getLogger(__name__)
+
+
+def evaluate_sre(
+    dataset: Dataset,
+    elements: Sequence[VectorElement],
+    config: SreConfig,
+    *,
+    true_poses: Mapping[str, Pose] | None = None,
+    scenes: Sequence[str] | None = None,
+    show_progress: bool = False,
+) -> SreReport:
+    """SRE / precision / recall of a vector map over key-frame images (true poses when given, else coarse)."""
+    chosen = [s for s in dataset.scenes if scenes is None or s.name in scenes]
+    if scenes is not None and len(chosen) != len(set(scenes)):
+        missing = sorted(set(scenes) - {s.name for s in chosen})
+        raise EvaluationInputError(f"{dataset.root}: no scene named {', '.join(missing)}")
+    map_classes = {m for m, _ in config.class_pairs}
+    used = [e for e in elements if e.cls in map_classes]
+    work = [(s.name, f.token, im) for s in chosen for f in s.frames for im in f.images.values()]
+    results = []
+    columns = (TextColumn("sre"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, disable=not show_progress) as progress:
+        bar = progress.add_task("sre", total=len(work))
+        for scene, frame, image in work:
+            global_from_ego = _pose_for(image, true_poses)
+            results.append(_evaluate_image(scene, frame, image, global_from_ego, used, config))
+            progress.advance(bar)
+    logger.info("evaluated %d images of %d scenes", len(results), len(chosen))
+    return SreReport.from_images(results, config)
+
+
+def camera_for(image: CameraImage, global_from_ego: Pose) -> PinholeCamera:
+    """The pinhole camera of an image under a given ego pose."""
+    global_from_cam = global_from_ego @ image.calibration.ego_from_cam
+    calibration = image.calibration
+    return PinholeCamera(
+        global_from_cam.rotation_matrix(),
+        global_from_cam.translation,
+        calibration.intrinsic,
+        calibration.width,
+        calibration.height,
+    )
+
+
+def project_elements(
+    elements: Sequence[VectorElement], camera: PinholeCamera, config: SreConfig, flat_z_m: float
+) -> list[ProjectedInstance]:
+    """Project every element into a camera; 2D elements get z = `flat_z_m` (the flat-ground assumption)."""
+    out = []
+    for element in elements:
+        points = element.points
+        if not element.has_elevation:
+            points = np.column_stack([points, np.full(len(points), flat_z_m)])
+        pieces = project_polyline(points, camera, config.projection, closed=element.closed)
+        if pieces:
+            out.append(ProjectedInstance(element.id, element.cls, tuple(pieces)))
+    return out
+
+
+def _evaluate_image(
+    scene: str,
+    frame: str,
+    image: CameraImage,
+    global_from_ego: Pose,
+    elements: Sequence[VectorElement],
+    config: SreConfig,
+) -> ImageSre:
+    """Project, extract, match one image."""
+    camera = camera_for(image, global_from_ego)
+    projected = project_elements(elements, camera, config, float(global_from_ego.translation[2]))
+    scale = config.scale(camera.width)
+    instances = extract_instances(
+        image.load_instance(),
+        {int(m) for _, m in config.class_pairs},
+        max(1, round(config.min_skeleton_px * scale)),
+    )
+    match = match_image(projected, instances, config, camera.width)
+    return ImageSre(scene, frame, image.channel, image.token, camera.width, match, config.reference_width_px)
+
+
+def _pose_for(image: CameraImage, true_poses: Mapping[str, Pose] | None) -> Pose:
+    """The true pose of an image when true poses are given (missing one is an error), else its coarse pose."""
+    if true_poses is None:
+        return image.global_from_ego
+    try:
+        return true_poses[image.token]
+    except KeyError:
+        raise EvaluationInputError(f"true poses have no entry for camera image {image.token!r}") from None
