@@ -12,33 +12,25 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from cama_pipeline.data import load_dataset
 from cama_pipeline.synthetic.config import preset
 from cama_pipeline.synthetic.generate import run
+from cama_pipeline.synthetic.realism import road_sift_inliers
 
 RESULTS = Path(__file__).parent / "results"
 
 
-def road_sift_inliers(dataset_root: Path, pairs: int = 10) -> list[int]:
-    """Fundamental-matrix inlier SIFT matches on road pixels between CAM_FRONT sweeps 2 apart (first day scene)."""
+def road_matches(dataset_root: Path, pairs: int = 12) -> list[int]:
+    """Verified road SIFT matches between CAM_FRONT sweeps 2 apart (about 1.3 m), over the first day scene."""
     scene = next(s for s in load_dataset(dataset_root).scenes if s.description.startswith("Day, moving"))
     images = scene.images["CAM_FRONT"]
-    sift = cv2.SIFT_create()
-    counts = []
-    for a, b in list(zip(images, images[2:], strict=False))[:pairs]:
-        kp_a, des_a = sift.detectAndCompute(cv2.cvtColor(a.load_rgb(), cv2.COLOR_RGB2GRAY), None)
-        kp_b, des_b = sift.detectAndCompute(cv2.cvtColor(b.load_rgb(), cv2.COLOR_RGB2GRAY), None)
-        good = [m for m, n in cv2.BFMatcher().knnMatch(des_a, des_b, k=2) if m.distance < 0.8 * n.distance]
-        pa = np.float32([kp_a[m.queryIdx].pt for m in good])
-        pb = np.float32([kp_b[m.trainIdx].pt for m in good])
-        _, inlier = cv2.findFundamentalMat(pa, pb, cv2.FM_RANSAC, 1.0, 0.999)
-        semantic = a.load_semantic()
-        on_road = np.isin(semantic[pa[:, 1].astype(int), pa[:, 0].astype(int)], [1, 2, 3, 4])
-        counts.append(int((inlier.ravel().astype(bool) & on_road).sum()))
-    return counts
+    step = max(1, (len(images) - 2) // pairs)
+    return [
+        road_sift_inliers(a.load_rgb(), b.load_rgb(), a.load_semantic())
+        for a, b in list(zip(images, images[2:], strict=False))[::step][:pairs]
+    ]
 
 
 def main() -> None:
@@ -54,7 +46,7 @@ def main() -> None:
         result = run(cfg, out, overwrite=True, workers=args.workers)
         seconds = time.perf_counter() - started
         megapixels = result.images * cfg.camera.width_px * cfg.camera.height_px / 1e6
-        inliers = road_sift_inliers(result.dataset_root)
+        inliers = road_matches(result.dataset_root)
     figures = {
         "preset": args.preset,
         "workers": args.workers,

@@ -43,7 +43,7 @@ from cama_pipeline.synthetic.writer import NuScenesTables, image_filename, make_
 
 logger = logging.getLogger(__name__)
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 """Bump when the generator's output changes for the same config, so old sites count as out of date."""
 DATASET_DIR = "nuscenes"
 GROUND_TRUTH_DIR = "ground_truth"

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cama_pipeline.data.schema import CAN_DIR, OPTIONAL_TABLES, can_file_name
+from cama_pipeline.data.schema import CAN_DIR, OPTIONAL_TABLES, REQUIRED_TABLES, can_file_name
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.synthetic.motion import matrix_to_quat
 from cama_pipeline.synthetic.rig import RigCamera
@@ -42,18 +42,7 @@ class NuScenesTables:
     tables: dict[str, list[dict]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in (
-            "scene",
-            "sample",
-            "sample_data",
-            "ego_pose",
-            "calibrated_sensor",
-            "sensor",
-            "log",
-            "map",
-        ):
-            self.tables.setdefault(name, [])
-        for name in OPTIONAL_TABLES:
+        for name in REQUIRED_TABLES + OPTIONAL_TABLES:
             self.tables.setdefault(name, [])
 
     def add_rig(self, rig: tuple[RigCamera, ...]) -> None:

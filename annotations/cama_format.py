@@ -1,0 +1,262 @@
+"""The CAMA release layout (nuScenes-CAMAv2 labels): export an annotation set to it and import it back.
+
+Layout written under `<out>/<name>/` (name = scene or site):
+  maps/map_labels.json   list of instances {"attrs": {"type"}, "data": [[u, v], ...], "id", "luid",
+                         "point_attrs", "shape_type": "polyline", "struct_type": "parsing", "track_id"};
+                         `data` in BEV pixels of the map raster (u = column, v = row, floats; our georeference
+                         convention: column grows with +x, row with -y, pixel (0, 0)'s centre at `origin_xy`).
+  maps/elevation.npy     the (H, W) float32 elevation raster (global z, NaN = unobserved), when given.
+  maps/georeference.json our extension: site id + Georeference, so import restores site coordinates.
+  odometry/camera_<CHANNEL>.txt  TUM rows `t x y z qx qy qz qw` (camera to global, t seconds), with a data set.
+
+Type table (one place): divider <-> lane_marking, boundary <-> Road_teeth, ped_crossing <-> Crosswalk_Line.
+`Stop_Line` has no class of ours: import skips it (logging the count) unless `stop_line_as_divider`.
+"""
+
+import json
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, RootModel, ValidationError
+
+from annotations.lift import lift_element
+from annotations.schema import AnnotationSet, ElementClass, Georeference, MapElement
+from annotations.transforms import pixel_from_site_points, site_from_pixel_points
+from cama_pipeline.data import Dataset
+from cama_pipeline.io import atomic_write_bytes, atomic_write_npy
+
+logger = logging.getLogger(__name__)
+
+CamaType = Literal["lane_marking", "Road_teeth", "Crosswalk_Line", "Stop_Line"]
+CAMA_TYPE_FROM_CLASS: dict[ElementClass, CamaType] = {
+    "divider": "lane_marking",
+    "boundary": "Road_teeth",
+    "ped_crossing": "Crosswalk_Line",
+}
+CLASS_FROM_CAMA_TYPE: dict[str, ElementClass] = {cama: ours for ours, cama in CAMA_TYPE_FROM_CLASS.items()}
+MAP_LABELS = Path("maps/map_labels.json")
+ELEVATION = Path("maps/elevation.npy")
+GEOREFERENCE = Path("maps/georeference.json")
+ODOMETRY_DIR = Path("odometry")
+IMPORT_AUTHOR = "cama-import"
+_M = TypeVar("_M", bound=BaseModel)
+
+
+class CamaAttrs(BaseModel):
+    """Instance attributes; the reference code reads only `type`."""
+
+    model_config = ConfigDict(extra="allow")
+
+    type: CamaType = Field(description="CAMA element type.")
+
+
+class CamaInstance(BaseModel):
+    """One instance of `map_labels.json`: a polyline in BEV-raster pixels [u = column, v = row]."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False)
+
+    attrs: CamaAttrs
+    data: list[tuple[float, float]] = Field(min_length=2, description="[u, v] BEV pixels (column, row).")
+    id: str | int = Field(description="Instance id (ours: the element id).")
+    luid: str | int | None = Field(default=None, description="Label unique id.")
+    point_attrs: list[list[Any]] = Field(default_factory=list, description="One list per point.")
+    shape_type: Literal["polyline"] = "polyline"
+    struct_type: Literal["parsing"] = "parsing"
+    track_id: str | int | None = None
+
+
+class CamaMapLabels(RootModel[list[CamaInstance]]):
+    """The whole `map_labels.json`: a list of instances."""
+
+
+class CamaGeoreferenceFile(BaseModel):
+    """`maps/georeference.json` (our extension): which site, and where its raster pixels sit."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    format: Literal["cama-studio-georeference"] = "cama-studio-georeference"
+    format_version: Literal[1] = 1
+    site_id: str = Field(min_length=1)
+    georeference: Georeference
+
+
+def format_validation_error(path: Path | str, error: ValidationError) -> str:
+    """`file: [3].attrs.type: unknown type 'Foo' ...`, one line per problem, for a ValueError."""
+    lines = []
+    for item in error.errors():
+        loc = "".join(f"[{part}]" if isinstance(part, int) else f".{part}" for part in item["loc"])
+        loc = loc.lstrip(".") or "(root)"
+        message = item["msg"]
+        if item["type"] == "literal_error" and item["loc"]:
+            expected = item.get("ctx", {}).get("expected", "")
+            message = f"unknown {item['loc'][-1]} {item['input']!r}; expected {expected}"
+        lines.append(f"{Path(path).name}: {loc}: {message}")
+    return f"{path}: invalid file\n" + "\n".join(lines) if len(lines) > 1 else lines[0]
+
+
+def read_json_file(path: Path) -> Any:
+    """Parse a JSON file; FileNotFoundError / ValueError naming it."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise ValueError(f"{path}: not valid JSON: {error}") from error
+
+
+def validate_file(model: type[_M], obj: Any, path: Path) -> _M:
+    """Validate a parsed file against its model; ValueError naming the file and field path."""
+    try:
+        return model.model_validate(obj)
+    except ValidationError as error:
+        raise ValueError(format_validation_error(path, error)) from error
+
+
+def class_from_cama_type(cama_type: str, *, stop_line_as_divider: bool = False) -> ElementClass | None:
+    """Our class for a CAMA type; None for `Stop_Line` unless mapped to divider; ValueError when unknown."""
+    if cama_type in CLASS_FROM_CAMA_TYPE:
+        return CLASS_FROM_CAMA_TYPE[cama_type]
+    if cama_type == "Stop_Line":
+        return "divider" if stop_line_as_divider else None
+    raise ValueError(f"type: unknown CAMA type {cama_type!r}")
+
+
+def cama_instances(annotations: AnnotationSet) -> list[dict[str, Any]]:
+    """The `map_labels.json` instances of a set, validated against the model."""
+    georef = annotations.georeference
+    instances = []
+    for index, element in enumerate(annotations.elements):
+        uv = pixel_from_site_points(element.xy(), georef)
+        instances.append(
+            {
+                "attrs": {"type": CAMA_TYPE_FROM_CLASS[element.cls]},
+                "data": uv.tolist(),
+                "id": element.id,
+                "luid": element.id,
+                "point_attrs": [[] for _ in range(len(uv))],
+                "shape_type": "polyline",
+                "struct_type": "parsing",
+                "track_id": index,
+            }
+        )
+    validated = validate_file(CamaMapLabels, instances, MAP_LABELS)
+    return [item.model_dump(mode="json") for item in validated.root]
+
+
+def export_cama(
+    annotations: AnnotationSet,
+    out: Path,
+    *,
+    name: str | None = None,
+    elevation: np.ndarray | None = None,
+    dataset: Dataset | None = None,
+    scenes: Sequence[str] | None = None,
+) -> Path:
+    """Write the CAMA layout under `out/<name or site_id>/`; returns that folder."""
+    georef = annotations.georeference
+    if elevation is not None:
+        elevation = np.asarray(elevation, dtype=np.float32)
+        if elevation.shape != georef.shape:
+            raise ValueError(
+                f"elevation: shape {elevation.shape} != georeference (height, width) {georef.shape}"
+            )
+    folder = Path(out) / (name or annotations.site_id)
+    labels = cama_instances(annotations)
+    geo_file = CamaGeoreferenceFile(site_id=annotations.site_id, georeference=georef)
+    if elevation is not None:
+        atomic_write_npy(folder / ELEVATION, elevation)
+    atomic_write_bytes(folder / GEOREFERENCE, geo_file.model_dump_json(indent=2).encode("utf-8"))
+    if dataset is not None:
+        write_odometry(dataset, folder / ODOMETRY_DIR, scenes=scenes)
+    atomic_write_bytes(folder / MAP_LABELS, json.dumps(labels, indent=1).encode("utf-8"))
+    logger.info("exported %d elements to %s", len(labels), folder)
+    return folder
+
+
+def write_odometry(dataset: Dataset, folder: Path, *, scenes: Sequence[str] | None = None) -> list[Path]:
+    """One TUM file per camera channel (`t x y z qx qy qz qw`, camera to global) over the chosen scenes."""
+    wanted = [s for s in dataset.scenes if scenes is None or s.name in scenes]
+    if scenes is not None and len(wanted) != len(set(scenes)):
+        known = sorted(s.name for s in dataset.scenes)
+        raise ValueError(f"scenes: {sorted(set(scenes) - {s.name for s in wanted})} not in data set {known}")
+    rows: dict[str, list[tuple[int, str]]] = {}
+    for scene in wanted:
+        for image in scene.all_images():
+            pose = image.global_from_ego @ image.calibration.ego_from_cam
+            (x, y, z), (qw, qx, qy, qz) = pose.translation, pose.rotation
+            line = (
+                f"{image.timestamp_us / 1e6:.6f} {x:.6f} {y:.6f} {z:.6f} {qx:.9f} {qy:.9f} {qz:.9f} {qw:.9f}"
+            )
+            rows.setdefault(image.channel, []).append((image.timestamp_us, line))
+    paths = []
+    for channel, lines in sorted(rows.items()):
+        path = folder / f"camera_{channel}.txt"
+        text = "# t x y z qx qy qz qw (camera to global, t in seconds)\n"
+        text += "".join(line + "\n" for _, line in sorted(lines))
+        atomic_write_bytes(path, text.encode("utf-8"))
+        paths.append(path)
+    return paths
+
+
+def import_cama(
+    folder: Path, *, site_id: str | None = None, stop_line_as_divider: bool = False
+) -> AnnotationSet:
+    """Read a CAMA layout folder back into an annotation set, lifting z from `maps/elevation.npy` if present."""
+    folder = Path(folder)
+    geo_file = validate_file(
+        CamaGeoreferenceFile, read_json_file(folder / GEOREFERENCE), folder / GEOREFERENCE
+    )
+    georef = geo_file.georeference
+    labels = validate_file(CamaMapLabels, read_json_file(folder / MAP_LABELS), folder / MAP_LABELS)
+    elevation = _read_elevation(folder / ELEVATION, georef)
+    elements: list[MapElement] = []
+    skipped = 0
+    for index, instance in enumerate(labels.root):
+        cls = class_from_cama_type(instance.attrs.type, stop_line_as_divider=stop_line_as_divider)
+        if cls is None:
+            skipped += 1
+            continue
+        elements.append(_element(instance, cls, georef, elevation, f"{folder / MAP_LABELS}: [{index}]"))
+    if skipped:
+        logger.warning("%s: skipped %d Stop_Line instances (no class of ours)", folder / MAP_LABELS, skipped)
+    try:
+        return AnnotationSet(site_id=site_id or geo_file.site_id, georeference=georef, elements=elements)
+    except ValidationError as error:
+        raise ValueError(format_validation_error(folder / MAP_LABELS, error)) from error
+
+
+def _read_elevation(path: Path, georef: Georeference) -> np.ndarray | None:
+    """The elevation raster if the file exists; ValueError naming it when its shape is wrong."""
+    if not path.is_file():
+        return None
+    try:
+        elevation = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: not a numpy array file: {error}") from error
+    if elevation.shape != georef.shape:
+        raise ValueError(f"{path}: shape {elevation.shape} != georeference (height, width) {georef.shape}")
+    return elevation
+
+
+def _element(
+    instance: CamaInstance, cls: ElementClass, georef: Georeference, elevation: np.ndarray | None, where: str
+) -> MapElement:
+    """One imported element (a reviewable human label), lifted when a raster is given."""
+    xy = site_from_pixel_points(np.asarray(instance.data, dtype=float), georef)
+    try:
+        element = MapElement(
+            id=str(instance.id),
+            cls=cls,
+            points_2d=[(x, y) for x, y in xy.tolist()],
+            source="human",
+            review_state="proposed",
+            author=IMPORT_AUTHOR,
+        )
+    except ValidationError as error:
+        raise ValueError(f"{where}: {format_validation_error('element', error)}") from error
+    if elevation is None:
+        return element
+    return lift_element(element, elevation, georef, strict=False)

@@ -1,0 +1,140 @@
+"""`cama export` / `cama import`: annotation sets to and from the CAMA release layout and MapTR vectors JSON.
+
+The JSON Schema files in `annotations/schemas/` are generated from the file models: `python -m
+annotations.export_command` rewrites them (a test checks the committed files equal the generated ones).
+"""
+
+import json
+import logging
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from pydantic import BaseModel
+
+from annotations.cama_format import CamaMapLabels, export_cama, import_cama
+from annotations.maptr_format import MaptrFile, export_maptr, import_maptr
+from annotations.schema import AnnotationSet, Georeference
+from cama_pipeline.data import DatasetError, load_dataset
+from cama_pipeline.io import atomic_write_bytes
+
+logger = logging.getLogger(__name__)
+
+SCHEMA_DIR = Path(__file__).parent / "schemas"
+SCHEMA_MODELS: dict[str, type[BaseModel]] = {
+    "cama_map_labels.schema.json": CamaMapLabels,
+    "maptr_vectors.schema.json": MaptrFile,
+}
+
+
+class ExportFormat(StrEnum):
+    """Which file format."""
+
+    cama = "cama"
+    maptr = "maptr"
+
+
+def schema_text(model: type[BaseModel]) -> str:
+    """The JSON Schema of a file model, as committed (sorted keys, 2-space indent, trailing newline)."""
+    return json.dumps(model.model_json_schema(), indent=2, sort_keys=True) + "\n"
+
+
+def write_schemas(folder: Path = SCHEMA_DIR) -> list[Path]:
+    """(Re)write every schema file from its model."""
+    paths = []
+    for name, model in SCHEMA_MODELS.items():
+        atomic_write_bytes(folder / name, schema_text(model).encode("utf-8"))
+        paths.append(folder / name)
+    return paths
+
+
+def _fail(error: Exception) -> typer.Exit:
+    """Print `error: ...` and give the exit to raise (code 2)."""
+    typer.echo(f"error: {error}", err=True)
+    return typer.Exit(code=2)
+
+
+def _load_elevation(path: Path | None) -> np.ndarray | None:
+    """The elevation raster from a .npy file, or None."""
+    if path is None:
+        return None
+    try:
+        return np.asarray(np.load(path, allow_pickle=False))
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: cannot read elevation raster: {error}") from error
+
+
+def export_command(
+    annotations_json: Annotated[Path, typer.Argument(help="Annotation set JSON (AnnotationSet).")],
+    out: Annotated[Path, typer.Argument(help="cama: output folder; maptr: output JSON file.")],
+    format: Annotated[ExportFormat, typer.Option("--format", help="cama or maptr.")] = ExportFormat.cama,
+    dataset: Annotated[
+        Path | None, typer.Option(help="Data set root (nuScenes layout): needed for maptr and cama odometry.")
+    ] = None,
+    elevation: Annotated[Path | None, typer.Option(help="Elevation raster .npy (H, W) for cama.")] = None,
+    name: Annotated[
+        str | None, typer.Option(help="cama: scene or site folder name (default: site id).")
+    ] = None,
+    scene: Annotated[
+        list[str] | None, typer.Option(help="cama odometry: only this scene (repeatable).")
+    ] = None,
+) -> None:
+    """Export an annotation set to the CAMA release layout or to MapTR vectors JSON."""
+    try:
+        annotations = AnnotationSet.read_json(annotations_json)
+        data = load_dataset(dataset) if dataset is not None else None
+        if format is ExportFormat.maptr:
+            if data is None:
+                raise ValueError("--format maptr needs --dataset ROOT (sample tokens and ego poses)")
+            written = export_maptr(annotations, data, out)
+        else:
+            raster = _load_elevation(elevation)
+            written = export_cama(annotations, out, name=name, elevation=raster, dataset=data, scenes=scene)
+    except (ValueError, FileNotFoundError, DatasetError) as error:
+        raise _fail(error) from error
+    typer.echo(f"exported {len(annotations.elements)} elements ({format.value}) to {written}")
+
+
+def import_command(
+    path: Annotated[Path, typer.Argument(help="cama: scene/site folder (holds maps/); maptr: vectors JSON.")],
+    out: Annotated[Path, typer.Option("--out", help="Annotation set JSON to write.")],
+    format: Annotated[ExportFormat, typer.Option("--format", help="cama or maptr.")] = ExportFormat.cama,
+    site_id: Annotated[
+        str | None, typer.Option(help="Site id (default: the one stored in the files).")
+    ] = None,
+    stop_line_as_divider: Annotated[
+        bool, typer.Option(help="cama: import Stop_Line as divider (skipped by default).")
+    ] = False,
+    georeference: Annotated[
+        Path | None, typer.Option(help="maptr: georeference JSON when the file has none.")
+    ] = None,
+) -> None:
+    """Import CAMA labels or MapTR vectors into an annotation set JSON, for review in the editor."""
+    try:
+        if format is ExportFormat.maptr:
+            georef = _read_georeference(georeference)
+            annotations = import_maptr(path, site_id=site_id, georeference=georef)
+        else:
+            annotations = import_cama(path, site_id=site_id, stop_line_as_divider=stop_line_as_divider)
+        annotations.write_json(out)
+    except (ValueError, FileNotFoundError) as error:
+        raise _fail(error) from error
+    typer.echo(f"imported {len(annotations.elements)} elements ({format.value}) to {out}")
+
+
+def _read_georeference(path: Path | None) -> Georeference | None:
+    """A full Georeference JSON (with site_origin_xy), or None."""
+    if path is None:
+        return None
+    try:
+        obj: Any = json.loads(path.read_text(encoding="utf-8"))
+        return Georeference.model_validate(obj.get("georeference", obj) if isinstance(obj, dict) else obj)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: invalid georeference: {error}") from error
+
+
+if __name__ == "__main__":
+    for written in write_schemas():
+        print(written)  # noqa: T201

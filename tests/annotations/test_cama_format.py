@@ -1,0 +1,170 @@
+"""CAMA release layout: lossless export -> import, the type table, pixel convention, bad files, schema files."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from annotation_helpers import SQUARE, element_kwargs
+
+from annotations import AnnotationSet, Georeference, MapElement, lift_element
+from annotations.cama_format import (
+    CAMA_TYPE_FROM_CLASS,
+    MAP_LABELS,
+    class_from_cama_type,
+    export_cama,
+    import_cama,
+)
+from annotations.export_command import SCHEMA_DIR, SCHEMA_MODELS, schema_text
+
+sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
+
+from nuscenes_fixture import write_nuscenes_fixture  # noqa: E402
+
+from cama_pipeline.data import load_dataset  # noqa: E402
+
+
+def _set(georef: Georeference, elevation: np.ndarray) -> AnnotationSet:
+    """A divider, a boundary and a closed crosswalk, lifted through the raster."""
+    elements = [
+        MapElement.model_validate(element_kwargs(id="d1", points_2d=[[1.0, 1.0], [5.0, 2.5], [10.0, 3.0]])),
+        MapElement.model_validate(
+            element_kwargs(id="b1", **{"class": "boundary"}, points_2d=[[2.0, 15.0], [18.0, 15.5]])
+        ),
+        MapElement.model_validate(
+            element_kwargs(
+                id="c1", **{"class": "ped_crossing"}, points_2d=[[x + 3, y + 5] for x, y in SQUARE]
+            )
+        ),
+    ]
+    lifted = [lift_element(e, elevation, georef) for e in elements]
+    return AnnotationSet(site_id="site-a", georeference=georef, elements=lifted)
+
+
+@pytest.fixture()
+def raster(plane_elevation: np.ndarray) -> np.ndarray:
+    """The plane raster as exported (float32)."""
+    return plane_elevation.astype(np.float32)
+
+
+def test_export_import_is_lossless(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
+    """2D points, class, id and 3D points (z from the raster) come back within 1e-6 m."""
+    original = _set(georef, raster)
+    folder = export_cama(original, tmp_path, elevation=raster)
+    assert folder == tmp_path / "site-a"
+    assert {p.name for p in (folder / "maps").iterdir()} == {
+        "map_labels.json",
+        "elevation.npy",
+        "georeference.json",
+    }
+    back = import_cama(folder)
+    assert back.site_id == "site-a" and back.georeference == georef
+    assert [e.id for e in back.elements] == ["d1", "b1", "c1"]
+    for a, b in zip(original.elements, back.elements, strict=True):
+        assert a.cls == b.cls
+        np.testing.assert_allclose(b.xy(), a.xy(), atol=1e-6)
+        assert a.points_3d is not None and b.points_3d is not None
+        np.testing.assert_allclose(b.xyz(), a.xyz(), atol=1e-6)
+    assert back.by_id("c1").closed and back.by_id("c1").points_2d[0] == back.by_id("c1").points_2d[-1]
+
+
+def test_type_table_both_ways() -> None:
+    """divider <-> lane_marking, boundary <-> Road_teeth, ped_crossing <-> Crosswalk_Line; Stop_Line optional."""
+    assert CAMA_TYPE_FROM_CLASS == {
+        "divider": "lane_marking",
+        "boundary": "Road_teeth",
+        "ped_crossing": "Crosswalk_Line",
+    }
+    for ours, cama in CAMA_TYPE_FROM_CLASS.items():
+        assert class_from_cama_type(cama) == ours
+    assert class_from_cama_type("Stop_Line") is None
+    assert class_from_cama_type("Stop_Line", stop_line_as_divider=True) == "divider"
+    with pytest.raises(ValueError, match="unknown CAMA type 'Foo'"):
+        class_from_cama_type("Foo")
+
+
+def test_pixel_convention(tmp_path: Path, georef: Georeference) -> None:
+    """u = column (+x), v = row (-y): site (1.0, 19.0) is pixel (2, 2) when pixel (0, 0) is at site (0, 20)."""
+    element = MapElement.model_validate(element_kwargs(points_2d=[[0.0, 20.0], [1.0, 19.0]]))
+    folder = export_cama(AnnotationSet(site_id="s", georeference=georef, elements=[element]), tmp_path)
+    labels = json.loads((folder / MAP_LABELS).read_text())
+    assert labels[0]["data"] == [[0.0, 0.0], [2.0, 2.0]]
+    assert labels[0]["attrs"] == {"type": "lane_marking"}
+    assert labels[0]["shape_type"] == "polyline" and labels[0]["struct_type"] == "parsing"
+    assert labels[0]["point_attrs"] == [[], []]
+    assert import_cama(folder).elements[0].points_3d is None  # no raster exported, nothing lifted
+
+
+def test_stop_line_skipped_unless_asked(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
+    """A Stop_Line instance is skipped by default and imported as a divider on request."""
+    folder = export_cama(_set(georef, raster), tmp_path, elevation=raster)
+    labels = json.loads((folder / MAP_LABELS).read_text())
+    labels.append({**labels[0], "id": 99, "attrs": {"type": "Stop_Line"}})
+    (folder / MAP_LABELS).write_text(json.dumps(labels))
+    assert len(import_cama(folder).elements) == 3
+    stop = import_cama(folder, stop_line_as_divider=True).by_id("99")
+    assert stop.cls == "divider"
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (
+            lambda labels: labels[2]["attrs"].update(type="Foo"),
+            "map_labels.json: [2].attrs.type: unknown type 'Foo'",
+        ),
+        (
+            lambda labels: labels[0]["data"][1].__setitem__(0, float("nan")),
+            "map_labels.json: [0].data[1][0]: ",
+        ),
+        (lambda labels: labels[1].pop("attrs"), "map_labels.json: [1].attrs: Field required"),
+        (lambda labels: labels.__setitem__(slice(None), []) or labels.append("x"), "map_labels.json: [0]: "),
+    ],
+)
+def test_bad_labels_name_file_and_field(
+    tmp_path: Path, georef: Georeference, raster: np.ndarray, edit: object, expected: str
+) -> None:
+    """Unknown type, NaN, a missing field or a non-object instance: ValueError naming file and field path."""
+    folder = export_cama(_set(georef, raster), tmp_path, elevation=raster)
+    labels = json.loads((folder / MAP_LABELS).read_text())
+    edit(labels)  # type: ignore[operator]
+    (folder / MAP_LABELS).write_text(json.dumps(labels))
+    with pytest.raises(ValueError) as caught:
+        import_cama(folder)
+    assert expected in str(caught.value)
+
+
+def test_labels_not_a_list(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
+    """A map_labels.json that is not a list is rejected at the root."""
+    folder = export_cama(_set(georef, raster), tmp_path)
+    (folder / MAP_LABELS).write_text(json.dumps({"instances": []}))
+    with pytest.raises(ValueError, match=r"map_labels.json: \(root\): Input should be a valid list"):
+        import_cama(folder)
+
+
+def test_missing_georeference_named(tmp_path: Path) -> None:
+    """A folder without maps/georeference.json names the missing file."""
+    with pytest.raises(FileNotFoundError, match="georeference.json"):
+        import_cama(tmp_path)
+
+
+def test_odometry_tum_rows(tmp_path: Path, georef: Georeference) -> None:
+    """With a data set, one TUM file per camera: `t x y z qx qy qz qw`, camera to global."""
+    fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
+    dataset = load_dataset(fixture.root)
+    folder = export_cama(AnnotationSet(site_id="s", georeference=georef), tmp_path / "out", dataset=dataset)
+    image = dataset.scenes[0].images["CAM_FRONT"][0]
+    rows = [line.split() for line in (folder / "odometry/camera_CAM_FRONT.txt").read_text().splitlines()[1:]]
+    assert len(rows) == len(dataset.scenes[0].images["CAM_FRONT"]) and all(len(r) == 8 for r in rows)
+    pose = image.global_from_ego @ image.calibration.ego_from_cam
+    first = np.array(rows[0], dtype=float)
+    assert first[0] == pytest.approx(image.timestamp_us / 1e6)
+    np.testing.assert_allclose(first[1:4], pose.translation, atol=1e-6)
+    np.testing.assert_allclose(first[[7, 4, 5, 6]], pose.rotation, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", sorted(SCHEMA_MODELS))
+def test_committed_schemas_match_models(name: str) -> None:
+    """annotations/schemas/*.schema.json equal the models' generated schemas (python -m annotations.export_command)."""
+    assert (SCHEMA_DIR / name).read_text(encoding="utf-8") == schema_text(SCHEMA_MODELS[name])
