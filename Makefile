@@ -24,7 +24,7 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy annotations cama_pipeline/data cama_pipeline/evaluate
+	$(BIN)/mypy annotations app/backend cama_pipeline/data cama_pipeline/evaluate
 
 test: $(STAMP)
 	$(MAKE) lint

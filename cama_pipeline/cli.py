@@ -71,11 +71,13 @@ def synth(
 def _register_stage_commands() -> None:
     """Commands whose implementation lives beside their stage (imported here, registered by name)."""
     from annotations.export_command import export_command, import_command
+    from app.backend.serve import serve_command
     from cama_pipeline.evaluate.command import eval_command
 
     app.command("eval")(eval_command)
     app.command("export")(export_command)
     app.command("import")(import_command)
+    app.command("serve")(serve_command)
 
 
 _register_stage_commands()

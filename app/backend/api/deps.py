@@ -1,0 +1,72 @@
+"""Request dependencies: settings, a database session, the current user and role checks."""
+
+import logging
+from collections.abc import Callable, Iterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, status
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy.orm import Session
+
+from app.backend import crud
+from app.backend.config import Settings
+from app.backend.models import User
+
+logger = logging.getLogger(__name__)
+
+bearer = HTTPBearer(auto_error=False, description="Token from POST /api/auth/login.")
+
+
+def get_settings(request: Request) -> Settings:
+    """The settings the app was created with."""
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+def get_session(request: Request) -> Iterator[Session]:
+    """One database session per request, closed afterwards."""
+    with request.app.state.sessionmaker() as session:
+        yield session
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+SessionDep = Annotated[Session, Depends(get_session)]
+
+
+def get_current_user(
+    session: SessionDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
+) -> User:
+    """The user owning the bearer token; 401 when it is missing, unknown or expired."""
+    user = None
+    if credentials is not None and credentials.scheme.lower() == "bearer":
+        user = crud.user_for_token(session=session, token=credentials.credentials)
+    if user is None:
+        raise HTTPException(
+            status_code=status.HTTP_401_UNAUTHORIZED,
+            detail="not authenticated: send 'Authorization: Bearer <token>' from POST /api/auth/login",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    return user
+
+
+CurrentUser = Annotated[User, Depends(get_current_user)]
+
+
+def require_role(*roles: str) -> Callable[[User], User]:
+    """A dependency that lets only users with one of `roles` through (403 otherwise)."""
+
+    def check(user: CurrentUser) -> User:
+        if user.role not in roles:
+            raise HTTPException(
+                status_code=status.HTTP_403_FORBIDDEN,
+                detail=f"role {user.role!r} may not do this; needs one of {sorted(roles)}",
+            )
+        return user
+
+    return check
+
+
+AnyUser = CurrentUser
+LeadUser = Annotated[User, Depends(require_role("lead", "admin"))]
+AdminUser = Annotated[User, Depends(require_role("admin"))]

@@ -1,0 +1,130 @@
+"""Map elements of a site: create, bulk proposals, bounding-box query, read, update, soft delete."""
+
+import logging
+import math
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, status
+
+from annotations.schema import ElementClass, ReviewState
+from app.backend import crud
+from app.backend.api.deps import CurrentUser, LeadUser, SessionDep, SettingsDep
+from app.backend.errors import InvalidInputError
+from app.backend.schemas import ConflictBody, ElementCreate, ElementPublic, ElementUpdate, ProposalBulk
+
+logger = logging.getLogger(__name__)
+router = APIRouter(prefix="/sites/{site_id}/elements", tags=["elements"])
+CONFLICT: dict[int | str, dict[str, Any]] = {
+    409: {"model": ConflictBody, "description": "Stale version: the body holds the current element."}
+}
+
+
+def parse_bbox(bbox: str | None) -> tuple[float, float, float, float] | None:
+    """`xmin,ymin,xmax,ymax` in site metres; InvalidInputError naming `bbox` otherwise."""
+    if bbox is None:
+        return None
+    try:
+        values = tuple(float(part) for part in bbox.split(","))
+    except ValueError:
+        raise InvalidInputError("bbox", f"expected 4 numbers xmin,ymin,xmax,ymax, got {bbox!r}") from None
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise InvalidInputError("bbox", f"expected 4 finite numbers xmin,ymin,xmax,ymax, got {bbox!r}")
+    if values[0] > values[2] or values[1] > values[3]:
+        raise InvalidInputError("bbox", f"min must not exceed max, got {bbox!r}")
+    return values[0], values[1], values[2], values[3]
+
+
+@router.get("", response_model=list[ElementPublic])
+def list_elements(
+    site_id: int,
+    session: SessionDep,
+    _user: CurrentUser,
+    bbox: Annotated[str | None, Query(description="xmin,ymin,xmax,ymax in site metres.")] = None,
+    cls: Annotated[ElementClass | None, Query(alias="class")] = None,
+    state: ReviewState | None = None,
+    include_deleted: bool = False,
+    limit: Annotated[int, Query(ge=1, le=100_000)] = 10_000,
+) -> list[ElementPublic]:
+    """Elements whose bounding box meets `bbox`, optionally filtered by class and state."""
+    elements = crud.query_elements(
+        session=session,
+        site_id=site_id,
+        bbox=parse_bbox(bbox),
+        cls=cls,
+        state=state,
+        include_deleted=include_deleted,
+        limit=limit,
+    )
+    return [crud.public(element) for element in elements]
+
+
+@router.post("", response_model=ElementPublic, status_code=status.HTTP_201_CREATED)
+def create_element(
+    site_id: int, element_in: ElementCreate, session: SessionDep, settings: SettingsDep, user: CurrentUser
+) -> ElementPublic:
+    """Draw a new element (version 1, state `proposed`)."""
+    (element,) = crud.create_elements(
+        session=session,
+        site_id=site_id,
+        elements_in=[element_in],
+        username=user.username,
+        margin_m=settings.extent_margin_m,
+    )
+    return crud.public(element)
+
+
+@router.post("/bulk", response_model=list[ElementPublic], status_code=status.HTTP_201_CREATED)
+def bulk_proposals(
+    site_id: int, bulk: ProposalBulk, session: SessionDep, settings: SettingsDep, user: LeadUser
+) -> list[ElementPublic]:
+    """Load many proposals at once (leads and admins); all are stored or none."""
+    elements = crud.create_elements(
+        session=session,
+        site_id=site_id,
+        elements_in=bulk.elements,
+        username=user.username,
+        margin_m=settings.extent_margin_m,
+    )
+    return [crud.public(element) for element in elements]
+
+
+@router.get("/{element_id}", response_model=ElementPublic)
+def read_element(site_id: int, element_id: int, session: SessionDep, _user: CurrentUser) -> ElementPublic:
+    """One element's current version (deleted ones too, flagged)."""
+    return crud.public(crud.get_element(session=session, site_id=site_id, element_id=element_id))
+
+
+@router.patch("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
+def update_element(
+    site_id: int,
+    element_id: int,
+    update: ElementUpdate,
+    session: SessionDep,
+    settings: SettingsDep,
+    user: CurrentUser,
+) -> ElementPublic:
+    """Change class, points or confidence; 409 with the current element when `version` is stale."""
+    element = crud.update_element(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        update=update,
+        username=user.username,
+        margin_m=settings.extent_margin_m,
+    )
+    return crud.public(element)
+
+
+@router.delete("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
+def delete_element(
+    site_id: int,
+    element_id: int,
+    version: Annotated[int, Query(ge=1, description="The version last read.")],
+    session: SessionDep,
+    user: CurrentUser,
+) -> ElementPublic:
+    """Soft delete (kept and logged; restore an earlier version to undo)."""
+    element = crud.delete_element(
+        session=session, site_id=site_id, element_id=element_id, version=version, username=user.username
+    )
+    return crud.public(element)

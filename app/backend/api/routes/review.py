@@ -1,0 +1,61 @@
+"""Review transitions and history: move an element through review states, read its log, restore a version."""
+
+import logging
+from typing import Any
+
+from fastapi import APIRouter
+
+from app.backend import crud
+from app.backend.api.deps import CurrentUser, SessionDep
+from app.backend.schemas import ConflictBody, EditLogPublic, ElementPublic, ReviewRequest, VersionRequest
+
+logger = logging.getLogger(__name__)
+router = APIRouter(prefix="/sites/{site_id}/elements/{element_id}", tags=["review"])
+CONFLICT: dict[int | str, dict[str, Any]] = {
+    409: {"model": ConflictBody, "description": "Stale version or invalid transition."}
+}
+
+
+@router.post("/review", response_model=ElementPublic, responses=CONFLICT)
+def review(
+    site_id: int, element_id: int, request: ReviewRequest, session: SessionDep, user: CurrentUser
+) -> ElementPublic:
+    """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned."""
+    element = crud.review_element(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        target=request.state,
+        version=request.version,
+        username=user.username,
+        role=user.role,
+    )
+    return crud.public(element)
+
+
+@router.get("/history", response_model=list[EditLogPublic])
+def history(site_id: int, element_id: int, session: SessionDep, _user: CurrentUser) -> list[EditLogPublic]:
+    """The element's edit log, oldest first: who, when, action, before and after."""
+    entries = crud.element_history(session=session, site_id=site_id, element_id=element_id)
+    return [EditLogPublic.model_validate(entry) for entry in entries]
+
+
+@router.post("/history/{restore_version}/restore", response_model=ElementPublic, responses=CONFLICT)
+def restore(
+    site_id: int,
+    element_id: int,
+    restore_version: int,
+    request: VersionRequest,
+    session: SessionDep,
+    user: CurrentUser,
+) -> ElementPublic:
+    """Make an earlier version's content current again, as a new version."""
+    element = crud.restore_version(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        restore=restore_version,
+        version=request.version,
+        username=user.username,
+    )
+    return crud.public(element)

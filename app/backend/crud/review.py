@@ -1,0 +1,80 @@
+"""Review transitions and history: state changes by role, the edit log, and restoring earlier versions."""
+
+import logging
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from app.backend.crud.elements import _set_points, check_version, commit_change, get_element, snapshot
+from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
+from app.backend.models import EditLog, Element
+
+logger = logging.getLogger(__name__)
+
+ANNOTATOR_TRANSITIONS: dict[str, frozenset[str]] = {
+    "proposed": frozenset({"accepted", "fixed", "rejected"}),
+    "returned": frozenset({"accepted", "fixed", "rejected"}),
+}
+"""Annotators verify proposals (and work sent back to them)."""
+LEAD_TRANSITIONS: dict[str, frozenset[str]] = {
+    "accepted": frozenset({"approved", "returned"}),
+    "fixed": frozenset({"approved", "returned"}),
+}
+"""Leads approve or return what annotators verified."""
+LEAD_STATES = frozenset({"approved", "returned"})
+
+
+def allowed_targets(state: str, role: str) -> frozenset[str]:
+    """States a user of `role` may move an element in `state` to (leads and admins may do annotators' work)."""
+    targets = ANNOTATOR_TRANSITIONS.get(state, frozenset())
+    if role in ("lead", "admin"):
+        targets = targets | LEAD_TRANSITIONS.get(state, frozenset())
+    return targets
+
+
+def review_element(
+    *, session: Session, site_id: int, element_id: int, target: str, version: int, username: str, role: str
+) -> Element:
+    """Move an element to `target`; 403 for a lead-only state asked by an annotator, 409 for an invalid move."""
+    if target in LEAD_STATES and role not in ("lead", "admin"):
+        raise ForbiddenError(f"state: only a lead may set {target!r}")
+    element = get_element(session=session, site_id=site_id, element_id=element_id)
+    check_version(element, version)
+    if element.deleted:
+        raise ConflictError(f"element {element_id} is deleted; restore a version first")
+    if target not in allowed_targets(element.state, role):
+        allowed = sorted(allowed_targets(element.state, role)) or "none"
+        raise ConflictError(
+            f"state: cannot go from {element.state!r} to {target!r}; allowed from {element.state!r}: {allowed}"
+        )
+    before = snapshot(element)
+    element.state = target
+    return commit_change(session, element, username=username, action="review", before=before)
+
+
+def element_history(*, session: Session, site_id: int, element_id: int) -> list[EditLog]:
+    """The element's edit log, oldest first."""
+    get_element(session=session, site_id=site_id, element_id=element_id)
+    query = select(EditLog).where(EditLog.element_id == element_id).order_by(EditLog.version, EditLog.id)
+    return list(session.scalars(query))
+
+
+def restore_version(
+    *, session: Session, site_id: int, element_id: int, restore: int, version: int, username: str
+) -> Element:
+    """Make the content of an earlier version the new current version (a new log entry; nothing erased)."""
+    element = get_element(session=session, site_id=site_id, element_id=element_id)
+    check_version(element, version)
+    entry = session.scalar(
+        select(EditLog).where(EditLog.element_id == element_id, EditLog.version == restore)
+    )
+    if entry is None:
+        raise NotFoundError(f"element {element_id} has no version {restore}")
+    before = snapshot(element)
+    content = entry.after
+    element.cls = content["class"]
+    _set_points(element, [(p[0], p[1]) for p in content["points"]])
+    element.confidence = content["confidence"]
+    element.state = content["state"]
+    element.deleted = bool(content["deleted"])
+    return commit_change(session, element, username=username, action="restore", before=before)

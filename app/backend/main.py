@@ -1,0 +1,44 @@
+"""The FastAPI application factory: `create_app(settings)` migrates the database and mounts the API."""
+
+import logging
+
+from fastapi import FastAPI
+
+from app.backend import crud
+from app.backend.api.main import api_router
+from app.backend.config import Settings
+from app.backend.db import make_engine, make_sessionmaker, upgrade
+from app.backend.errors import install_error_handlers
+from app.backend.middleware import BodySizeLimit
+
+logger = logging.getLogger(__name__)
+
+
+def create_app(settings: Settings) -> FastAPI:
+    """Migrate the database to the latest schema, bootstrap the first admin if asked, and build the app."""
+    database_url = settings.resolved_database_url
+    upgrade(database_url)
+    engine = make_engine(database_url)
+    sessions = make_sessionmaker(engine)
+    if settings.admin_username:
+        with sessions() as session:
+            crud.ensure_admin(
+                session=session,
+                username=settings.admin_username,
+                password=settings.admin_password,
+                scrypt_n=settings.scrypt_n,
+            )
+    app = FastAPI(
+        title="CAMA Studio",
+        summary="HD-map annotation: sites, versioned vector elements, review and edit history.",
+        docs_url="/docs",
+        openapi_url="/openapi.json",
+    )
+    app.state.settings = settings
+    app.state.engine = engine
+    app.state.sessionmaker = sessions
+    install_error_handlers(app)
+    app.include_router(api_router)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_payload_bytes)
+    logger.info("backend ready on %s", engine.url.render_as_string(hide_password=True))
+    return app

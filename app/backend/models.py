@@ -1,0 +1,97 @@
+"""ORM models (SQLAlchemy 2): users, tokens, sites, map elements and the append-only edit log.
+
+These are storage classes only; the API's request and response shapes live in `schemas.py`.
+"""
+
+import logging
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import JSON, Boolean, DateTime, Float, ForeignKey, Index, Integer, String, Text
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+logger = logging.getLogger(__name__)
+
+
+class Base(DeclarativeBase):
+    """Declarative base shared by every table (Alembic's target metadata)."""
+
+
+class User(Base):
+    """A person who logs in: annotator, lead or admin."""
+
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    username: Mapped[str] = mapped_column(String(64), unique=True, index=True)
+    role: Mapped[str] = mapped_column(String(16))
+    password_hash: Mapped[str] = mapped_column(String(255))
+    is_active: Mapped[bool] = mapped_column(Boolean, default=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class Token(Base):
+    """A login token; only its SHA-256 digest is stored, so a leaked database leaks no usable token."""
+
+    __tablename__ = "tokens"
+
+    token_hash: Mapped[str] = mapped_column(String(64), primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    expires_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class Site(Base):
+    """An annotated area: its origin, raster georeference and where its BEV rasters lie."""
+
+    __tablename__ = "sites"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(128), unique=True)
+    site_origin_x: Mapped[float] = mapped_column(Float)
+    site_origin_y: Mapped[float] = mapped_column(Float)
+    georeference: Mapped[dict[str, Any]] = mapped_column(JSON)
+    raster_dir: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class Element(Base):
+    """The current version of one map element; every change is mirrored by an `EditLog` row."""
+
+    __tablename__ = "elements"
+    __table_args__ = (Index("ix_elements_site_bbox", "site_id", "xmin", "xmax", "ymin", "ymax"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    site_id: Mapped[int] = mapped_column(ForeignKey("sites.id", ondelete="CASCADE"), index=True)
+    cls: Mapped[str] = mapped_column("class", String(32))
+    points: Mapped[list[list[float]]] = mapped_column(JSON)
+    xmin: Mapped[float] = mapped_column(Float)
+    ymin: Mapped[float] = mapped_column(Float)
+    xmax: Mapped[float] = mapped_column(Float)
+    ymax: Mapped[float] = mapped_column(Float)
+    confidence: Mapped[float | None] = mapped_column(Float, nullable=True)
+    source: Mapped[str] = mapped_column(String(16))
+    state: Mapped[str] = mapped_column(String(16), index=True)
+    deleted: Mapped[bool] = mapped_column(Boolean, default=False)
+    version: Mapped[int] = mapped_column(Integer, nullable=False)
+    author: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    proposal: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    """Snapshot of the element as first proposed (class, points, confidence), for proposal-to-final diffs."""
+
+    __mapper_args__ = {"version_id_col": version}  # the ORM's optimistic lock: UPDATE ... WHERE version = old
+
+
+class EditLog(Base):
+    """Append-only record of one change to an element: who, when, what, and the state before and after."""
+
+    __tablename__ = "edit_log"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    element_id: Mapped[int] = mapped_column(ForeignKey("elements.id", ondelete="CASCADE"), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    username: Mapped[str] = mapped_column(String(64))
+    at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    action: Mapped[str] = mapped_column(String(16))
+    before: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    after: Mapped[dict[str, Any]] = mapped_column(JSON)

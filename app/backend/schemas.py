@@ -1,0 +1,220 @@
+"""API request and response shapes (pydantic), separate from the ORM models.
+
+Element geometry is validated by the `annotations` package (`MapElement`): one definition of a valid element.
+Non-finite numbers are rejected at parse time (`allow_inf_nan=False`), since JSON parsers accept NaN.
+"""
+
+import logging
+from datetime import datetime
+from typing import Any, Literal, Self
+
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from annotations.schema import ElementClass, MapElement, ReviewState, Source
+
+logger = logging.getLogger(__name__)
+
+Role = Literal["annotator", "lead", "admin"]
+Point = tuple[float, float]
+STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, populate_by_name=True)
+
+
+def check_element(*, cls: str, points: list[Point], source: str, confidence: float | None) -> None:
+    """Validate an element through `annotations.MapElement`; ValueError naming the field on failure."""
+    try:
+        MapElement.model_validate(
+            {"id": "new", "class": cls, "points_2d": points, "source": source, "confidence": confidence}
+        )
+    except ValidationError as error:
+        messages = []
+        for item in error.errors():
+            field = ".".join(str(part) for part in item["loc"]) or "element"
+            field = "points" if field.startswith("points_2d") else field
+            message = str(item["msg"]).removeprefix("Value error, ")
+            messages.append(
+                message.replace("points_2d", "points") if ":" in message else f"{field}: {message}"
+            )
+        raise ValueError("; ".join(messages)) from None
+
+
+class LoginRequest(BaseModel):
+    """Credentials for `POST /api/auth/login` (JSON or form-encoded)."""
+
+    model_config = STRICT
+    username: str = Field(min_length=1, max_length=64)
+    password: str = Field(min_length=1, max_length=1024)
+
+
+class TokenPublic(BaseModel):
+    """A bearer token and when it expires."""
+
+    access_token: str
+    token_type: Literal["bearer"] = "bearer"
+    expires_at: datetime
+
+
+class UserCreate(BaseModel):
+    """A new user, made by an admin."""
+
+    model_config = STRICT
+    username: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.@-]+$")
+    password: str = Field(min_length=8, max_length=1024)
+    role: Role = "annotator"
+
+
+class UserPublic(BaseModel):
+    """A user as the API shows it (never the password hash)."""
+
+    model_config = ConfigDict(from_attributes=True)
+    id: int
+    username: str
+    role: Role
+    is_active: bool
+
+
+class GeoreferenceIn(BaseModel):
+    """A raster georeference as written beside BEV rasters (DESIGN.md convention)."""
+
+    model_config = STRICT
+    origin_xy: Point
+    resolution: float = Field(gt=0.0)
+    width: int = Field(ge=1)
+    height: int = Field(ge=1)
+
+
+class SiteCreate(BaseModel):
+    """Register a site from a synthetic site folder, or from a georeference plus a raster folder."""
+
+    model_config = STRICT
+    name: str = Field(min_length=1, max_length=128)
+    synthetic_dir: str | None = Field(default=None, description="Folder written by `cama synth`.")
+    site_origin_xy: Point | None = None
+    georeference: GeoreferenceIn | None = None
+    raster_dir: str | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> Self:
+        """Either `synthetic_dir` or all of `site_origin_xy`, `georeference`, `raster_dir`."""
+        manual = (self.site_origin_xy, self.georeference, self.raster_dir)
+        if self.synthetic_dir is None and any(value is None for value in manual):
+            raise ValueError("give synthetic_dir, or site_origin_xy + georeference + raster_dir")
+        if self.synthetic_dir is not None and any(value is not None for value in manual):
+            raise ValueError("synthetic_dir: give it alone, not with site_origin_xy/georeference/raster_dir")
+        return self
+
+
+class Extent(BaseModel):
+    """An axis-aligned box in site metres."""
+
+    xmin: float
+    ymin: float
+    xmax: float
+    ymax: float
+
+
+class SitePublic(BaseModel):
+    """A site in lists."""
+
+    id: int
+    name: str
+    site_origin_xy: Point
+    extent: Extent
+
+
+class SiteDetail(SitePublic):
+    """A site with its georeference, raster layers and element counts."""
+
+    georeference: dict[str, Any]
+    layers: list[str]
+    element_count: int
+    counts_by_state: dict[str, int]
+    counts_by_class: dict[str, int]
+
+
+class ElementCreate(BaseModel):
+    """A new element; geometry checked by `annotations.MapElement`."""
+
+    model_config = STRICT
+    cls: ElementClass = Field(validation_alias=AliasChoices("class", "cls"), serialization_alias="class")
+    points: list[Point] = Field(max_length=10_000, description="[x, y] site metres; crosswalks closed.")
+    confidence: float | None = Field(default=None, ge=0.0, le=1.0)
+    source: Source = "human"
+
+    @model_validator(mode="after")
+    def _valid_geometry(self) -> Self:
+        """Reject < 2 points, coincident points, open or self-crossing crosswalks, proposals without confidence."""
+        check_element(cls=self.cls, points=self.points, source=self.source, confidence=self.confidence)
+        return self
+
+
+class ProposalBulk(BaseModel):
+    """Many proposals at once; all are stored or none."""
+
+    model_config = STRICT
+    elements: list[ElementCreate] = Field(min_length=1, max_length=50_000)
+
+
+class ElementUpdate(BaseModel):
+    """A change to an element; `version` must be the one last read (optimistic concurrency)."""
+
+    model_config = STRICT
+    version: int = Field(ge=1)
+    cls: ElementClass | None = Field(
+        default=None, validation_alias=AliasChoices("class", "cls"), serialization_alias="class"
+    )
+    points: list[Point] | None = Field(default=None, max_length=10_000)
+    confidence: float | None = Field(default=None, ge=0.0, le=1.0)
+
+
+class ElementPublic(BaseModel):
+    """An element's current version."""
+
+    model_config = ConfigDict(populate_by_name=True, serialize_by_alias=True)
+    id: int
+    site_id: int
+    cls: ElementClass = Field(serialization_alias="class", validation_alias=AliasChoices("class", "cls"))
+    points: list[Point]
+    confidence: float | None
+    source: Source
+    state: ReviewState
+    deleted: bool
+    version: int
+    author: str | None
+    created_at: datetime
+    updated_at: datetime
+
+
+class ReviewRequest(BaseModel):
+    """Move an element to a review state; `version` as last read."""
+
+    model_config = STRICT
+    state: Literal["accepted", "fixed", "rejected", "approved", "returned"]
+    version: int = Field(ge=1)
+
+
+class VersionRequest(BaseModel):
+    """Carries the version last read, for changes without other content (restore)."""
+
+    model_config = STRICT
+    version: int = Field(ge=1)
+
+
+class EditLogPublic(BaseModel):
+    """One entry of an element's edit log."""
+
+    model_config = ConfigDict(from_attributes=True)
+    id: int
+    element_id: int
+    version: int
+    username: str
+    at: datetime
+    action: str
+    before: dict[str, Any] | None
+    after: dict[str, Any]
+
+
+class ConflictBody(BaseModel):
+    """The 409 body: why, and the element as stored now."""
+
+    detail: str
+    current: ElementPublic | None = None

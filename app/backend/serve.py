@@ -1,0 +1,38 @@
+"""`cama serve`: run the backend with uvicorn."""
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from app.backend.config import Settings
+
+logger = logging.getLogger(__name__)
+
+
+def serve_command(
+    data_dir: Annotated[Path, typer.Argument(help="Folder for the server's database and state.")],
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port.")] = 8000,
+    database_url: Annotated[
+        str | None, typer.Option(help="SQLAlchemy URL (e.g. postgresql://...); default SQLite in data_dir.")
+    ] = None,
+    admin_username: Annotated[
+        str | None,
+        typer.Option(help="Create this admin if there are no users; password from CAMA_ADMIN_PASSWORD."),
+    ] = None,
+) -> None:
+    """Serve the annotation API (OpenAPI at /docs); settings from CAMA_* variables, options win."""
+    import uvicorn
+
+    from app.backend.main import create_app
+
+    try:
+        settings = Settings.from_env(
+            data_dir=data_dir, database_url=database_url, admin_username=admin_username
+        )
+    except ValueError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(code=2) from error
+    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")

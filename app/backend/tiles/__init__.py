@@ -1,0 +1,29 @@
+"""BEV raster tiles: display colouring, cached tile pyramids, safe tile lookup and elevation queries."""
+
+from app.backend.tiles.access import (
+    TileRequestError,
+    UnknownLayerError,
+    elevation_at,
+    pyramid_info,
+    tile_file,
+)
+from app.backend.tiles.georef import GeoreferenceLike, RasterGeoreference
+from app.backend.tiles.layers import LAYER_NAMES, LayerName, Legend
+from app.backend.tiles.pyramid import PyramidInfo, PyramidLevel, build_pyramid, build_site_pyramids
+
+__all__ = [
+    "LAYER_NAMES",
+    "GeoreferenceLike",
+    "LayerName",
+    "Legend",
+    "PyramidInfo",
+    "PyramidLevel",
+    "RasterGeoreference",
+    "TileRequestError",
+    "UnknownLayerError",
+    "build_pyramid",
+    "build_site_pyramids",
+    "elevation_at",
+    "pyramid_info",
+    "tile_file",
+]

@@ -1,0 +1,29 @@
+"""Backend test helpers shared by the fixtures and tests: constants, login, element bodies."""
+
+from typing import Any
+
+from fastapi.testclient import TestClient
+
+PASSWORD = "correct horse battery"
+ROLES = ("annotator", "lead", "admin")
+ORIGIN_XY = (1000.0, 2000.0)
+GEOREFERENCE = {"origin_xy": [1000.0, 2100.0], "resolution": 0.5, "width": 200, "height": 200}
+"""Site extent in site metres: x [-0.25, 99.75], y [0.25, 100.25]."""
+
+
+def login(client: TestClient, username: str, password: str = PASSWORD) -> dict[str, str]:
+    """Authorization headers for a user."""
+    response = client.post("/api/auth/login", json={"username": username, "password": password})
+    assert response.status_code == 200, response.text
+    return {"Authorization": f"Bearer {response.json()['access_token']}"}
+
+
+def divider(x0: float = 10.0, y0: float = 10.0, **extra: Any) -> dict[str, Any]:
+    """A short divider element body."""
+    return {"class": "divider", "points": [[x0, y0], [x0 + 5.0, y0], [x0 + 10.0, y0 + 1.0]], **extra}
+
+
+def crosswalk(x0: float = 50.0, y0: float = 50.0) -> dict[str, Any]:
+    """A closed 4 m x 3 m crosswalk body."""
+    ring = [[x0, y0], [x0 + 4, y0], [x0 + 4, y0 + 3], [x0, y0 + 3], [x0, y0]]
+    return {"class": "ped_crossing", "points": ring}

@@ -1,0 +1,87 @@
+"""Backend test helpers: an app on a fresh temporary SQLite database per test, users per role, a small site."""
+
+import json
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD, divider, login
+from fastapi.testclient import TestClient
+
+from app.backend.config import Settings
+from app.backend.main import create_app
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    """Settings on a temporary data folder with cheap password hashing and a small payload limit."""
+    return Settings(
+        data_dir=tmp_path / "data",
+        scrypt_n=2**4,
+        max_payload_bytes=64 * 1024,
+        extent_margin_m=10.0,
+        admin_username="root",
+        admin_password=PASSWORD,
+    )
+
+
+@pytest.fixture
+def client(settings: Settings) -> Iterator[TestClient]:
+    """A client on a freshly migrated database with a bootstrap admin."""
+    with TestClient(create_app(settings)) as test_client:
+        yield test_client
+    test_client.app.state.engine.dispose()  # type: ignore[attr-defined]
+
+
+@pytest.fixture
+def headers(client: TestClient) -> dict[str, dict[str, str]]:
+    """Auth headers by role: the bootstrap admin creates one annotator and one lead."""
+    admin = login(client, "root")
+    for role in ("annotator", "lead"):
+        response = client.post(
+            "/api/users", json={"username": role, "password": PASSWORD, "role": role}, headers=admin
+        )
+        assert response.status_code == 201, response.text
+    return {"admin": admin, "annotator": login(client, "annotator"), "lead": login(client, "lead")}
+
+
+@pytest.fixture
+def raster_dir(tmp_path: Path) -> Path:
+    """A raster folder with two (empty) layer files."""
+    folder = tmp_path / "bev"
+    folder.mkdir()
+    for name in ("semantic.png", "elevation.npy"):
+        (folder / name).write_bytes(b"")
+    (folder / "georeference.json").write_text(json.dumps(GEOREFERENCE))
+    return folder
+
+
+@pytest.fixture
+def site_id(client: TestClient, headers: dict[str, dict[str, str]], raster_dir: Path) -> int:
+    """A registered site 100 m x 100 m."""
+    body = {
+        "name": "s1",
+        "site_origin_xy": ORIGIN_XY,
+        "georeference": GEOREFERENCE,
+        "raster_dir": str(raster_dir),
+    }
+    response = client.post("/api/sites", json=body, headers=headers["lead"])
+    assert response.status_code == 201, response.text
+    return int(response.json()["id"])
+
+
+@pytest.fixture
+def make_element(
+    client: TestClient, headers: dict[str, dict[str, str]], site_id: int
+) -> Callable[..., dict[str, Any]]:
+    """Create an element as the annotator and return its JSON."""
+
+    def make(body: dict[str, Any] | None = None) -> dict[str, Any]:
+        response = client.post(
+            f"/api/sites/{site_id}/elements", json=body or divider(), headers=headers["annotator"]
+        )
+        assert response.status_code == 201, response.text
+        return dict(response.json())
+
+    return make
