@@ -5,8 +5,9 @@ Non-finite numbers are rejected at parse time (`allow_inf_nan=False`), since JSO
 """
 
 import logging
+from collections.abc import Sequence
 from datetime import datetime
-from typing import Any, Literal, Self
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -15,11 +16,12 @@ from annotations.schema import ElementClass, MapElement, ReviewState, Source
 logger = logging.getLogger(__name__)
 
 Role = Literal["annotator", "lead", "admin"]
-Point = tuple[float, float]
+Point = Annotated[Sequence[float], Field(min_length=2, max_length=2)]
+"""[x, y] in metres (an array of two numbers; a plain array keeps the OpenAPI schema simple for clients)."""
 STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, populate_by_name=True)
 
 
-def check_element(*, cls: str, points: list[Point], source: str, confidence: float | None) -> None:
+def check_element(*, cls: str, points: Sequence[Point], source: str, confidence: float | None) -> None:
     """Validate an element through `annotations.MapElement`; ValueError naming the field on failure."""
     try:
         MapElement.model_validate(

@@ -2,8 +2,12 @@
 
 from fastapi import APIRouter
 
-from app.backend.api.routes import elements, login, review, sites, users
+from app.backend.api.routes import elements, issues, login, quality, queues, rasters, review, sites, users
 
 api_router = APIRouter(prefix="/api")
 for module in (login, users, sites, elements, review):
+    api_router.include_router(module.router)
+for module in (rasters, quality):
+    api_router.include_router(module.router)
+for module in (queues, issues):
     api_router.include_router(module.router)

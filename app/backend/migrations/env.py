@@ -4,6 +4,7 @@ import logging
 
 from alembic import context
 
+from app.backend import models_review  # noqa: F401  (registers the queue and issue tables)
 from app.backend.db import make_engine
 from app.backend.models import Base
 

@@ -178,7 +178,7 @@ def load_layer(bev_dir: Path, name: LayerName) -> np.ndarray:
     if name == "elevation":
         try:
             return np.load(path, mmap_mode="r", allow_pickle=False)
-        except ValueError as error:
+        except (ValueError, EOFError, OSError) as error:
             raise ValueError(f"{path}: not a readable .npy raster: {error}") from error
     flags = cv2.IMREAD_COLOR if name == "photometric" else cv2.IMREAD_UNCHANGED
     image = cv2.imread(str(path), flags)

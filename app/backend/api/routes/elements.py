@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, status
 
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, LeadUser, SessionDep, SettingsDep
+from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.errors import InvalidInputError
 from app.backend.schemas import ConflictBody, ElementCreate, ElementPublic, ElementUpdate, ProposalBulk
 
@@ -36,7 +36,7 @@ def parse_bbox(bbox: str | None) -> tuple[float, float, float, float] | None:
 
 @router.get("", response_model=list[ElementPublic])
 def list_elements(
-    site_id: int,
+    site_id: IdPath,
     session: SessionDep,
     _user: CurrentUser,
     bbox: Annotated[str | None, Query(description="xmin,ymin,xmax,ymax in site metres.")] = None,
@@ -60,7 +60,7 @@ def list_elements(
 
 @router.post("", response_model=ElementPublic, status_code=status.HTTP_201_CREATED)
 def create_element(
-    site_id: int, element_in: ElementCreate, session: SessionDep, settings: SettingsDep, user: CurrentUser
+    site_id: IdPath, element_in: ElementCreate, session: SessionDep, settings: SettingsDep, user: CurrentUser
 ) -> ElementPublic:
     """Draw a new element (version 1, state `proposed`)."""
     (element,) = crud.create_elements(
@@ -75,7 +75,7 @@ def create_element(
 
 @router.post("/bulk", response_model=list[ElementPublic], status_code=status.HTTP_201_CREATED)
 def bulk_proposals(
-    site_id: int, bulk: ProposalBulk, session: SessionDep, settings: SettingsDep, user: LeadUser
+    site_id: IdPath, bulk: ProposalBulk, session: SessionDep, settings: SettingsDep, user: LeadUser
 ) -> list[ElementPublic]:
     """Load many proposals at once (leads and admins); all are stored or none."""
     elements = crud.create_elements(
@@ -89,15 +89,17 @@ def bulk_proposals(
 
 
 @router.get("/{element_id}", response_model=ElementPublic)
-def read_element(site_id: int, element_id: int, session: SessionDep, _user: CurrentUser) -> ElementPublic:
+def read_element(
+    site_id: IdPath, element_id: IdPath, session: SessionDep, _user: CurrentUser
+) -> ElementPublic:
     """One element's current version (deleted ones too, flagged)."""
     return crud.public(crud.get_element(session=session, site_id=site_id, element_id=element_id))
 
 
 @router.patch("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
 def update_element(
-    site_id: int,
-    element_id: int,
+    site_id: IdPath,
+    element_id: IdPath,
     update: ElementUpdate,
     session: SessionDep,
     settings: SettingsDep,
@@ -117,9 +119,9 @@ def update_element(
 
 @router.delete("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
 def delete_element(
-    site_id: int,
-    element_id: int,
-    version: Annotated[int, Query(ge=1, description="The version last read.")],
+    site_id: IdPath,
+    element_id: IdPath,
+    version: Annotated[int, Query(ge=1, le=MAX_ID, description="The version last read.")],
     session: SessionDep,
     user: CurrentUser,
 ) -> ElementPublic:

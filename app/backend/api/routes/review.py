@@ -6,7 +6,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, SessionDep
+from app.backend.api.deps import CurrentUser, IdPath, SessionDep, VersionPath
 from app.backend.schemas import ConflictBody, EditLogPublic, ElementPublic, ReviewRequest, VersionRequest
 
 logger = logging.getLogger(__name__)
@@ -18,7 +18,7 @@ CONFLICT: dict[int | str, dict[str, Any]] = {
 
 @router.post("/review", response_model=ElementPublic, responses=CONFLICT)
 def review(
-    site_id: int, element_id: int, request: ReviewRequest, session: SessionDep, user: CurrentUser
+    site_id: IdPath, element_id: IdPath, request: ReviewRequest, session: SessionDep, user: CurrentUser
 ) -> ElementPublic:
     """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned."""
     element = crud.review_element(
@@ -34,7 +34,9 @@ def review(
 
 
 @router.get("/history", response_model=list[EditLogPublic])
-def history(site_id: int, element_id: int, session: SessionDep, _user: CurrentUser) -> list[EditLogPublic]:
+def history(
+    site_id: IdPath, element_id: IdPath, session: SessionDep, _user: CurrentUser
+) -> list[EditLogPublic]:
     """The element's edit log, oldest first: who, when, action, before and after."""
     entries = crud.element_history(session=session, site_id=site_id, element_id=element_id)
     return [EditLogPublic.model_validate(entry) for entry in entries]
@@ -42,9 +44,9 @@ def history(site_id: int, element_id: int, session: SessionDep, _user: CurrentUs
 
 @router.post("/history/{restore_version}/restore", response_model=ElementPublic, responses=CONFLICT)
 def restore(
-    site_id: int,
-    element_id: int,
-    restore_version: int,
+    site_id: IdPath,
+    element_id: IdPath,
+    restore_version: VersionPath,
     request: VersionRequest,
     session: SessionDep,
     user: CurrentUser,

@@ -5,7 +5,7 @@ import logging
 from fastapi import APIRouter, status
 
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, LeadUser, SessionDep
+from app.backend.api.deps import CurrentUser, IdPath, LeadUser, SessionDep
 from app.backend.models import Site
 from app.backend.schemas import SiteCreate, SiteDetail, SitePublic
 
@@ -37,7 +37,7 @@ def list_sites(session: SessionDep, _user: CurrentUser) -> list[SitePublic]:
 
 
 @router.get("/{site_id}", response_model=SiteDetail)
-def read_site(site_id: int, session: SessionDep, _user: CurrentUser) -> SiteDetail:
+def read_site(site_id: IdPath, session: SessionDep, _user: CurrentUser) -> SiteDetail:
     """A site's extent, georeference, raster layers present and element counts by state and class."""
     site = crud.get_site(session=session, site_id=site_id)
     by_state, by_class = crud.site_counts(session=session, site_id=site_id)

@@ -1,0 +1,205 @@
+"""Queues: the lead's review queue and annotators' work items held by leases.
+
+Review queue order: confidence ascending, elements without a confidence (drawn by people) last, then id.
+
+Work items: `next_work_item` leases one element at a time. Candidates are live elements of the site that no
+active lease holds and that the requester does not already hold, in this order:
+1. `returned` elements whose last annotator (the latest edit-log entry by a user with role `annotator`) is the
+   requester, oldest id first: returned work goes to the front of its annotator's queue;
+2. `proposed` elements, lowest confidence first, human-made (no confidence) last.
+Returned elements of other annotators are never handed out.
+
+The guard against two annotators getting one element is the UNIQUE `leases.active_element_id`: an insert that
+loses a race fails with IntegrityError and the next candidate is tried. Expired leases are reclaimed (their
+`active_element_id` cleared) at the start of each request, so an abandoned item is free again.
+"""
+
+import logging
+from collections.abc import Callable
+from datetime import datetime, timedelta
+
+from sqlalchemy import ColumnElement, Select, func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from app.backend.crud.elements import public
+from app.backend.crud.sites import get_site
+from app.backend.crud.users import as_utc, utc_now
+from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
+from app.backend.models import EditLog, Element, User
+from app.backend.models_review import Lease
+from app.backend.schemas_review import LeasePublic
+
+logger = logging.getLogger(__name__)
+
+clock: Callable[[], datetime] = utc_now
+"""The time source for leases (tests replace it to make leases expire without sleeping)."""
+CANDIDATES_PER_TRY = 16
+"""How many candidates one attempt considers before looking again."""
+MAX_ATTEMPTS = 8
+
+
+def review_queue(
+    *,
+    session: Session,
+    site_id: int,
+    cls: str | None = None,
+    state: str | None = None,
+    author: str | None = None,
+    bbox: tuple[float, float, float, float] | None = None,
+    limit: int = 100,
+    offset: int = 0,
+) -> tuple[int, list[Element]]:
+    """The total count and one page of live elements, lowest confidence first and no confidence last."""
+    get_site(session=session, site_id=site_id)
+    conditions: list[ColumnElement[bool]] = [Element.site_id == site_id, Element.deleted.is_(False)]
+    if cls is not None:
+        conditions.append(Element.cls == cls)
+    if state is not None:
+        conditions.append(Element.state == state)
+    if author is not None:
+        conditions.append(Element.author == author)
+    if bbox is not None:
+        xmin, ymin, xmax, ymax = bbox
+        conditions += [Element.xmax >= xmin, Element.xmin <= xmax, Element.ymax >= ymin, Element.ymin <= ymax]
+    total = session.scalar(select(func.count()).select_from(Element).where(*conditions)) or 0
+    query = (
+        select(Element)
+        .where(*conditions)
+        .order_by(Element.confidence.is_(None), Element.confidence, Element.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return int(total), list(session.scalars(query))
+
+
+def lease_public(session: Session, lease: Lease, *, now: datetime | None = None) -> LeasePublic:
+    """The API view of a lease with its element."""
+    now = now or clock()
+    element = session.get(Element, lease.element_id)
+    if element is None:
+        raise NotFoundError(f"element {lease.element_id} of lease {lease.id} not found")
+    active = lease.active_element_id is not None and as_utc(lease.expires_at) > now
+    return LeasePublic(
+        id=lease.id,
+        site_id=lease.site_id,
+        element_id=lease.element_id,
+        username=lease.username,
+        acquired_at=as_utc(lease.acquired_at),
+        expires_at=as_utc(lease.expires_at),
+        released_at=None if lease.released_at is None else as_utc(lease.released_at),
+        active=active,
+        element=public(element),
+    )
+
+
+def _reclaim_expired(session: Session, *, site_id: int, now: datetime) -> None:
+    """Free the elements of expired leases (the row stays, as history). Also opens the write transaction."""
+    session.execute(
+        update(Lease)
+        .where(Lease.site_id == site_id, Lease.active_element_id.is_not(None), Lease.expires_at <= now)
+        .values(active_element_id=None)
+    )
+
+
+def _returned_to(site_id: int, username: str) -> Select[Element]:
+    """Returned elements whose latest edit by an annotator was made by `username`."""
+    last_annotator_edit = (
+        select(EditLog.element_id, func.max(EditLog.id).label("log_id"))
+        .join(User, User.username == EditLog.username)
+        .where(User.role == "annotator")
+        .group_by(EditLog.element_id)
+        .subquery()
+    )
+    return (
+        select(Element)
+        .join(last_annotator_edit, last_annotator_edit.c.element_id == Element.id)
+        .join(EditLog, EditLog.id == last_annotator_edit.c.log_id)
+        .where(Element.site_id == site_id, Element.state == "returned", EditLog.username == username)
+        .order_by(Element.id)
+    )
+
+
+def _candidates(session: Session, *, site_id: int, username: str) -> list[Element]:
+    """Unleased elements for `username`, in queue order (see the module docstring)."""
+    held = select(Lease.active_element_id).where(Lease.active_element_id.is_not(None))
+    free = (Element.deleted.is_(False), Element.id.not_in(held))
+    returned = _returned_to(site_id, username).where(*free).limit(CANDIDATES_PER_TRY)
+    proposed = (
+        select(Element)
+        .where(Element.site_id == site_id, Element.state == "proposed", *free)
+        .order_by(Element.confidence.is_(None), Element.confidence, Element.id)
+        .limit(CANDIDATES_PER_TRY)
+    )
+    return list(session.scalars(returned)) + list(session.scalars(proposed))
+
+
+def next_work_item(*, session: Session, site_id: int, username: str, lease_s: int) -> Lease | None:
+    """Lease the next work item to `username` for `lease_s` seconds; None when there is no work left."""
+    get_site(session=session, site_id=site_id)
+    for _attempt in range(MAX_ATTEMPTS):
+        now = clock()
+        _reclaim_expired(session, site_id=site_id, now=now)
+        candidates = _candidates(session, site_id=site_id, username=username)
+        if not candidates:
+            session.commit()
+            return None
+        element = candidates[0]
+        lease = Lease(
+            site_id=site_id,
+            element_id=element.id,
+            active_element_id=element.id,
+            username=username,
+            acquired_at=now,
+            expires_at=now + timedelta(seconds=lease_s),
+        )
+        session.add(lease)
+        try:
+            session.commit()
+        except IntegrityError:
+            session.rollback()  # another request leased it first: look again
+            continue
+        logger.info("leased element %s to %s until %s", element.id, username, lease.expires_at)
+        return lease
+    raise ConflictError("queue: too many concurrent requests for work items; try again")
+
+
+def get_lease(*, session: Session, lease_id: int) -> Lease:
+    """The lease with this id; NotFoundError otherwise."""
+    lease = session.get(Lease, lease_id)
+    if lease is None:
+        raise NotFoundError(f"lease {lease_id} not found")
+    return lease
+
+
+def release_lease(*, session: Session, lease_id: int, username: str, role: str) -> Lease:
+    """Give the element back; the holder, a lead or an admin may release. Releasing twice is a no-op."""
+    lease = get_lease(session=session, lease_id=lease_id)
+    if lease.username != username and role not in ("lead", "admin"):
+        raise ForbiddenError(f"lease {lease_id} belongs to {lease.username!r}")
+    if lease.released_at is None:
+        lease.released_at = clock()
+        lease.active_element_id = None
+        session.commit()
+        logger.info("lease %s released by %s", lease_id, username)
+    return lease
+
+
+def renew_lease(*, session: Session, lease_id: int, username: str, lease_s: int) -> Lease:
+    """Extend the holder's unexpired lease to `lease_s` seconds from now; 409 when released or expired."""
+    lease = get_lease(session=session, lease_id=lease_id)
+    if lease.username != username:
+        raise ForbiddenError(f"lease {lease_id} belongs to {lease.username!r}; only its holder may renew it")
+    now = clock()
+    result = session.execute(
+        update(Lease)
+        .where(Lease.id == lease_id, Lease.active_element_id.is_not(None), Lease.expires_at > now)
+        .values(expires_at=now + timedelta(seconds=lease_s))
+        .execution_options(synchronize_session=False)
+    )
+    if result.rowcount != 1:  # type: ignore[attr-defined]
+        session.rollback()
+        raise ConflictError(f"lease {lease_id} was released or has expired; ask for the next work item")
+    session.commit()
+    session.refresh(lease)
+    return lease
