@@ -9,6 +9,9 @@ Layout written under `<out>/<name>/` (name = scene or site):
   maps/georeference.json our extension: site id + Georeference, so import restores site coordinates.
   odometry/camera_<CHANNEL>.txt  TUM rows `t x y z qx qy qz qw` (camera to global, t seconds), with a data set.
 
+A plain CAMA release folder (no georeference.json) imports too: its raster (`maps/elevation.npy` or the single
+`maps/*.npy`) fixes a scene-local frame centred on the map, see `release_georeference` for the axis mapping.
+
 Type table (one place): divider <-> lane_marking, boundary <-> Road_teeth, ped_crossing <-> Crosswalk_Line.
 `Stop_Line` has no class of ours: import skips it (logging the count) unless `stop_line_as_divider`.
 """
@@ -23,7 +26,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, RootModel, ValidationError
 
 from annotations.lift import lift_element
-from annotations.schema import AnnotationSet, ElementClass, Georeference, MapElement
+from annotations.schema import POLYGON_CLASSES, AnnotationSet, ElementClass, Georeference, MapElement
 from annotations.transforms import pixel_from_site_points, site_from_pixel_points
 from cama_pipeline.data import Dataset
 from cama_pipeline.io import atomic_write_bytes, atomic_write_npy
@@ -42,6 +45,8 @@ ELEVATION = Path("maps/elevation.npy")
 GEOREFERENCE = Path("maps/georeference.json")
 ODOMETRY_DIR = Path("odometry")
 IMPORT_AUTHOR = "cama-import"
+DEFAULT_RELEASE_RESOLUTION_M = 0.1
+"""Metres per BEV pixel in the public CAMA release."""
 _M = TypeVar("_M", bound=BaseModel)
 
 
@@ -202,16 +207,37 @@ def write_odometry(dataset: Dataset, folder: Path, *, scenes: Sequence[str] | No
 
 
 def import_cama(
-    folder: Path, *, site_id: str | None = None, stop_line_as_divider: bool = False
+    folder: Path,
+    *,
+    site_id: str | None = None,
+    stop_line_as_divider: bool = False,
+    resolution_m: float = DEFAULT_RELEASE_RESOLUTION_M,
 ) -> AnnotationSet:
-    """Read a CAMA layout folder back into an annotation set, lifting z from `maps/elevation.npy` if present."""
+    """Read a CAMA folder into an annotation set: our export (with `maps/georeference.json`) or a plain release.
+
+    With `maps/georeference.json` (our extension) pixels map through the stored georeference and z is lifted from
+    `maps/elevation.npy` when present. Without it the folder is a plain release (`release_georeference`): the
+    elevation raster beside `map_labels.json` is required and fixes the frame; `resolution_m` is its pixel size
+    and the site id defaults to the folder name. Crosswalk lines whose first point != last point are closed by
+    appending the first point (a ring that is then not simple is rejected, naming the instance).
+    """
     folder = Path(folder)
-    geo_file = validate_file(
-        CamaGeoreferenceFile, read_json_file(folder / GEOREFERENCE), folder / GEOREFERENCE
-    )
-    georef = geo_file.georeference
+    if (folder / GEOREFERENCE).is_file():
+        geo_file = validate_file(
+            CamaGeoreferenceFile, read_json_file(folder / GEOREFERENCE), folder / GEOREFERENCE
+        )
+        georef, stored_site_id = geo_file.georeference, geo_file.site_id
+        elevation = _read_elevation(folder / ELEVATION, georef)
+    else:
+        elevation_path = release_elevation_path(folder)
+        elevation = _load_npy(elevation_path)
+        if elevation.ndim != 2 or 0 in elevation.shape:
+            raise ValueError(
+                f"{elevation_path}: expected a non-empty (H, W) raster, got shape {elevation.shape}"
+            )
+        georef = release_georeference(elevation.shape, resolution_m=resolution_m)
+        stored_site_id = folder.resolve().name
     labels = validate_file(CamaMapLabels, read_json_file(folder / MAP_LABELS), folder / MAP_LABELS)
-    elevation = _read_elevation(folder / ELEVATION, georef)
     elements: list[MapElement] = []
     skipped = 0
     for index, instance in enumerate(labels.root):
@@ -223,19 +249,67 @@ def import_cama(
     if skipped:
         logger.warning("%s: skipped %d Stop_Line instances (no class of ours)", folder / MAP_LABELS, skipped)
     try:
-        return AnnotationSet(site_id=site_id or geo_file.site_id, georeference=georef, elements=elements)
+        return AnnotationSet(site_id=site_id or stored_site_id, georeference=georef, elements=elements)
     except ValidationError as error:
         raise ValueError(format_validation_error(folder / MAP_LABELS, error)) from error
+
+
+def release_georeference(
+    shape: tuple[int, ...], *, resolution_m: float = DEFAULT_RELEASE_RESOLUTION_M
+) -> Georeference:
+    """The scene-local georeference of a plain CAMA release raster of `shape` = (rows, cols).
+
+    The release convention (notes): x_cama = v * r - H/2, y_cama = u * r - W/2 in metres, with [u, v] = [column,
+    row] pixels, r = `resolution_m`, and H = rows * r, W = cols * r the raster's height and width in metres (so the
+    map is centred at 0; pixel centres sit at integer u, v). x_cama grows with the row, which our convention
+    (column -> +x, row -> -y) cannot express, so imported points use our axes, a proper 90-degree rotation of
+    the release frame: x = y_cama = u * r - W/2, y = -x_cama = H/2 - v * r (and back: x_cama = -y, y_cama = x).
+    That is exactly this georeference: site origin (0, 0), pixel (0, 0)'s centre at (-W/2, H/2).
+    """
+    if not (np.isfinite(resolution_m) and resolution_m > 0):
+        raise ValueError(f"resolution_m: expected a finite value > 0, got {resolution_m}")
+    rows, cols = int(shape[0]), int(shape[1])
+    return Georeference(
+        site_origin_xy=(0.0, 0.0),
+        origin_xy=(-cols * resolution_m / 2, rows * resolution_m / 2),
+        resolution=resolution_m,
+        width=cols,
+        height=rows,
+    )
+
+
+def release_elevation_path(folder: Path) -> Path:
+    """`maps/elevation.npy`, else the single `maps/*.npy`; FileNotFoundError / ValueError naming the folder."""
+    maps = Path(folder) / MAP_LABELS.parent
+    if (Path(folder) / ELEVATION).is_file():
+        return Path(folder) / ELEVATION
+    candidates = sorted(p for p in maps.glob("*.npy") if p.is_file()) if maps.is_dir() else []
+    if len(candidates) == 1:
+        return candidates[0]
+    if not candidates:
+        raise FileNotFoundError(
+            f"{folder}: cannot place the CAMA labels: need {GEOREFERENCE} (our export) or, for a plain CAMA "
+            f"release, the elevation raster as a .npy in {maps} beside map_labels.json"
+        )
+    names = [p.name for p in candidates]
+    raise ValueError(
+        f"{maps}: several .npy files {names} and no elevation.npy; keep one or name it elevation.npy"
+    )
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    """A numpy array file; ValueError naming it when it is not one."""
+    try:
+        return np.asarray(np.load(path, allow_pickle=False), dtype=float)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: not a numpy array file: {error}") from error
 
 
 def _read_elevation(path: Path, georef: Georeference) -> np.ndarray | None:
     """The elevation raster if the file exists; ValueError naming it when its shape is wrong."""
     if not path.is_file():
         return None
-    try:
-        elevation = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise ValueError(f"{path}: not a numpy array file: {error}") from error
+    elevation = _load_npy(path)
     if elevation.shape != georef.shape:
         raise ValueError(f"{path}: shape {elevation.shape} != georeference (height, width) {georef.shape}")
     return elevation
@@ -245,7 +319,10 @@ def _element(
     instance: CamaInstance, cls: ElementClass, georef: Georeference, elevation: np.ndarray | None, where: str
 ) -> MapElement:
     """One imported element (a reviewable human label), lifted when a raster is given."""
-    xy = site_from_pixel_points(np.asarray(instance.data, dtype=float), georef)
+    uv = np.asarray(instance.data, dtype=float)
+    if cls in POLYGON_CLASSES and not np.array_equal(uv[0], uv[-1]):
+        uv = np.vstack([uv, uv[:1]])  # release crosswalk lines may be open: close the ring
+    xy = site_from_pixel_points(uv, georef)
     try:
         element = MapElement(
             id=str(instance.id),

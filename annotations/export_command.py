@@ -14,7 +14,7 @@ import numpy as np
 import typer
 from pydantic import BaseModel
 
-from annotations.cama_format import CamaMapLabels, export_cama, import_cama
+from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, export_cama, import_cama
 from annotations.maptr_format import MaptrFile, export_maptr, import_maptr
 from annotations.schema import AnnotationSet, Georeference
 from cama_pipeline.data import DatasetError, load_dataset
@@ -110,6 +110,9 @@ def import_command(
     georeference: Annotated[
         Path | None, typer.Option(help="maptr: georeference JSON when the file has none.")
     ] = None,
+    resolution_m: Annotated[
+        float, typer.Option(help="cama: metres per pixel of a plain release folder (no georeference.json).")
+    ] = DEFAULT_RELEASE_RESOLUTION_M,
 ) -> None:
     """Import CAMA labels or MapTR vectors into an annotation set JSON, for review in the editor."""
     try:
@@ -117,7 +120,9 @@ def import_command(
             georef = _read_georeference(georeference)
             annotations = import_maptr(path, site_id=site_id, georeference=georef)
         else:
-            annotations = import_cama(path, site_id=site_id, stop_line_as_divider=stop_line_as_divider)
+            annotations = import_cama(
+                path, site_id=site_id, stop_line_as_divider=stop_line_as_divider, resolution_m=resolution_m
+            )
         annotations.write_json(out)
     except (ValueError, FileNotFoundError) as error:
         raise _fail(error) from error

@@ -6,7 +6,11 @@ The server is `cama serve` (uvicorn, one process) on loopback with SQLite in a t
 PostgreSQL when a URL is given (`--postgres-url` or CAMA_BENCH_POSTGRES_URL; that database must be empty or
 already migrated by CAMA, and is written to).
 
-Usage: .venv/bin/python bench/api_load.py [--clients 50] [--duration-s 15] [--server-cpus 0,1]
+Two runs per database: `paced` (each client pauses a random time of mean --think-ms between edits, as an
+annotator does; latency under realistic load) and `saturation` (no pause: the server's capacity, where latency
+is queueing by Little's law, clients / throughput).
+
+Usage: .venv/bin/python bench/api_load.py [--clients 50] [--duration-s 15] [--think-ms 1000] [--server-cpus 0,1]
 Prints the figures and writes them to bench/results/api_load.json.
 """
 
@@ -51,8 +55,10 @@ def client_loop(
     seed: int,
     stop: threading.Event,
     stats: ClientStats,
+    think_s: float = 0.0,
 ) -> None:
-    """Edit random elements until `stop` is set or the per-client cap is reached."""
+    """Edit random elements until `stop` is set or the per-client cap is reached; between edits a client
+    thinks for an exponentially distributed time of mean `think_s` (0 = back to back, a saturation test)."""
     rng = random.Random(seed)
     with httpx.Client(base_url=base_url, headers=headers, timeout=30.0) as client:
         while not stop.is_set() and len(stats.latencies_s) < MAX_EDITS_PER_CLIENT:
@@ -73,6 +79,8 @@ def client_loop(
                 stats.errors.append(repr(error))
                 continue
             stats.latencies_s.append(time.perf_counter() - started)
+            if think_s > 0:
+                stop.wait(rng.expovariate(1.0 / think_s))
 
 
 def percentile_ms(values_s: list[float], q: float) -> float:
@@ -80,7 +88,9 @@ def percentile_ms(values_s: list[float], q: float) -> float:
     return 1000.0 * statistics.quantiles(values_s, n=1000, method="inclusive")[round(q * 10) - 1]
 
 
-def run_load(server: ServerProcess, *, clients: int, duration_s: float, n_elements: int) -> dict[str, Any]:
+def run_load(
+    server: ServerProcess, *, clients: int, duration_s: float, n_elements: int, think_s: float
+) -> dict[str, Any]:
     """Seed a site and elements, run the clients for `duration_s`, return the figures."""
     with httpx.Client(base_url=server.base_url, timeout=30.0) as client:
         headers = login(client)
@@ -89,7 +99,9 @@ def run_load(server: ServerProcess, *, clients: int, duration_s: float, n_elemen
     stop = threading.Event()
     stats = [ClientStats() for _ in range(clients)]
     workers = [
-        threading.Thread(target=client_loop, args=(server.base_url, headers, site_id, ids, n, stop, stats[n]))
+        threading.Thread(
+            target=client_loop, args=(server.base_url, headers, site_id, ids, n, stop, stats[n], think_s)
+        )
         for n in range(clients)
     ]
     started = time.perf_counter()
@@ -105,6 +117,7 @@ def run_load(server: ServerProcess, *, clients: int, duration_s: float, n_elemen
     if len(latencies) < 2:
         raise RuntimeError(f"too few edits completed ({len(latencies)}); errors: {errors[:5]}")
     return {
+        "mean_think_ms": round(1000 * think_s),
         "edits": len(latencies),
         "elapsed_s": round(elapsed_s, 2),
         "throughput_edits_per_s": round(len(latencies) / elapsed_s, 1),
@@ -124,9 +137,16 @@ def bench_backend(label: str, database_url: str | None, args: argparse.Namespace
             data_dir=Path(folder), database_url=database_url, cpus=args.server_cpus
         ).start()
         try:
-            return run_load(
-                server, clients=args.clients, duration_s=args.duration_s, n_elements=args.elements
-            )
+            return {
+                mode: run_load(
+                    server,
+                    clients=args.clients,
+                    duration_s=args.duration_s,
+                    n_elements=args.elements,
+                    think_s=think_ms / 1000.0,
+                )
+                for mode, think_ms in (("paced", args.think_ms), ("saturation", 0.0))
+            }
         finally:
             server.stop()
 
@@ -143,6 +163,13 @@ def main() -> None:
     parser.add_argument("--elements", type=int, default=200, help="Elements the clients pick from at random.")
     parser.add_argument("--server-cpus", type=parse_cpus, default=None, help="Pin the server, e.g. 0,1.")
     parser.add_argument("--postgres-url", default=os.environ.get("CAMA_BENCH_POSTGRES_URL", ""))
+    parser.add_argument(
+        "--think-ms",
+        type=float,
+        default=1000.0,
+        help="Mean pause between a client's edits in the paced run (an annotator's edit rhythm); "
+        "a saturation run with no pause follows.",
+    )
     parser.add_argument("--output", type=Path, default=RESULTS / "api_load.json")
     args = parser.parse_args()
     if args.clients < 1 or args.duration_s <= 0 or args.elements < 1:
@@ -153,6 +180,7 @@ def main() -> None:
             "clients": args.clients,
             "duration_s": args.duration_s,
             "elements": args.elements,
+            "paced_mean_think_ms": args.think_ms,
             "server_cpus": list(args.server_cpus) if args.server_cpus else "all",
         },
         "machine": {

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from annotation_helpers import SQUARE, element_kwargs
+import typer
+from annotation_helpers import SQUARE, element_kwargs, plane_z
+from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement, lift_element
 from annotations.cama_format import (
@@ -16,7 +18,8 @@ from annotations.cama_format import (
     export_cama,
     import_cama,
 )
-from annotations.export_command import SCHEMA_DIR, SCHEMA_MODELS, schema_text
+from annotations.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
+from annotations.transforms import pixel_from_site_points
 
 sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
 
@@ -168,3 +171,103 @@ def test_odometry_tum_rows(tmp_path: Path, georef: Georeference) -> None:
 def test_committed_schemas_match_models(name: str) -> None:
     """annotations/schemas/*.schema.json equal the models' generated schemas (python -m annotations.export_command)."""
     assert (SCHEMA_DIR / name).read_text(encoding="utf-8") == schema_text(SCHEMA_MODELS[name])
+
+
+RELEASE_ROWS, RELEASE_COLS = 200, 300  # 20 m x 30 m at 0.1 m: H/2 = 10 m, W/2 = 15 m
+RELEASE_LABELS = [
+    {"attrs": {"type": "lane_marking"}, "data": [[50, 40], [120, 40], [200, 60]], "id": 1},
+    {"attrs": {"type": "Road_teeth"}, "data": [[10, 100], [290, 100]], "id": 2},
+    {"attrs": {"type": "Crosswalk_Line"}, "data": [[100, 100], [140, 100], [140, 130], [100, 130]], "id": 3},
+    {"attrs": {"type": "Stop_Line"}, "data": [[0, 0], [10, 0]], "id": 4},
+]
+
+
+def _release_plane(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """The known plane at release pixels, in our axes: x = u * 0.1 - W/2, y = H/2 - v * 0.1."""
+    return plane_z(cols * 0.1 - RELEASE_COLS * 0.1 / 2, RELEASE_ROWS * 0.1 / 2 - rows * 0.1)
+
+
+def _write_release(folder: Path, *, npy_name: str | None = "scene_height.npy") -> Path:
+    """A plain CAMA release scene (no georeference.json): map_labels.json and, unless None, a plane raster."""
+    (folder / "maps").mkdir(parents=True)
+    (folder / MAP_LABELS).write_text(json.dumps(RELEASE_LABELS))
+    if npy_name is not None:
+        rows, cols = np.mgrid[0:RELEASE_ROWS, 0:RELEASE_COLS]
+        elevation = _release_plane(rows, cols).astype(np.float32)
+        elevation[180:, 280:] = np.nan  # an unobserved corner, away from the labels
+        np.save(folder / "maps" / npy_name, elevation)
+    return folder
+
+
+def test_import_plain_release(tmp_path: Path) -> None:
+    """Pixel [u=50, v=40]: x_cama = 40*0.1 - 10 = -6, y_cama = 50*0.1 - 15 = -10 -> ours (x, y) = (-10, 6)."""
+    back = import_cama(_write_release(tmp_path / "scene-0001"))
+    assert back.site_id == "scene-0001"
+    assert back.georeference == Georeference(
+        site_origin_xy=(0.0, 0.0), origin_xy=(-15.0, 10.0), resolution=0.1, width=300, height=200
+    )
+    assert [(e.id, e.cls) for e in back.elements] == [
+        ("1", "divider"),
+        ("2", "boundary"),
+        ("3", "ped_crossing"),
+    ]
+    divider = back.by_id("1")
+    np.testing.assert_allclose(divider.points_2d[0], (-10.0, 6.0), atol=1e-9)
+    np.testing.assert_allclose(divider.points_2d[2], (200 * 0.1 - 15, 10 - 60 * 0.1), atol=1e-9)
+    for element, instance in zip(back.elements, RELEASE_LABELS, strict=False):
+        data = np.asarray(instance["data"], dtype=float)
+        np.testing.assert_allclose(pixel_from_site_points(element.xy(), back.georeference)[: len(data)], data)
+        xyz = element.xyz()
+        assert xyz is not None
+        np.testing.assert_allclose(xyz[:, 2], plane_z(xyz[:, 0], xyz[:, 1]), atol=1e-5)
+    assert divider.points_3d is not None
+    assert divider.points_3d[0][2] == pytest.approx(float(plane_z(-10.0, 6.0)), abs=1e-5)
+
+
+def test_release_crosswalk_is_closed(tmp_path: Path) -> None:
+    """An open Crosswalk_Line (first != last) is closed by appending its first point."""
+    crossing = import_cama(_write_release(tmp_path / "s")).by_id("3")
+    assert len(crossing.points_2d) == 5 and crossing.points_2d[0] == crossing.points_2d[-1]
+    np.testing.assert_allclose(crossing.points_2d[0], (100 * 0.1 - 15, 10 - 100 * 0.1), atol=1e-9)
+
+
+def test_release_stop_line_and_resolution(tmp_path: Path) -> None:
+    """Stop_Line only on request; the resolution scales the frame (0.2 m: pixel [50, 40] -> (-20, 12))."""
+    folder = _write_release(tmp_path / "s")
+    back = import_cama(folder, stop_line_as_divider=True, resolution_m=0.2, site_id="site-x")
+    assert back.site_id == "site-x" and back.by_id("4").cls == "divider"
+    np.testing.assert_allclose(back.by_id("1").points_2d[0], (50 * 0.2 - 30.0, 20.0 - 40 * 0.2), atol=1e-9)
+    with pytest.raises(ValueError, match="resolution_m"):
+        import_cama(folder, resolution_m=0.0)
+
+
+def test_release_prefers_elevation_npy(tmp_path: Path) -> None:
+    """elevation.npy wins over other .npy files; several others without it are ambiguous."""
+    folder = _write_release(tmp_path / "s")
+    np.save(folder / "maps/other.npy", np.zeros((10, 10)))
+    with pytest.raises(ValueError, match=r"several \.npy files \['other.npy', 'scene_height.npy'\]"):
+        import_cama(folder)
+    (folder / "maps/scene_height.npy").rename(folder / "maps/elevation.npy")
+    assert import_cama(folder).georeference.shape == (RELEASE_ROWS, RELEASE_COLS)
+
+
+def test_release_without_raster_is_a_clear_error(tmp_path: Path) -> None:
+    """No georeference.json and no .npy: FileNotFoundError naming the folder and what is needed."""
+    folder = _write_release(tmp_path / "bare", npy_name=None)
+    with pytest.raises(
+        FileNotFoundError, match=r"bare: cannot place the CAMA labels: need .*georeference.json"
+    ):
+        import_cama(folder)
+
+
+def test_release_import_command(tmp_path: Path) -> None:
+    """`cama import --resolution-m` reads a plain release folder."""
+    app = typer.Typer()
+    app.command("import")(import_command)  # a one-command app: invoked without the command name
+    folder = _write_release(tmp_path / "s")
+    args = [str(folder), "--out", str(tmp_path / "a.json"), "--resolution-m", "0.2"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    np.testing.assert_allclose(
+        AnnotationSet.read_json(tmp_path / "a.json").by_id("1").points_2d[0], (-20.0, 12.0)
+    )

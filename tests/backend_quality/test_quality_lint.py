@@ -174,3 +174,11 @@ def test_lint_scales_to_thousands_of_elements() -> None:
     ]
     findings = lint(views)
     assert codes(findings) == ["dangling_divider_end"] * (2 * len(views))
+
+
+def test_lint_of_no_elements_or_one_element_does_not_crash():
+    """Found by the schemathesis run: an empty neighbour query used to raise inside STRtree."""
+    assert lint([]) == []
+    single = [ElementView(id="only", cls="divider", points=np.array([[0.0, 0.0], [5.0, 0.0]]))]
+    codes = {finding.code for finding in lint(single, region=box(-10, -10, 10, 10))}
+    assert codes == {"dangling_divider_end"}

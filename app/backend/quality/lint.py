@@ -121,6 +121,11 @@ class ElementView:
         return self.points[0], self.points[-1]
 
 
+def _geometry_array(geometries: list) -> np.ndarray:
+    """Geometries as the object array STRtree.query wants (a plain empty list would be a float array)."""
+    return np.array(geometries, dtype=object)
+
+
 def _xy(geometry: BaseGeometry) -> tuple[float, float]:
     """A representative (x, y) of a geometry as plain floats."""
     point = geometry if isinstance(geometry, Point) else geometry.representative_point()
@@ -230,7 +235,7 @@ def find_crossing_dividers(views: Sequence[ElementView], config: LintConfig) -> 
     dividers = _of_class(views, "divider")
     lines = [view.line for view in dividers]
     tree = shapely.STRtree(lines)
-    pairs = tree.query(lines, predicate="intersects")
+    pairs = tree.query(_geometry_array(lines), predicate="intersects")
     findings = []
     for i, j in zip(pairs[0], pairs[1], strict=True):
         if i >= j:
@@ -296,7 +301,7 @@ def find_divider_spacing(views: Sequence[ElementView], config: LintConfig) -> li
     dividers = _of_class(views, "divider")
     lines = [view.line for view in dividers]
     tree = shapely.STRtree(lines)
-    pairs = tree.query(lines, predicate="dwithin", distance=config.spacing_search_m)
+    pairs = tree.query(_geometry_array(lines), predicate="dwithin", distance=config.spacing_search_m)
     findings = []
     for i, j in zip(pairs[0], pairs[1], strict=True):
         if i >= j:
@@ -365,7 +370,9 @@ def find_broken_boundaries(views: Sequence[ElementView], config: LintConfig) -> 
     boundaries = _of_class(views, "boundary")
     ends = [end for view in boundaries for end in view.ends]
     tree = shapely.STRtree([Point(end) for end in ends])
-    pairs = tree.query([Point(end) for end in ends], predicate="dwithin", distance=config.break_gap_m)
+    pairs = tree.query(
+        _geometry_array([Point(end) for end in ends]), predicate="dwithin", distance=config.break_gap_m
+    )
     findings = []
     for a, b in zip(pairs[0], pairs[1], strict=True):
         first, second = boundaries[a // 2], boundaries[b // 2]
