@@ -1,6 +1,8 @@
 """The FastAPI application factory: `create_app(settings)` migrates the database and mounts the API."""
 
 import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
@@ -9,9 +11,20 @@ from app.backend.api.main import api_router
 from app.backend.config import Settings
 from app.backend.db import make_engine, make_sessionmaker, upgrade
 from app.backend.errors import install_error_handlers
+from app.backend.jobs.kinds import JOB_KINDS
+from app.backend.jobs.runner import JobRunner
 from app.backend.middleware import BodySizeLimit
 
 logger = logging.getLogger(__name__)
+
+
+@asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """Stop background jobs when the server shuts down (running ones end at their next step)."""
+    try:
+        yield
+    finally:
+        app.state.jobs.shutdown()
 
 
 def create_app(settings: Settings) -> FastAPI:
@@ -33,10 +46,12 @@ def create_app(settings: Settings) -> FastAPI:
         summary="HD-map annotation: sites, versioned vector elements, review and edit history.",
         docs_url="/docs",
         openapi_url="/openapi.json",
+        lifespan=_lifespan,
     )
     app.state.settings = settings
     app.state.engine = engine
     app.state.sessionmaker = sessions
+    app.state.jobs = JobRunner(sessions=sessions, data_dir=settings.data_dir, kinds=JOB_KINDS)
     install_error_handlers(app)
     app.include_router(api_router)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_payload_bytes)

@@ -2,7 +2,18 @@
 
 from fastapi import APIRouter
 
-from app.backend.api.routes import elements, issues, login, quality, queues, rasters, review, sites, users
+from app.backend.api.routes import (
+    elements,
+    issues,
+    jobs,
+    login,
+    quality,
+    queues,
+    rasters,
+    review,
+    sites,
+    users,
+)
 
 api_router = APIRouter(prefix="/api")
 for module in (login, users, sites, elements, review):
@@ -11,3 +22,4 @@ for module in (rasters, quality):
     api_router.include_router(module.router)
 for module in (queues, issues):
     api_router.include_router(module.router)
+api_router.include_router(jobs.router)

@@ -4,7 +4,10 @@ import logging
 
 from alembic import context
 
-from app.backend import models_review  # noqa: F401  (registers the queue and issue tables)
+from app.backend import (
+    models_jobs,  # noqa: F401  (registers the jobs table)
+    models_review,  # noqa: F401  (registers the queue and issue tables)
+)
 from app.backend.db import make_engine
 from app.backend.models import Base
 

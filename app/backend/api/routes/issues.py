@@ -45,7 +45,7 @@ def list_issues(
     element_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
     reason: IssueReason | None = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> list[IssuePublic]:
     """Issues of a site, oldest first, filtered by status, element and reason."""
     found = issues.list_issues(

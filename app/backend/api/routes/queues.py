@@ -7,7 +7,7 @@ from fastapi import APIRouter, Query, Response, status
 
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep
 from app.backend.api.routes.elements import parse_bbox
 from app.backend.crud import queues
 from app.backend.schemas_review import LeasePublic, LeaseRequest, ReviewQueuePage
@@ -28,7 +28,7 @@ def review_queue(
     author: Annotated[str | None, Query(max_length=64, description="Last editor's username.")] = None,
     bbox: Annotated[str | None, Query(description="xmin,ymin,xmax,ymax in site metres.")] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> ReviewQueuePage:
     """Leads: live elements, lowest confidence first; human-made elements (no confidence) come last."""
     total, elements = queues.review_queue(

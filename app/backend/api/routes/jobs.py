@@ -1,0 +1,69 @@
+"""Background jobs of a site: submit (leads), follow progress, cancel (leads), download the result."""
+
+import logging
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Request, status
+from fastapi.responses import FileResponse
+
+from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.crud import jobs
+from app.backend.jobs.runner import JobRunner
+from app.backend.schemas_jobs import JobCreate, JobPublic
+
+logger = logging.getLogger(__name__)
+router = APIRouter(tags=["jobs"])
+CONFLICT: dict[int | str, dict[str, Any]] = {409: {"description": "The job has already finished."}}
+DOWNLOAD: dict[int | str, dict[str, Any]] = {
+    200: {"content": {"application/octet-stream": {}}, "description": "The job's result file."},
+    404: {"description": "Unknown job, or no result yet (not succeeded)."},
+}
+
+
+def _runner(request: Request) -> JobRunner:
+    runner: JobRunner = request.app.state.jobs
+    return runner
+
+
+@router.post("/sites/{site_id}/jobs", response_model=JobPublic, status_code=status.HTTP_202_ACCEPTED)
+def create_job(
+    site_id: IdPath, job_in: JobCreate, request: Request, session: SessionDep, user: LeadUser
+) -> JobPublic:
+    """Leads: queue a `lift` or `export` job; poll `GET /api/jobs/{id}` for its progress."""
+    job = jobs.create_job(
+        session=session, runner=_runner(request), site_id=site_id, job_in=job_in, username=user.username
+    )
+    return jobs.job_public(job)
+
+
+@router.get("/sites/{site_id}/jobs", response_model=list[JobPublic])
+def list_jobs(
+    site_id: IdPath,
+    session: SessionDep,
+    _user: CurrentUser,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+) -> list[JobPublic]:
+    """A site's jobs, newest first."""
+    found = jobs.list_jobs(session=session, site_id=site_id, limit=limit, offset=offset)
+    return [jobs.job_public(job) for job in found]
+
+
+@router.get("/jobs/{job_id}", response_model=JobPublic)
+def read_job(job_id: IdPath, session: SessionDep, _user: CurrentUser) -> JobPublic:
+    """One job: state, progress in [0, 1] and message."""
+    return jobs.job_public(jobs.get_job(session=session, job_id=job_id))
+
+
+@router.post("/jobs/{job_id}/cancel", response_model=JobPublic, responses=CONFLICT)
+def cancel_job(job_id: IdPath, session: SessionDep, _user: LeadUser) -> JobPublic:
+    """Leads: cancel a queued job, or ask a running one to stop at its next step (state follows)."""
+    return jobs.job_public(jobs.cancel_job(session=session, job_id=job_id))
+
+
+@router.get("/jobs/{job_id}/download", response_class=FileResponse, responses=DOWNLOAD)
+def download_job(job_id: IdPath, session: SessionDep, _user: CurrentUser) -> FileResponse:
+    """The result of a succeeded job: `export.zip` of an export, `lifted.json` of a lift."""
+    path = jobs.result_file(session=session, job_id=job_id)
+    media = "application/zip" if path.suffix == ".zip" else "application/json"
+    return FileResponse(path, media_type=media, filename=f"job-{job_id}-{path.name}")

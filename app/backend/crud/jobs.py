@@ -1,0 +1,112 @@
+"""Jobs: submit (validating kind and params), read, list, cancel, and find the downloadable result."""
+
+import logging
+from pathlib import Path
+
+from pydantic import ValidationError
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from app.backend.crud.sites import get_site
+from app.backend.crud.users import utc_now
+from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
+from app.backend.jobs.kinds import UNAVAILABLE_KINDS
+from app.backend.jobs.runner import JobRunner
+from app.backend.models_jobs import FINISHED_STATES, Job
+from app.backend.schemas_jobs import JobCreate, JobPublic
+
+logger = logging.getLogger(__name__)
+
+
+def job_public(job: Job) -> JobPublic:
+    """The API view of a job."""
+    view = JobPublic.model_validate({**{c: getattr(job, c) for c in _COLUMNS}, "download_url": None})
+    if job.state == "succeeded" and job.result_path:
+        view.download_url = f"/api/jobs/{job.id}/download"
+    return view
+
+
+_COLUMNS = tuple(name for name in JobPublic.model_fields if name != "download_url")
+
+
+def create_job(*, session: Session, runner: JobRunner, site_id: int, job_in: JobCreate, username: str) -> Job:
+    """Validate the kind and its params, store the job as queued and hand it to the runner."""
+    get_site(session=session, site_id=site_id)
+    if job_in.kind in UNAVAILABLE_KINDS:
+        raise InvalidInputError("kind", f"{job_in.kind!r} is {UNAVAILABLE_KINDS[job_in.kind]}")
+    kind = runner.kinds.get(job_in.kind)
+    if kind is None:
+        known = sorted([*runner.kinds, *UNAVAILABLE_KINDS])
+        raise InvalidInputError("kind", f"unknown job kind {job_in.kind!r}; expected one of {known}")
+    try:
+        params = kind.params.model_validate(job_in.params).model_dump(mode="json")
+    except ValidationError as error:
+        raise InvalidInputError("params", str(error)) from None
+    now = utc_now()
+    job = Job(
+        site_id=site_id,
+        kind=job_in.kind,
+        params=params,
+        state="queued",
+        progress=0.0,
+        message="queued",
+        cancel_requested=False,
+        created_by=username,
+        created_at=now,
+        updated_at=now,
+    )
+    session.add(job)
+    session.commit()
+    runner.submit(job.id)
+    logger.info("job %d (%s) of site %d submitted by %s", job.id, job.kind, site_id, username)
+    return job
+
+
+def get_job(*, session: Session, job_id: int) -> Job:
+    """The job with this id; NotFoundError otherwise."""
+    job = session.get(Job, job_id)
+    if job is None:
+        raise NotFoundError(f"job {job_id} not found")
+    return job
+
+
+def list_jobs(*, session: Session, site_id: int, limit: int, offset: int) -> list[Job]:
+    """A site's jobs, newest first."""
+    get_site(session=session, site_id=site_id)
+    query = select(Job).where(Job.site_id == site_id).order_by(Job.id.desc()).limit(limit).offset(offset)
+    return list(session.scalars(query))
+
+
+def cancel_job(*, session: Session, job_id: int) -> Job:
+    """Cancel a queued job at once, or ask a running one to stop at its next step; ConflictError if finished."""
+    job = get_job(session=session, job_id=job_id)
+    if job.state in FINISHED_STATES:
+        raise ConflictError(f"job {job_id} already {job.state}; only queued or running jobs can be cancelled")
+    now = utc_now()
+    session.execute(
+        update(Job)
+        .where(Job.id == job_id, Job.state == "queued")
+        .values(state="cancelled", message="cancelled before it started", finished_at=now, updated_at=now)
+    )
+    session.execute(
+        update(Job)
+        .where(Job.id == job_id, Job.state == "running")
+        .values(cancel_requested=True, updated_at=now)
+    )
+    session.commit()
+    session.refresh(job)
+    if job.state in ("succeeded", "failed"):
+        raise ConflictError(f"job {job_id} already {job.state}; only queued or running jobs can be cancelled")
+    logger.info("job %d: cancel requested (%s)", job_id, job.state)
+    return job
+
+
+def result_file(*, session: Session, job_id: int) -> Path:
+    """The file a succeeded job left; NotFoundError until it exists."""
+    job = get_job(session=session, job_id=job_id)
+    if job.state != "succeeded" or not job.result_path:
+        raise NotFoundError(f"job {job_id} has no result to download (state {job.state})")
+    path = Path(job.result_path)
+    if not path.is_file():
+        raise NotFoundError(f"job {job_id}: result file {path.name} is gone")
+    return path

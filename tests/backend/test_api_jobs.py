@@ -1,0 +1,152 @@
+"""Background jobs through HTTP: lift and export run to completion, the export downloads, cancel, roles."""
+
+import io
+import json
+import threading
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from backend_helpers import divider
+from fastapi.testclient import TestClient
+from pydantic import BaseModel
+
+from app.backend.jobs.runner import JobContext, JobKind, JobResult
+
+Headers = dict[str, dict[str, str]]
+POLL_TIMEOUT_S = 5.0
+
+
+@pytest.fixture
+def elevation_site(site_id: int, raster_dir: Path) -> int:
+    """The conftest site with a 200 x 200 elevation plane whose top-left 20 x 20 cells are unobserved (NaN)."""
+    rows, cols = np.mgrid[0:200, 0:200]
+    elevation = (5.0 + 0.01 * cols + 0.02 * rows).astype(np.float32)
+    elevation[:20, :20] = np.nan
+    np.save(raster_dir / "elevation.npy", elevation)
+    return site_id
+
+
+def submit(client: TestClient, headers: Headers, site_id: int, kind: str, **params: Any) -> dict[str, Any]:
+    response = client.post(
+        f"/api/sites/{site_id}/jobs", json={"kind": kind, "params": params}, headers=headers["lead"]
+    )
+    assert response.status_code == 202, response.text
+    return dict(response.json())
+
+
+def wait_done(client: TestClient, headers: Headers, job_id: int) -> dict[str, Any]:
+    deadline = time.monotonic() + POLL_TIMEOUT_S
+    while time.monotonic() < deadline:
+        job = client.get(f"/api/jobs/{job_id}", headers=headers["annotator"]).json()
+        if job["state"] in ("succeeded", "failed", "cancelled"):
+            return dict(job)
+        time.sleep(0.02)
+    raise AssertionError(f"job {job_id} still {job['state']} after {POLL_TIMEOUT_S} s")
+
+
+def test_lift_job_lifts_live_elements_and_flags_unobserved_vertices(
+    client: TestClient, headers: Headers, elevation_site: int, make_element: Any
+) -> None:
+    good = make_element(divider(10.0, 10.0))
+    flagged = make_element(divider(1.0, 95.0))
+    gone = make_element(divider(30.0, 30.0))
+    deleted = client.delete(
+        f"/api/sites/{elevation_site}/elements/{gone['id']}?version={gone['version']}",
+        headers=headers["annotator"],
+    )
+    assert deleted.status_code in (200, 204), deleted.text
+    job = submit(client, headers, elevation_site, "lift")
+    assert job["state"] in ("queued", "running", "succeeded") and job["created_by"] == "lead"
+    done = wait_done(client, headers, job["id"])
+    assert done["state"] == "succeeded", done["message"]
+    assert done["progress"] == 1.0
+    assert "lifted 1 of 2 elements" in done["message"] and f"element {flagged['id']}" in done["message"]
+    lifted = client.get(done["download_url"], headers=headers["annotator"])
+    assert lifted.status_code == 200
+    elements = {element["id"]: element for element in json.loads(lifted.content)["elements"]}
+    assert set(elements) == {str(good["id"]), str(flagged["id"])}
+    assert elements[str(flagged["id"])]["points_3d"] is None
+    xyz = np.asarray(elements[str(good["id"])]["points_3d"])
+    # site (10, 10) is raster col 20, row 180 on the plane 5 + 0.01 col + 0.02 row
+    assert xyz[0] == pytest.approx([10.0, 10.0, 5.0 + 0.01 * 20 + 0.02 * 180], abs=1e-4)
+    listed = client.get(f"/api/sites/{elevation_site}/jobs", headers=headers["annotator"])
+    assert [item["id"] for item in listed.json()] == [job["id"]]
+
+
+def test_export_job_downloads_a_zip_with_the_cama_layout(
+    client: TestClient, headers: Headers, elevation_site: int, make_element: Any
+) -> None:
+    made = make_element()
+    job = submit(client, headers, elevation_site, "export", format="cama")
+    early = client.get(f"/api/jobs/{job['id']}/download", headers=headers["lead"])
+    done = wait_done(client, headers, job["id"])
+    assert early.status_code in (200, 404)
+    assert done["state"] == "succeeded", done["message"]
+    response = client.get(f"/api/jobs/{job['id']}/download", headers=headers["lead"])
+    assert response.status_code == 200 and response.headers["content-type"] == "application/zip"
+    with zipfile.ZipFile(io.BytesIO(response.content)) as bundle:
+        names = set(bundle.namelist())
+        labels = json.loads(bundle.read("maps/map_labels.json"))
+    assert {"maps/map_labels.json", "maps/georeference.json", "maps/elevation.npy"} <= names
+    assert [label["id"] for label in labels] == [str(made["id"])]
+
+
+class _SlowParams(BaseModel):
+    steps: int = 500
+
+
+def test_cancel_stops_a_running_job_and_finished_jobs_conflict(
+    client: TestClient, headers: Headers, site_id: int
+) -> None:
+    started = threading.Event()
+
+    def slow(context: JobContext, params: _SlowParams) -> JobResult:
+        for step in range(params.steps):
+            started.set()
+            context.report(step / params.steps, force=True)
+            time.sleep(0.01)
+        return JobResult(None, "ran to the end")
+
+    client.app.state.jobs.kinds["slow"] = JobKind(_SlowParams, slow, "sleeps")  # type: ignore[attr-defined]
+    job = submit(client, headers, site_id, "slow")
+    assert started.wait(POLL_TIMEOUT_S)
+    forbidden = client.post(f"/api/jobs/{job['id']}/cancel", headers=headers["annotator"])
+    assert forbidden.status_code == 403
+    cancel = client.post(f"/api/jobs/{job['id']}/cancel", headers=headers["lead"])
+    assert cancel.status_code == 200, cancel.text
+    assert cancel.json()["cancel_requested"] is True
+    done = wait_done(client, headers, job["id"])
+    assert done["state"] == "cancelled" and done["progress"] < 1.0
+    assert client.get(f"/api/jobs/{job['id']}/download", headers=headers["lead"]).status_code == 404
+    again = client.post(f"/api/jobs/{job['id']}/cancel", headers=headers["admin"])
+    assert again.status_code == 409
+
+
+def test_submission_rules(client: TestClient, headers: Headers, site_id: int) -> None:
+    body = {"kind": "lift", "params": {}}
+    annotator = client.post(f"/api/sites/{site_id}/jobs", json=body, headers=headers["annotator"])
+    assert annotator.status_code == 403
+    for kind in ("retrain", "refresh_proposals"):
+        response = client.post(f"/api/sites/{site_id}/jobs", json={"kind": kind}, headers=headers["lead"])
+        assert response.status_code == 422
+        assert "not available yet: needs the VMA model (issue 6)" in response.text
+    unknown = client.post(f"/api/sites/{site_id}/jobs", json={"kind": "nope"}, headers=headers["lead"])
+    assert unknown.status_code == 422 and "unknown job kind" in unknown.text
+    bad = {"kind": "export", "params": {"format": "maptr"}}
+    assert client.post(f"/api/sites/{site_id}/jobs", json=bad, headers=headers["lead"]).status_code == 422
+    assert client.post("/api/sites/999/jobs", json=body, headers=headers["lead"]).status_code == 404
+    assert client.get("/api/jobs/999", headers=headers["lead"]).status_code == 404
+    assert client.post("/api/jobs/999/cancel", headers=headers["lead"]).status_code == 404
+    assert client.get("/api/jobs/999/download", headers=headers["lead"]).status_code == 404
+
+
+def test_lift_without_a_usable_elevation_raster_fails_with_the_file_named(
+    client: TestClient, headers: Headers, site_id: int, make_element: Any
+) -> None:
+    make_element()
+    done = wait_done(client, headers, submit(client, headers, site_id, "lift")["id"])
+    assert done["state"] == "failed" and "elevation.npy" in done["message"]
