@@ -1,5 +1,6 @@
 """Backend test helpers shared by the fixtures and tests: constants, login, element bodies."""
 
+from pathlib import Path
 from typing import Any
 
 from fastapi.testclient import TestClient
@@ -16,6 +17,19 @@ def login(client: TestClient, username: str, password: str = PASSWORD) -> dict[s
     response = client.post("/api/auth/login", json={"username": username, "password": password})
     assert response.status_code == 200, response.text
     return {"Authorization": f"Bearer {response.json()['access_token']}"}
+
+
+def register_site(client: TestClient, lead: dict[str, str], raster_dir: Path, name: str) -> int:
+    """Register the 100 m x 100 m test site on `raster_dir` (as a lead); its id."""
+    body = {
+        "name": name,
+        "site_origin_xy": ORIGIN_XY,
+        "georeference": GEOREFERENCE,
+        "raster_dir": str(raster_dir),
+    }
+    response = client.post("/api/sites", json=body, headers=lead)
+    assert response.status_code == 201, response.text
+    return int(response.json()["id"])
 
 
 def divider(x0: float = 10.0, y0: float = 10.0, **extra: Any) -> dict[str, Any]:

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD, divider, login
+from backend_helpers import GEOREFERENCE, PASSWORD, divider, login, register_site
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
@@ -60,15 +60,7 @@ def raster_dir(tmp_path: Path) -> Path:
 @pytest.fixture
 def site_id(client: TestClient, headers: dict[str, dict[str, str]], raster_dir: Path) -> int:
     """A registered site 100 m x 100 m."""
-    body = {
-        "name": "s1",
-        "site_origin_xy": ORIGIN_XY,
-        "georeference": GEOREFERENCE,
-        "raster_dir": str(raster_dir),
-    }
-    response = client.post("/api/sites", json=body, headers=headers["lead"])
-    assert response.status_code == 201, response.text
-    return int(response.json()["id"])
+    return register_site(client, headers["lead"], raster_dir, "s1")
 
 
 @pytest.fixture

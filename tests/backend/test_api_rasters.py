@@ -6,7 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from backend_helpers import GEOREFERENCE, ORIGIN_XY
+from backend_helpers import GEOREFERENCE, ORIGIN_XY, register_site
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
@@ -38,15 +38,7 @@ def bev_dir(tmp_path: Path) -> Path:
 @pytest.fixture
 def raster_site(client: TestClient, headers: Headers, bev_dir: Path) -> int:
     """A site registered on the real raster folder."""
-    body = {
-        "name": "rasters",
-        "site_origin_xy": ORIGIN_XY,
-        "georeference": GEOREFERENCE,
-        "raster_dir": str(bev_dir),
-    }
-    response = client.post("/api/sites", json=body, headers=headers["lead"])
-    assert response.status_code == 201, response.text
-    return int(response.json()["id"])
+    return register_site(client, headers["lead"], bev_dir, "rasters")
 
 
 def test_layers_list_every_layer_with_legend_and_build_once(
