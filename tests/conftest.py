@@ -1,4 +1,4 @@
-"""A tiny synthetic site, generated once per test session, shared read-only by the tests."""
+"""Fixtures shared by every test folder: a tiny synthetic site, generated once per session, read-only."""
 
 from dataclasses import dataclass
 from pathlib import Path
