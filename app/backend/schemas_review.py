@@ -7,6 +7,7 @@ from typing import Literal, Self
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from app.backend.schemas import STRICT, ElementPublic, Point
+from app.backend.schemas_quality import LintFindingPublic
 
 logger = logging.getLogger(__name__)
 
@@ -20,13 +21,19 @@ IssueReason = Literal[
 IssueStatus = Literal["open", "resolved"]
 
 
+class QueueItem(ElementPublic):
+    """An element in a queue, with the lint findings that involve it (empty when it is clean)."""
+
+    lint: list[LintFindingPublic] = Field(default_factory=list)
+
+
 class ReviewQueuePage(BaseModel):
     """One page of a lead's review queue: lowest confidence first, human-made (no confidence) last."""
 
     total: int
     limit: int
     offset: int
-    items: list[ElementPublic]
+    items: list[QueueItem]
 
 
 class LeaseRequest(BaseModel):
@@ -48,6 +55,9 @@ class LeasePublic(BaseModel):
     released_at: datetime | None
     active: bool
     element: ElementPublic
+    lint: list[LintFindingPublic] = Field(
+        default_factory=list, description="Lint findings involving the element: what to look at first."
+    )
 
 
 class IssueCreate(BaseModel):

@@ -134,6 +134,50 @@ def test_expired_lease_frees_the_item(
     assert stale.status_code == 409
 
 
+def test_lint_findings_appear_in_the_queues(client: TestClient, headers: Headers, site_id: int) -> None:
+    (clean,) = load_proposals(client, headers, site_id, [0.1])
+    crossing = [
+        {"class": "divider", "points": [[20, 40], [40, 40]], "source": "proposal", "confidence": c}
+        for c in (0.5, 0.9)
+    ]
+    crossing[1]["points"] = [[30, 30], [30, 50]]
+    response = client.post(
+        f"/api/sites/{site_id}/elements/bulk", json={"elements": crossing}, headers=headers["lead"]
+    )
+    assert response.status_code == 201, response.text
+    first, second = (int(e["id"]) for e in response.json())
+    url = f"/api/sites/{site_id}/queue/review"
+    flagged = client.get(url, params={"flagged": "true"}, headers=headers["lead"]).json()
+    codes = {item["id"]: {f["code"] for f in item["lint"]} for item in flagged["items"]}
+    assert "crossing_dividers" in codes[first] and "crossing_dividers" in codes[second]
+    everything = client.get(url, headers=headers["lead"]).json()
+    assert [item["id"] for item in everything["items"]] == [clean, first, second]
+    lease = next_item(client, site_id, headers["annotator"])
+    assert lease is not None and lease["element_id"] == first  # a lint error outranks lower confidence
+    assert any(f["code"] == "crossing_dividers" for f in lease["lint"])
+    assert [next_item(client, site_id, headers["annotator"])["element_id"] for _ in range(2)] == [
+        second,
+        clean,
+    ]
+
+
+def test_review_verdict_ends_the_lease(client: TestClient, headers: Headers, site_id: int) -> None:
+    first, second = load_proposals(client, headers, site_id, [0.2, 0.4])
+    lease = next_item(client, site_id, headers["annotator"])
+    assert lease is not None and lease["element_id"] == first
+    review = f"/api/sites/{site_id}/elements/{first}/review"
+    stale = client.post(review, json={"state": "accepted", "version": 9}, headers=headers["annotator"])
+    assert stale.status_code == 409
+    held = client.get(f"/api/leases/{lease['id']}", headers=headers["annotator"]).json()
+    assert held["active"]  # a refused review leaves the lease alone
+    done = client.post(review, json={"state": "fixed", "version": 1}, headers=headers["annotator"])
+    assert done.status_code == 200, done.text
+    ended = client.get(f"/api/leases/{lease['id']}", headers=headers["annotator"]).json()
+    assert not ended["active"] and ended["released_at"]
+    following = next_item(client, site_id, headers["annotator"])
+    assert following is not None and following["element_id"] == second
+
+
 def test_returned_work_goes_first_to_its_annotator(
     client: TestClient, headers: Headers, site_id: int
 ) -> None:

@@ -1,6 +1,7 @@
 """Request dependencies: settings, a database session, the current user and role checks."""
 
 import logging
+import threading
 from collections.abc import Callable, Iterator
 from typing import Annotated
 
@@ -10,6 +11,7 @@ from sqlalchemy.orm import Session
 
 from app.backend import crud
 from app.backend.config import Settings
+from app.backend.crud.quality import LintCache
 from app.backend.models import User
 
 logger = logging.getLogger(__name__)
@@ -75,3 +77,18 @@ def require_role(*roles: str) -> Callable[[User], User]:
 AnyUser = CurrentUser
 LeadUser = Annotated[User, Depends(require_role("lead", "admin"))]
 AdminUser = Annotated[User, Depends(require_role("admin"))]
+
+
+_LINT_CACHE_LOCK = threading.Lock()
+
+
+def get_lint_cache(request: Request) -> LintCache:
+    """The app's lint cache, made on first use (one per app, so tests and servers never share one)."""
+    with _LINT_CACHE_LOCK:
+        cache = getattr(request.app.state, "lint_cache", None)
+        if cache is None:
+            cache = request.app.state.lint_cache = LintCache()
+    return cache
+
+
+LintCacheDep = Annotated[LintCache, Depends(get_lint_cache)]

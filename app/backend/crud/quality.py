@@ -138,6 +138,15 @@ def element_findings(
     return [finding for finding in report.findings if element_id in finding.element_ids]
 
 
+def findings_by_element(report: LintReport) -> dict[int, list[LintFindingPublic]]:
+    """The report's findings grouped under every element they involve."""
+    grouped: dict[int, list[LintFindingPublic]] = defaultdict(list)
+    for finding in report.findings:
+        for element_id in finding.element_ids:
+            grouped[element_id].append(finding)
+    return dict(grouped)
+
+
 def _diff_of(element: Element) -> ProposalDiff:
     """The proposal-to-current diff of an element with a proposal snapshot."""
     proposal = element.proposal or {}

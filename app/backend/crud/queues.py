@@ -6,7 +6,8 @@ Work items: `next_work_item` leases one element at a time. Candidates are live e
 active lease holds and that the requester does not already hold, in this order:
 1. `returned` elements whose last annotator (the latest edit-log entry by a user with role `annotator`) is the
    requester, oldest id first: returned work goes to the front of its annotator's queue;
-2. `proposed` elements, lowest confidence first, human-made (no confidence) last.
+2. `proposed` elements with lint errors (the caller passes their ids), then the other `proposed` ones; each
+   group lowest confidence first, human-made (no confidence) last.
 Returned elements of other annotators are never handed out.
 
 The guard against two annotators getting one element is the UNIQUE `leases.active_element_id`: an insert that
@@ -15,7 +16,7 @@ loses a race fails with IntegrityError and the next candidate is tried. Expired 
 """
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Sequence
 from datetime import datetime, timedelta
 
 from sqlalchemy import ColumnElement, Select, func, select, update
@@ -28,6 +29,7 @@ from app.backend.crud.users import as_utc, utc_now
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element, User
 from app.backend.models_review import Lease
+from app.backend.schemas_quality import LintFindingPublic
 from app.backend.schemas_review import LeasePublic
 
 logger = logging.getLogger(__name__)
@@ -47,12 +49,16 @@ def review_queue(
     state: str | None = None,
     author: str | None = None,
     bbox: tuple[float, float, float, float] | None = None,
+    only_ids: Collection[int] | None = None,
     limit: int = 100,
     offset: int = 0,
 ) -> tuple[int, list[Element]]:
-    """The total count and one page of live elements, lowest confidence first and no confidence last."""
+    """The total count and one page of live elements, lowest confidence first and no confidence last;
+    `only_ids` restricts the queue to those elements (e.g. the ones with lint findings)."""
     get_site(session=session, site_id=site_id)
     conditions: list[ColumnElement[bool]] = [Element.site_id == site_id, Element.deleted.is_(False)]
+    if only_ids is not None:
+        conditions.append(Element.id.in_(sorted(only_ids)))
     if cls is not None:
         conditions.append(Element.cls == cls)
     if state is not None:
@@ -73,8 +79,14 @@ def review_queue(
     return int(total), list(session.scalars(query))
 
 
-def lease_public(session: Session, lease: Lease, *, now: datetime | None = None) -> LeasePublic:
-    """The API view of a lease with its element."""
+def lease_public(
+    session: Session,
+    lease: Lease,
+    *,
+    now: datetime | None = None,
+    lint: Sequence[LintFindingPublic] = (),
+) -> LeasePublic:
+    """The API view of a lease with its element (and the lint findings involving it, when given)."""
     now = now or clock()
     element = session.get(Element, lease.element_id)
     if element is None:
@@ -90,6 +102,7 @@ def lease_public(session: Session, lease: Lease, *, now: datetime | None = None)
         released_at=None if lease.released_at is None else as_utc(lease.released_at),
         active=active,
         element=public(element),
+        lint=list(lint),
     )
 
 
@@ -120,7 +133,9 @@ def _returned_to(site_id: int, username: str) -> Select[Element]:
     )
 
 
-def _candidates(session: Session, *, site_id: int, username: str) -> list[Element]:
+def _candidates(
+    session: Session, *, site_id: int, username: str, flagged_ids: Collection[int]
+) -> list[Element]:
     """Unleased elements for `username`, in queue order (see the module docstring)."""
     held = select(Lease.active_element_id).where(Lease.active_element_id.is_not(None))
     free = (Element.deleted.is_(False), Element.id.not_in(held))
@@ -128,19 +143,27 @@ def _candidates(session: Session, *, site_id: int, username: str) -> list[Elemen
     proposed = (
         select(Element)
         .where(Element.site_id == site_id, Element.state == "proposed", *free)
-        .order_by(Element.confidence.is_(None), Element.confidence, Element.id)
+        .order_by(
+            Element.id.not_in(sorted(flagged_ids)),
+            Element.confidence.is_(None),
+            Element.confidence,
+            Element.id,
+        )
         .limit(CANDIDATES_PER_TRY)
     )
     return list(session.scalars(returned)) + list(session.scalars(proposed))
 
 
-def next_work_item(*, session: Session, site_id: int, username: str, lease_s: int) -> Lease | None:
-    """Lease the next work item to `username` for `lease_s` seconds; None when there is no work left."""
+def next_work_item(
+    *, session: Session, site_id: int, username: str, lease_s: int, flagged_ids: Collection[int] = ()
+) -> Lease | None:
+    """Lease the next work item to `username` for `lease_s` seconds (proposals in `flagged_ids`, those with
+    lint errors, before the others); None when there is no work left."""
     get_site(session=session, site_id=site_id)
     for _attempt in range(MAX_ATTEMPTS):
         now = clock()
         _reclaim_expired(session, site_id=site_id, now=now)
-        candidates = _candidates(session, site_id=site_id, username=username)
+        candidates = _candidates(session, site_id=site_id, username=username, flagged_ids=flagged_ids)
         if not candidates:
             session.commit()
             return None
@@ -169,6 +192,14 @@ def get_lease(*, session: Session, lease_id: int) -> Lease:
     lease = session.get(Lease, lease_id)
     if lease is None:
         raise NotFoundError(f"lease {lease_id} not found")
+    return lease
+
+
+def read_lease(*, session: Session, lease_id: int, username: str, role: str) -> Lease:
+    """The lease, for its holder, a lead or an admin."""
+    lease = get_lease(session=session, lease_id=lease_id)
+    if lease.username != username and role not in ("lead", "admin"):
+        raise ForbiddenError(f"lease {lease_id} belongs to {lease.username!r}")
     return lease
 
 

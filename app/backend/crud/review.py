@@ -2,12 +2,14 @@
 
 import logging
 
-from sqlalchemy import select
+from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
 from app.backend.crud.elements import _set_points, check_version, commit_change, get_element, snapshot
+from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element
+from app.backend.models_review import Lease
 
 logger = logging.getLogger(__name__)
 
@@ -22,6 +24,8 @@ LEAD_TRANSITIONS: dict[str, frozenset[str]] = {
 }
 """Leads approve or return what annotators verified."""
 LEAD_STATES = frozenset({"approved", "returned"})
+VERIFIED_STATES = frozenset({"accepted", "fixed", "rejected"})
+"""An annotator's verdict: the work item is done, so its lease ends with the review."""
 
 
 def allowed_targets(state: str, role: str) -> frozenset[str]:
@@ -47,9 +51,23 @@ def review_element(
         raise ConflictError(
             f"state: cannot go from {element.state!r} to {target!r}; allowed from {element.state!r}: {allowed}"
         )
+    if (
+        target in VERIFIED_STATES
+    ):  # before the element changes: an autoflush here would bump its version twice
+        _release_leases_of(session, element_id)
     before = snapshot(element)
     element.state = target
     return commit_change(session, element, username=username, action="review", before=before)
+
+
+def _release_leases_of(session: Session, element_id: int) -> None:
+    """End the active lease on a reviewed element, in the review's own transaction (undone with it on 409)."""
+    session.execute(
+        update(Lease)
+        .where(Lease.active_element_id == element_id)
+        .values(active_element_id=None, released_at=utc_now())
+        .execution_options(synchronize_session=False)
+    )
 
 
 def element_history(*, session: Session, site_id: int, element_id: int) -> list[EditLog]:

@@ -1,12 +1,10 @@
 """Map quality: lint on demand and after a save, proposal-to-final diffs, and annotator figures (leads)."""
 
 import logging
-import threading
-from typing import Annotated
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter
 
-from app.backend.api.deps import CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.api.deps import CurrentUser, IdPath, LeadUser, LintCacheDep, SessionDep
 from app.backend.crud import quality
 from app.backend.errors import InvalidInputError
 from app.backend.schemas_quality import (
@@ -20,19 +18,6 @@ from app.backend.schemas_quality import (
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}", tags=["quality"])
-_STATE_LOCK = threading.Lock()
-
-
-def get_lint_cache(request: Request) -> quality.LintCache:
-    """The app's lint cache, made on first use (one per app, so tests and servers never share one)."""
-    with _STATE_LOCK:
-        cache = getattr(request.app.state, "lint_cache", None)
-        if cache is None:
-            cache = request.app.state.lint_cache = quality.LintCache()
-    return cache
-
-
-LintCacheDep = Annotated[quality.LintCache, Depends(get_lint_cache)]
 
 
 @router.get("/lint", response_model=LintReport)

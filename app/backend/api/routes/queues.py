@@ -7,10 +7,10 @@ from fastapi import APIRouter, Query, Response, status
 
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
-from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, LintCacheDep, SessionDep
 from app.backend.api.routes.elements import parse_bbox
-from app.backend.crud import queues
-from app.backend.schemas_review import LeasePublic, LeaseRequest, ReviewQueuePage
+from app.backend.crud import quality, queues
+from app.backend.schemas_review import LeasePublic, LeaseRequest, QueueItem, ReviewQueuePage
 
 logger = logging.getLogger(__name__)
 router = APIRouter(tags=["queues"])
@@ -22,15 +22,19 @@ LEASE_GONE: dict[int | str, dict[str, Any]] = {409: {"description": "The lease w
 def review_queue(
     site_id: IdPath,
     session: SessionDep,
+    cache: LintCacheDep,
     _user: LeadUser,
     cls: Annotated[ElementClass | None, Query(alias="class")] = None,
     state: ReviewState | None = None,
     author: Annotated[str | None, Query(max_length=64, description="Last editor's username.")] = None,
     bbox: Annotated[str | None, Query(description="xmin,ymin,xmax,ymax in site metres.")] = None,
+    flagged: Annotated[bool, Query(description="Only elements with lint findings.")] = False,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> ReviewQueuePage:
-    """Leads: live elements, lowest confidence first; human-made elements (no confidence) come last."""
+    """Leads: live elements, lowest confidence first; human-made elements (no confidence) come last.
+    Each item carries its lint findings; `flagged=true` keeps only elements that have some."""
+    findings = quality.findings_by_element(quality.lint_site(session=session, site_id=site_id, cache=cache))
     total, elements = queues.review_queue(
         session=session,
         site_id=site_id,
@@ -38,22 +42,42 @@ def review_queue(
         state=state,
         author=author,
         bbox=parse_bbox(bbox),
+        only_ids=findings.keys() if flagged else None,
         limit=limit,
         offset=offset,
     )
-    items = [crud.public(element) for element in elements]
+    items = [
+        QueueItem(**crud.public(element).model_dump(), lint=findings.get(element.id, []))
+        for element in elements
+    ]
     return ReviewQueuePage(total=total, limit=limit, offset=offset, items=items)
 
 
 @router.post("/sites/{site_id}/queue/next", response_model=LeasePublic, responses=NO_WORK)
 def next_work_item(
-    site_id: IdPath, session: SessionDep, user: CurrentUser, request: LeaseRequest | None = None
+    site_id: IdPath,
+    session: SessionDep,
+    cache: LintCacheDep,
+    user: CurrentUser,
+    request: LeaseRequest | None = None,
 ) -> LeasePublic | Response:
-    """Lease the next work item: your returned elements first, then proposals by lowest confidence."""
+    """Lease the next work item: your returned elements first, then proposals with lint errors, then the
+    other proposals, each by lowest confidence; the lease lists the item's lint findings."""
     lease_s = (request or LeaseRequest()).lease_s
-    lease = queues.next_work_item(session=session, site_id=site_id, username=user.username, lease_s=lease_s)
+    findings = quality.findings_by_element(quality.lint_site(session=session, site_id=site_id, cache=cache))
+    errors = [i for i, found in findings.items() if any(f.severity == "error" for f in found)]
+    lease = queues.next_work_item(
+        session=session, site_id=site_id, username=user.username, lease_s=lease_s, flagged_ids=errors
+    )
     if lease is None:
         return Response(status_code=status.HTTP_204_NO_CONTENT)
+    return queues.lease_public(session, lease, lint=findings.get(lease.element_id, []))
+
+
+@router.get("/leases/{lease_id}", response_model=LeasePublic)
+def read_lease(lease_id: IdPath, session: SessionDep, user: CurrentUser) -> LeasePublic:
+    """One lease (its holder, a lead or an admin): whether it is still active, and its element."""
+    lease = queues.read_lease(session=session, lease_id=lease_id, username=user.username, role=user.role)
     return queues.lease_public(session, lease)
 
 
