@@ -52,6 +52,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.engine = engine
     app.state.sessionmaker = sessions
     app.state.jobs = JobRunner(sessions=sessions, data_dir=settings.data_dir, kinds=JOB_KINDS)
+    app.state.jobs.recover_interrupted()
     install_error_handlers(app)
     app.include_router(api_router)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_payload_bytes)

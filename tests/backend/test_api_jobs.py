@@ -14,7 +14,11 @@ from backend_helpers import divider
 from fastapi.testclient import TestClient
 from pydantic import BaseModel
 
+from app.backend.config import Settings
+from app.backend.crud.users import utc_now
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
+from app.backend.main import create_app
+from app.backend.models_jobs import Job
 
 Headers = dict[str, dict[str, str]]
 POLL_TIMEOUT_S = 5.0
@@ -150,3 +154,60 @@ def test_lift_without_a_usable_elevation_raster_fails_with_the_file_named(
     make_element()
     done = wait_done(client, headers, submit(client, headers, site_id, "lift")["id"])
     assert done["state"] == "failed" and "elevation.npy" in done["message"]
+
+
+def test_delete_removes_a_finished_job_and_its_files(
+    client: TestClient, headers: Headers, elevation_site: int, make_element: Any
+) -> None:
+    make_element()
+    job = submit(client, headers, elevation_site, "export", format="cama")
+    assert wait_done(client, headers, job["id"])["state"] == "succeeded"
+    workdir = client.app.state.jobs.workdir(job["id"])  # type: ignore[attr-defined]
+    assert any(workdir.iterdir())
+    url = f"/api/jobs/{job['id']}"
+    assert client.delete(url, headers=headers["annotator"]).status_code == 403
+    assert client.delete(url, headers=headers["lead"]).status_code == 204
+    assert not workdir.exists()
+    assert client.get(url, headers=headers["lead"]).status_code == 404
+    assert client.delete(url, headers=headers["lead"]).status_code == 404
+
+
+def test_delete_refuses_a_running_job(client: TestClient, headers: Headers, site_id: int) -> None:
+    release = threading.Event()
+
+    def waits(context: JobContext, params: _SlowParams) -> JobResult:
+        release.wait(POLL_TIMEOUT_S)
+        return JobResult(None, "released")
+
+    client.app.state.jobs.kinds["waits"] = JobKind(_SlowParams, waits, "waits")  # type: ignore[attr-defined]
+    job = submit(client, headers, site_id, "waits")
+    refused = client.delete(f"/api/jobs/{job['id']}", headers=headers["lead"])
+    release.set()
+    assert refused.status_code == 409 and "cancel it" in refused.json()["detail"]
+    assert wait_done(client, headers, job["id"])["state"] == "succeeded"
+
+
+def test_jobs_orphaned_by_a_crash_are_marked_failed_at_start(
+    client: TestClient, headers: Headers, site_id: int, settings: Settings
+) -> None:
+    sessions = client.app.state.sessionmaker  # type: ignore[attr-defined]
+    with sessions() as session:
+        now = utc_now()
+        orphan = Job(
+            site_id=site_id,
+            kind="export",
+            params={},
+            state="running",
+            progress=0.4,
+            message="running",
+            cancel_requested=False,
+            created_by="lead",
+            created_at=now,
+            updated_at=now,
+        )
+        session.add(orphan)
+        session.commit()
+        orphan_id = orphan.id
+    with TestClient(create_app(settings)) as restarted:
+        job = restarted.get(f"/api/jobs/{orphan_id}", headers=headers["lead"]).json()
+    assert job["state"] == "failed" and "interrupted" in job["message"] and job["finished_at"]

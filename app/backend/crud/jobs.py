@@ -1,6 +1,7 @@
 """Jobs: submit (validating kind and params), read, list, cancel, and find the downloadable result."""
 
 import logging
+import shutil
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -110,3 +111,14 @@ def result_file(*, session: Session, job_id: int) -> Path:
     if not path.is_file():
         raise NotFoundError(f"job {job_id}: result file {path.name} is gone")
     return path
+
+
+def delete_job(*, session: Session, runner: JobRunner, job_id: int) -> None:
+    """Remove a finished job's row and its files (results included); ConflictError while it is queued or running."""
+    job = get_job(session=session, job_id=job_id)
+    if job.state not in FINISHED_STATES:
+        raise ConflictError(f"job {job_id} is {job.state}; cancel it and wait until it has stopped")
+    session.delete(job)
+    session.commit()
+    shutil.rmtree(runner.workdir(job_id), ignore_errors=True)
+    logger.info("job %d deleted with its files", job_id)

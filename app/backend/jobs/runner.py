@@ -116,6 +116,27 @@ class JobRunner:
             self._submitted.add(job_id)
         self._executor.submit(self._run, job_id)
 
+    def recover_interrupted(self) -> int:
+        """Mark jobs left queued or running by a server that died (e.g. SIGKILL) as failed; call before serving.
+
+        One runner owns a database's jobs, so at start-up no job can still be running elsewhere."""
+        with self._sessions() as session:
+            result = session.execute(
+                update(Job)
+                .where(Job.state.in_(("queued", "running")))
+                .values(
+                    state="failed",
+                    message="interrupted: the server stopped before the job finished; submit it again",
+                    finished_at=utc_now(),
+                    updated_at=utc_now(),
+                )
+            )
+            session.commit()
+        count = int(getattr(result, "rowcount", 0) or 0)
+        if count:
+            logger.warning("%d job(s) interrupted by the previous server run marked failed", count)
+        return count
+
     def shutdown(self) -> None:
         """Stop running jobs at their next step, drop queued ones, and mark both failed as interrupted."""
         self._stop.set()

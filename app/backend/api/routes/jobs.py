@@ -3,7 +3,7 @@
 import logging
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, Request, status
+from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep
@@ -14,6 +14,7 @@ from app.backend.schemas_jobs import JobCreate, JobPublic
 logger = logging.getLogger(__name__)
 router = APIRouter(tags=["jobs"])
 CONFLICT: dict[int | str, dict[str, Any]] = {409: {"description": "The job has already finished."}}
+STILL_RUNNING: dict[int | str, dict[str, Any]] = {409: {"description": "The job is queued or running."}}
 DOWNLOAD: dict[int | str, dict[str, Any]] = {
     200: {"content": {"application/octet-stream": {}}, "description": "The job's result file."},
     404: {"description": "Unknown job, or no result yet (not succeeded)."},
@@ -67,3 +68,10 @@ def download_job(job_id: IdPath, session: SessionDep, _user: CurrentUser) -> Fil
     path = jobs.result_file(session=session, job_id=job_id)
     media = "application/zip" if path.suffix == ".zip" else "application/json"
     return FileResponse(path, media_type=media, filename=f"job-{job_id}-{path.name}")
+
+
+@router.delete("/jobs/{job_id}", status_code=status.HTTP_204_NO_CONTENT, responses=STILL_RUNNING)
+def delete_job(job_id: IdPath, request: Request, session: SessionDep, _user: LeadUser) -> Response:
+    """Leads: remove a finished job and its files (the export it made included), to free disk space."""
+    jobs.delete_job(session=session, runner=_runner(request), job_id=job_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
