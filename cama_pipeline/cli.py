@@ -73,11 +73,17 @@ def _register_stage_commands() -> None:
     from annotations.export_command import export_command, import_command
     from app.backend.serve import serve_command
     from cama_pipeline.evaluate.command import eval_command
+    from cama_pipeline.keyframes.command import keyframes_command
+    from cama_pipeline.site.command import sites_command
+    from cama_pipeline.wigo.command import wigo_command
 
     app.command("eval")(eval_command)
     app.command("export")(export_command)
     app.command("import")(import_command)
     app.command("serve")(serve_command)
+    app.command("wigo")(wigo_command)
+    app.command("keyframes")(keyframes_command)
+    app.command("sites")(sites_command)
 
 
 _register_stage_commands()

@@ -1,0 +1,36 @@
+"""`cama sites`: aggregate the scenes of a data set into sites and write the site manifests."""
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from cama_pipeline.site.config import SiteConfig
+from cama_pipeline.site.stage import run
+from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
+
+console = Console()
+
+
+def sites_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    overlap_radius_m: Annotated[float, typer.Option(help="Scenes closer than this share a site.")] = 30.0,
+    night_brightness: Annotated[
+        float, typer.Option(help="Mean 8-bit luma below which a scene counts as night.")
+    ] = 60.0,
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """Group overlapping scenes into sites, drop night scenes, merge stationary clips (after wigo, keyframes)."""
+    try:
+        config = SiteConfig(overlap_radius_m=overlap_radius_m, night_brightness=night_brightness)
+        result = run(config, dataset, workspace, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise fail(err) from err
+    state = " (up to date)" if result.skipped else ""
+    for site in result.aggregation.sites:
+        merged = ", ".join(f"{s} -> {m}" for s, m in site.merged.items()) or "none"
+        console.print(f"[green]{site.site_id}[/green]{state}: {', '.join(site.scenes)}; merged: {merged}")
+        console.print(f"  manifest: {result.manifests[site.site_id]}")
+    for name, reason in result.aggregation.dropped.items():
+        console.print(f"[yellow]dropped[/yellow] {name}: {reason}")

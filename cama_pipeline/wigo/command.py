@@ -1,0 +1,57 @@
+"""`cama wigo`: fuse wheel, IMU and GNSS of every scene into ego poses at the camera timestamps."""
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from cama_pipeline.data import DatasetError
+from cama_pipeline.site.workspace import WorkspaceError
+from cama_pipeline.wigo.config import RobustKernel, WigoConfig
+from cama_pipeline.wigo.stage import run
+
+console = Console()
+
+DatasetArg = Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")]
+WorkspaceOpt = Annotated[
+    Path | None, typer.Option(help="Workspace folder; default <data set root's parent>/workspace.")
+]
+ScenesOpt = Annotated[list[str] | None, typer.Option("--scene", help="Only this scene (repeatable).")]
+OverwriteOpt = Annotated[bool, typer.Option(help="Recompute even when the outputs are up to date.")]
+
+
+def fail(err: Exception) -> typer.Exit:
+    """Print an input error and return the exit to raise (code 2)."""
+    console.print(f"[red]error:[/red] {err}")
+    return typer.Exit(code=2)
+
+
+INPUT_ERRORS = (DatasetError, WorkspaceError, FileNotFoundError, ValueError)
+"""Errors that mean bad input (printed, exit code 2), not a bug."""
+
+
+def wigo_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    scene: ScenesOpt = None,
+    robust: Annotated[str, typer.Option(help="GNSS robust kernel: huber, cauchy or none.")] = "huber",
+    no_logged_pose: Annotated[
+        bool, typer.Option(help="Do not fuse the logged ego_pose (wheel + IMU + GNSS only).")
+    ] = False,
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """WIGO: pose-graph fusion of wheel + IMU + GNSS into 6-DoF ego poses with covariances."""
+    try:
+        kernel: RobustKernel = robust  # type: ignore[assignment]  # validated by WigoConfig
+        config = WigoConfig(gnss_robust=kernel)
+        if no_logged_pose:
+            config = WigoConfig(gnss_robust=kernel, logged_pose_sigmas=(0.0, 0.0, 0.0, 0.0))
+        result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise fail(err) from err
+    done = len(result.files) - len(result.skipped)
+    console.print(
+        f"[green]wigo[/green] {done} scene(s) fused, {len(result.skipped)} up to date, "
+        f"in {result.seconds:.1f} s -> {result.workspace / 'wigo'}"
+    )

@@ -1,0 +1,107 @@
+"""The WIGO stage: fuse every scene of a data set and write `wigo/<scene>.json` into the workspace."""
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from rich.progress import Progress
+from scipy.spatial.transform import Rotation
+
+from cama_pipeline.data import Dataset, Scene, load_dataset
+from cama_pipeline.data.schema import CAN_DIR, CAN_MESSAGES, can_file_name
+from cama_pipeline.site.workspace import (
+    PoseRecord,
+    WigoFile,
+    default_workspace,
+    file_stats,
+    fingerprint,
+    stored_fingerprint,
+    wigo_path,
+    write_wigo,
+)
+from cama_pipeline.wigo.config import WigoConfig
+from cama_pipeline.wigo.fusion import FusedPoses, fuse_clip
+from cama_pipeline.wigo.inputs import clip_inputs
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class WigoResult:
+    """What a run did: the files per scene, which were skipped as up to date, how long it took."""
+
+    workspace: Path
+    files: dict[str, Path]
+    skipped: tuple[str, ...]
+    seconds: float
+
+
+def select_scenes(dataset: Dataset, names: Sequence[str] | None) -> tuple[Scene, ...]:
+    """The named scenes (all when None); ValueError naming an unknown one and listing the known."""
+    if not names:
+        return dataset.scenes
+    known = {s.name: s for s in dataset.scenes}
+    missing = [n for n in names if n not in known]
+    if missing:
+        raise ValueError(f"unknown scene(s) {missing}; the data set has {sorted(known)}")
+    return tuple(known[n] for n in names)
+
+
+def scene_fingerprint(dataset: Dataset, scene: Scene, config: WigoConfig) -> str:
+    """Hash of the config and of the tables and CAN files the fusion of `scene` reads."""
+    inputs = [dataset.version_dir / "sample_data.json", dataset.version_dir / "ego_pose.json"]
+    inputs += [dataset.root / CAN_DIR / can_file_name(scene.name, m) for m in CAN_MESSAGES]
+    return fingerprint("wigo", config.to_json(), scene.token, file_stats(inputs))
+
+
+def to_wigo_file(fused: FusedPoses, scene: Scene, digest: str, config: WigoConfig) -> WigoFile:
+    """The on-disk record of one scene's fused poses."""
+    quats = Rotation.from_matrix(fused.rotation).as_quat(canonical=True, scalar_first=True)
+    poses = tuple(
+        PoseRecord(token, channel, int(t), fused.translation[i], quats[i], fused.covariance[i])
+        for i, (token, channel, t) in enumerate(
+            zip(fused.tokens, fused.channels, fused.times_us, strict=True)
+        )
+    )
+    return WigoFile(
+        scene.name, scene.token, digest, config.to_json(), fused.report, fused.node_times_us.tolist(), poses
+    )
+
+
+def run(
+    config: WigoConfig,
+    dataset_root: Path,
+    workspace: Path | None = None,
+    *,
+    scenes: Sequence[str] | None = None,
+    overwrite: bool = False,
+    show_progress: bool = True,
+    dataset: Dataset | None = None,
+) -> WigoResult:
+    """Fuse the scenes of the data set at `dataset_root` (default workspace: beside the data set).
+
+    A scene whose output holds the same fingerprint (config + input files) is skipped unless `overwrite`.
+    `dataset` may pass an already loaded data set of the same root.
+    """
+    started = time.perf_counter()
+    dataset = dataset if dataset is not None else load_dataset(Path(dataset_root), check_files=False)
+    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
+    chosen = select_scenes(dataset, scenes)
+    files: dict[str, Path] = {}
+    skipped: list[str] = []
+    with Progress(disable=not show_progress, transient=True) as progress:
+        bar = progress.add_task("WIGO fusion", total=len(chosen))
+        for scene in chosen:
+            path = wigo_path(workspace, scene.name)
+            digest = scene_fingerprint(dataset, scene, config)
+            files[scene.name] = path
+            if not overwrite and stored_fingerprint(path) == digest:
+                logger.info("scene %s: %s is up to date", scene.name, path)
+                skipped.append(scene.name)
+            else:
+                fused = fuse_clip(clip_inputs(scene), config)
+                write_wigo(path, to_wigo_file(fused, scene, digest, config))
+            progress.advance(bar)
+    return WigoResult(workspace, files, tuple(skipped), time.perf_counter() - started)
