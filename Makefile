@@ -5,7 +5,15 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_ROOT ?= data/synthetic/default
 
-.PHONY: demo test setup lint clean
+.PHONY: demo test setup lint clean frontend chromium
+
+# The browser editor: `npm ci` when the lock file changed, the Vite build when its output is older than a source.
+FRONTEND := app/frontend
+FRONTEND_INSTALLED := $(FRONTEND)/node_modules/.package-lock.json
+FRONTEND_BUILT := $(FRONTEND)/dist/index.html
+FRONTEND_SOURCES := $(shell find $(FRONTEND)/src -type f) $(addprefix $(FRONTEND)/,index.html vite.config.js package.json)
+# Debian's Chromium for the browser tests, installed only when missing.
+CHROMIUM := /usr/bin/chromium
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -16,9 +24,22 @@ $(STAMP): $(BIN)/python requirements.lock pyproject.toml
 	$(BIN)/pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-setup: $(STAMP)
+setup: $(STAMP) frontend
 
-demo: $(STAMP)
+$(FRONTEND_INSTALLED): $(FRONTEND)/package-lock.json
+	cd $(FRONTEND) && npm ci --no-audit --no-fund
+
+$(FRONTEND_BUILT): $(FRONTEND_INSTALLED) $(FRONTEND_SOURCES)
+	cd $(FRONTEND) && npm run build
+
+frontend: $(FRONTEND_BUILT)
+
+$(CHROMIUM):
+	apt-get update && apt-get install -y chromium
+
+chromium: $(CHROMIUM)
+
+demo: $(STAMP) frontend
 	$(BIN)/cama synth --preset default --out $(DEMO_ROOT)
 
 lint: $(STAMP)
@@ -26,7 +47,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy annotations app/backend cama_pipeline/data cama_pipeline/evaluate
 
-test: $(STAMP)
+test: $(STAMP) frontend chromium
 	$(MAKE) lint
 	$(BIN)/python -m pytest -q
 

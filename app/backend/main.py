@@ -8,6 +8,7 @@ from fastapi import FastAPI
 
 from app.backend import crud
 from app.backend.api.main import api_router
+from app.backend.api.routes import frontend
 from app.backend.config import Settings
 from app.backend.db import make_engine, make_sessionmaker, upgrade
 from app.backend.errors import install_error_handlers
@@ -55,6 +56,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.jobs.recover_interrupted()
     install_error_handlers(app)
     app.include_router(api_router)
+    app.include_router(frontend.router)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_payload_bytes)
     logger.info("backend ready on %s", engine.url.render_as_string(hide_password=True))
     return app

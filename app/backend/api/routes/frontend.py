@@ -1,0 +1,51 @@
+"""The built browser editor (`app/frontend/dist`, made by the Vite build of the set-up step) at `/`.
+
+Only `index.html` and the hashed files under `assets/` are served; the page gets a strict Content-Security-Policy
+(scripts from this origin only), so even a rendering mistake could not run injected script.
+"""
+
+import logging
+from pathlib import Path
+
+from fastapi import APIRouter
+from fastapi.responses import FileResponse
+
+from app.backend.errors import NotFoundError
+
+logger = logging.getLogger(__name__)
+router = APIRouter(include_in_schema=False)
+
+DIST_DIR = Path(__file__).resolve().parents[3] / "frontend" / "dist"
+"""Vite's output folder; built by `make` (the `frontend` target) before `demo` and `test`."""
+ASSET_CACHE_CONTROL = "public, max-age=31536000, immutable"
+CONTENT_SECURITY_POLICY = (
+    "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' blob: data:; "
+    "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
+)
+
+
+def _index_file() -> Path:
+    """The editor's page; 404 explaining how to build it when the build output is missing."""
+    index = DIST_DIR / "index.html"
+    if not index.is_file():
+        raise NotFoundError(
+            f"the editor is not built: {index} is missing; run `make setup` (npm ci + vite build)"
+        )
+    return index
+
+
+@router.get("/", response_class=FileResponse)
+def editor_page() -> FileResponse:
+    """The single-page editor; it routes itself by URL hash and talks to `/api`."""
+    headers = {"Content-Security-Policy": CONTENT_SECURITY_POLICY, "Cache-Control": "no-cache"}
+    return FileResponse(_index_file(), media_type="text/html", headers=headers)
+
+
+@router.get("/assets/{name}", response_class=FileResponse)
+def editor_asset(name: str) -> FileResponse:
+    """A hashed script, style sheet or image of the build; names with path parts are refused."""
+    assets = (DIST_DIR / "assets").resolve()
+    path = (assets / name).resolve()
+    if path.parent != assets or not path.is_file():
+        raise NotFoundError(f"no editor asset {name!r}")
+    return FileResponse(path, headers={"Cache-Control": ASSET_CACHE_CONTROL})

@@ -1,0 +1,91 @@
+// The review panel: what is selected (class, confidence, state, version, author), the review buttons, the
+// annotator queue's "next" (leased, centred on the map) and the class/confidence key.
+import { h, replaceChildren, toast } from "../dom.js";
+import { CLASS_COLORS, CLASS_LABELS, HIGH_CONFIDENCE, LOW_CONFIDENCE, confidenceBucket } from "./styles.js";
+
+const NEXT_RESOLUTION_M = 0.06;
+
+export class ReviewPanel {
+  /**
+   * @param {{api: import("../api.js").Api, siteId: number, view: import("ol/View.js").default,
+   *   store: import("./elements.js").ElementStore, tools: import("./tools.js").Tools,
+   *   ops: import("./operations.js").Operations, isLead: boolean}} context
+   */
+  constructor(context) {
+    Object.assign(this, context);
+    this.lease = null;
+    this.info = h("div.selection-info#selection-info");
+    this.queueInfo = h("div.muted.small#queue-info");
+    const button = (label, key, state, cls = "") =>
+      h(`button.review${cls}`, { onclick: () => this.ops.review(state), title: `${label} (${key})`, dataset: { state } }, label, h("kbd", {}, key));
+    const leadButtons = this.isLead ? [button("Approve", "Shift+A", "approved"), button("Return", "Shift+R", "returned")] : [];
+    this.element = h(
+      "div.review-panel",
+      {},
+      h("button.primary.wide#next-item", { onclick: () => this.next(), title: "Next item of my queue (N)" }, "Next item ", h("kbd", {}, "N")),
+      this.queueInfo,
+      this.info,
+      h("div.review-buttons", {}, button("Accept", "A", "accepted", ".ok"), button("Fixed", "F", "fixed", ".fix"), button("Reject", "X", "rejected", ".bad"), ...leadButtons),
+      this.key(),
+    );
+    this.update();
+  }
+
+  /** Class colours and the confidence dash key. */
+  key() {
+    const classes = Object.entries(CLASS_LABELS).map(([cls, label], i) =>
+      h("span.key-entry", {}, h("span.key-line", { style: `border-color: ${CLASS_COLORS[cls]}` }), `${label} `, h("kbd", {}, String(i + 1))),
+    );
+    const dashes = [
+      ["solid", `≥ ${HIGH_CONFIDENCE} or drawn`],
+      ["dashed", `${LOW_CONFIDENCE}–${HIGH_CONFIDENCE}`],
+      ["dotted low", `< ${LOW_CONFIDENCE} (halo)`],
+    ].map(([style, label]) => h("span.key-entry", {}, h(`span.key-line.${style.replace(" ", ".")}`), label));
+    return h("div.key", {}, h("h4", {}, "Classes"), ...classes, h("h4", {}, "Confidence"), ...dashes);
+  }
+
+  /** Redraw the selection summary. */
+  update() {
+    const features = this.tools.selected();
+    if (!features.length) {
+      replaceChildren(this.info, h("p.muted", {}, "Nothing selected. Click an element, or press N for the next item."));
+      return;
+    }
+    const rows = features.slice(0, 4).map((feature) => {
+      const e = this.store.get(/** @type {number} */ (feature.getId()));
+      const confidence = e.confidence === null ? "drawn" : e.confidence.toFixed(2);
+      return h(
+        "div.selected-element",
+        { dataset: { id: String(e.id), state: e.state, cls: e.class, version: String(e.version) } },
+        h("div.sel-title", {}, h("span.class-dot", { style: `background: ${CLASS_COLORS[e.class]}` }), `${CLASS_LABELS[e.class]} #${e.id}`, h(`span.state.${e.state}`, {}, e.state)),
+        h("div.sel-meta", {}, `confidence ${confidence} (${confidenceBucket(e.confidence)}) · ${e.points.length} vertices · v${e.version}`),
+        h("div.sel-meta", {}, "last edit by ", h("span.author", {}, e.author || "?")),
+      );
+    });
+    if (features.length > 4) rows.push(h("p.muted", {}, `and ${features.length - 4} more`));
+    replaceChildren(this.info, ...rows);
+  }
+
+  /** Lease the next item of my queue, centre the map on it and select it (the previous lease is released). */
+  async next() {
+    try {
+      if (this.lease) await this.api.post(`/api/leases/${this.lease.id}/release`, {}).catch(() => undefined);
+      const lease = await this.api.post(`/api/sites/${this.siteId}/queue/next`, {});
+      this.lease = lease;
+      if (!lease) {
+        this.queueInfo.textContent = "Your queue is empty.";
+        toast("Your queue is empty");
+        return;
+      }
+      const feature = this.store.upsert(lease.element);
+      this.queueInfo.textContent = `Item #${lease.element.id} leased until ${new Date(lease.expires_at).toLocaleTimeString()}`;
+      if (feature) {
+        const extent = feature.getGeometry().getExtent();
+        this.view.fit(extent, { padding: [120, 120, 120, 120], minResolution: NEXT_RESOLUTION_M, duration: 250 });
+        this.tools.setSelection([feature]);
+      }
+    } catch (error) {
+      toast(`Next: ${error.message}`, "error");
+    }
+  }
+}

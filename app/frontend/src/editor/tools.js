@@ -1,0 +1,143 @@
+// Editing interactions: Select (shift toggles), Modify on the selection (drag a vertex, drag a segment to insert
+// one, alt-click deletes one), Draw for new polylines and crosswalk polygons, Snap to existing vertices (last).
+import Draw from "ol/interaction/Draw.js";
+import Modify from "ol/interaction/Modify.js";
+import Select from "ol/interaction/Select.js";
+import Snap from "ol/interaction/Snap.js";
+import { altKeyOnly, click, shiftKeyOnly, singleClick } from "ol/events/condition.js";
+import { pointsOf, samePoints } from "./elements.js";
+import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
+import { Stroke, Style, Circle, Fill } from "ol/style.js";
+
+export const MODES = ["select", "divider", "boundary", "ped_crossing"];
+
+/** The sketch style while drawing a class. */
+function sketchStyle(cls) {
+  const color = CLASS_COLORS[cls];
+  return new Style({
+    stroke: new Stroke({ color, width: 3, lineDash: [6, 4] }),
+    fill: new Fill({ color: "rgba(232, 121, 249, 0.12)" }),
+    image: new Circle({ radius: 5, fill: new Fill({ color }), stroke: new Stroke({ color: "#0f172a", width: 1 }) }),
+  });
+}
+
+export class Tools extends EventTarget {
+  /**
+   * @param {import("ol/Map.js").default} map
+   * @param {import("ol/layer/Vector.js").default} elementLayer
+   * @param {import("./elements.js").ElementStore} store
+   * @param {import("./sync.js").Sync} sync
+   */
+  constructor(map, elementLayer, store, sync) {
+    super();
+    this.map = map;
+    this.store = store;
+    this.sync = sync;
+    this.mode = "select";
+    /** @type {Draw|null} */
+    this.draw = null;
+    this.select = new Select({
+      layers: [elementLayer],
+      style: selectedStyle,
+      hitTolerance: 6,
+      condition: click,
+      toggleCondition: shiftKeyOnly,
+    });
+    this.modify = new Modify({
+      features: this.select.getFeatures(),
+      pixelTolerance: 10,
+      deleteCondition: (event) => altKeyOnly(event) && singleClick(event),
+    });
+    this.snap = new Snap({ source: elementLayer.getSource(), pixelTolerance: 10 });
+    this.modify.on("modifyend", (event) => this.saveModified(event.features.getArray()));
+    this.select.on("select", () => this.emit("selection"));
+    map.addInteraction(this.select);
+    map.addInteraction(this.modify);
+    map.addInteraction(this.snap);
+  }
+
+  emit(type) {
+    this.dispatchEvent(new Event(type));
+  }
+
+  /** The selected features. */
+  selected() {
+    return this.select.getFeatures().getArray().slice();
+  }
+
+  /** Select exactly these features. */
+  setSelection(features) {
+    const collection = this.select.getFeatures();
+    collection.clear();
+    for (const feature of features) if (feature) collection.push(feature);
+    this.emit("selection");
+  }
+
+  /** Save the geometry of features the Modify interaction changed, named by what happened to the vertices. */
+  saveModified(features) {
+    const steps = [];
+    let delta = 0;
+    for (const feature of features) {
+      const element = this.store.get(/** @type {number} */ (feature.getId()));
+      const points = pointsOf(feature);
+      if (!element || samePoints(points, element.points)) continue;
+      delta += points.length - element.points.length;
+      steps.push({ op: "update", id: element.id, body: { points } });
+    }
+    if (!steps.length) return;
+    const label = delta > 0 ? "Insert vertex" : delta < 0 ? "Delete vertex" : "Move vertex";
+    this.sync.commit(label, steps);
+  }
+
+  /**
+   * Switch between selecting/editing and drawing a class.
+   * @param {string} mode one of MODES
+   */
+  setMode(mode) {
+    if (this.draw) {
+      this.map.removeInteraction(this.draw);
+      this.draw = null;
+    }
+    this.mode = mode;
+    const drawing = mode !== "select";
+    this.select.setActive(!drawing);
+    this.modify.setActive(!drawing);
+    if (drawing) {
+      this.setSelection([]);
+      this.draw = new Draw({
+        type: mode === "ped_crossing" ? "Polygon" : "LineString",
+        style: sketchStyle(mode),
+        stopClick: true,
+      });
+      this.draw.on("drawend", (event) => this.saveDrawn(mode, event.feature));
+      this.map.addInteraction(this.draw);
+      // Snap must come after Draw to see its pointer events first.
+      this.map.removeInteraction(this.snap);
+      this.map.addInteraction(this.snap);
+    }
+    this.emit("mode");
+  }
+
+  /** Create the drawn element, then select it and go back to select mode. */
+  async saveDrawn(cls, feature) {
+    const points = pointsOf(feature);
+    setTimeout(() => this.setMode("select"), 0);
+    const records = await this.sync.commit(`Draw ${CLASS_LABELS[cls].toLowerCase()}`, [
+      { op: "create", body: { class: cls, points } },
+    ]);
+    if (records) this.setSelection([this.store.feature(records[0].id)]);
+  }
+
+  /** Finish the sketch in progress (Enter), or drop its last point (Backspace), or abort it (Escape). */
+  finishDrawing() {
+    if (this.draw) this.draw.finishDrawing();
+  }
+
+  undoLastPoint() {
+    if (this.draw) this.draw.removeLastPoint();
+  }
+
+  abortDrawing() {
+    if (this.draw) this.draw.abortDrawing();
+  }
+}

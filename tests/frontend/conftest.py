@@ -1,0 +1,38 @@
+"""Browser-test fixtures: one seeded server and one headless Chromium for the whole session, a page per test."""
+
+from collections.abc import Iterator
+
+import pytest
+from editor_browser_helpers import SeededServer, launch_chromium, seeded_server
+from playwright.sync_api import Browser, Page, sync_playwright
+
+VIEWPORT = {"width": 1440, "height": 900}
+
+
+@pytest.fixture(scope="session")
+def seeded(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SeededServer]:
+    """A real `cama serve` on loopback with users ann, bob (annotators), lead and the painted site."""
+    with seeded_server(tmp_path_factory.mktemp("editor-server")) as server:
+        yield server
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Browser]:
+    """Headless Debian Chromium."""
+    with sync_playwright() as playwright:
+        chromium = launch_chromium(playwright)
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Page]:
+    """A fresh context (own session storage; CSP bypassed so Playwright may evaluate) and page; page errors fail."""
+    context = browser.new_context(viewport=VIEWPORT, bypass_csp=True)
+    page = context.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.set_default_timeout(10_000)
+    yield page
+    context.close()
+    assert not errors, f"uncaught errors in the page: {errors}"
