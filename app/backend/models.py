@@ -76,16 +76,18 @@ class Element(Base):
     """The current version of one map element; every change is mirrored by an `EditLog` row."""
 
     __tablename__ = "elements"
-    __table_args__ = (Index("ix_elements_site_bbox", "site_id", "xmin", "xmax", "ymin", "ymax"),)
+    __table_args__ = (
+        Index("ix_elements_site_bbox", "site_id", "bbox_xmin", "bbox_xmax", "bbox_ymin", "bbox_ymax"),
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     site_id: Mapped[int] = mapped_column(ForeignKey("sites.id", ondelete="CASCADE"), index=True)
     cls: Mapped[str] = mapped_column("class", String(32))
     points: Mapped[list[list[float]]] = mapped_column(JSON)
-    xmin: Mapped[float] = mapped_column(Float)
-    ymin: Mapped[float] = mapped_column(Float)
-    xmax: Mapped[float] = mapped_column(Float)
-    ymax: Mapped[float] = mapped_column(Float)
+    xmin: Mapped[float] = mapped_column("bbox_xmin", Float)
+    ymin: Mapped[float] = mapped_column("bbox_ymin", Float)
+    xmax: Mapped[float] = mapped_column("bbox_xmax", Float)
+    ymax: Mapped[float] = mapped_column("bbox_ymax", Float)
     confidence: Mapped[float | None] = mapped_column(Float, nullable=True)
     source: Mapped[str] = mapped_column(String(16))
     state: Mapped[str] = mapped_column(String(16), index=True)

@@ -1,4 +1,5 @@
-"""Backend test helpers: an app on a fresh temporary SQLite database per test, users per role, a small site."""
+"""Backend test helpers: an app on a fresh database per test (SQLite, and PostgreSQL where its server programs
+are installed), users per role, a small site."""
 
 import json
 from collections.abc import Callable, Iterator
@@ -8,16 +9,39 @@ from typing import Any
 import pytest
 from backend_helpers import GEOREFERENCE, PASSWORD, divider, login, register_site
 from fastapi.testclient import TestClient
+from postgres_server import PostgresServer, find_bin_dir
 
 from app.backend.config import Settings
 from app.backend.main import create_app
 
 
+@pytest.fixture(scope="session")
+def postgres() -> Iterator[PostgresServer]:
+    """A PostgreSQL server for the session; skipped (with the reason shown) when PostgreSQL is not installed."""
+    bin_dir = find_bin_dir()
+    if bin_dir is None:
+        pytest.skip("PostgreSQL server programs (initdb, pg_ctl) not installed")
+    server = PostgresServer(bin_dir)
+    server.start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def database_url(request: pytest.FixtureRequest) -> str | None:
+    """Every backend test runs on both databases: None is the default SQLite file in the data folder."""
+    if request.param == "sqlite":
+        return None
+    server: PostgresServer = request.getfixturevalue("postgres")
+    return server.database_url()
+
+
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
+def settings(tmp_path: Path, database_url: str | None) -> Settings:
     """Settings on a temporary data folder with cheap password hashing and a small payload limit."""
     return Settings(
         data_dir=tmp_path / "data",
+        database_url=database_url,
         scrypt_n=2**4,
         max_payload_bytes=64 * 1024,
         extent_margin_m=10.0,

@@ -50,10 +50,10 @@ def upgrade() -> None:
         sa.Column("site_id", sa.Integer(), nullable=False),
         sa.Column("class", sa.String(length=32), nullable=False),
         sa.Column("points", sa.JSON(), nullable=False),
-        sa.Column("xmin", sa.Float(), nullable=False),
-        sa.Column("ymin", sa.Float(), nullable=False),
-        sa.Column("xmax", sa.Float(), nullable=False),
-        sa.Column("ymax", sa.Float(), nullable=False),
+        sa.Column("bbox_xmin", sa.Float(), nullable=False),
+        sa.Column("bbox_ymin", sa.Float(), nullable=False),
+        sa.Column("bbox_xmax", sa.Float(), nullable=False),
+        sa.Column("bbox_ymax", sa.Float(), nullable=False),
         sa.Column("confidence", sa.Float(), nullable=True),
         sa.Column("source", sa.String(length=16), nullable=False),
         sa.Column("state", sa.String(length=16), nullable=False),
@@ -68,7 +68,9 @@ def upgrade() -> None:
     )
     with op.batch_alter_table("elements", schema=None) as batch_op:
         batch_op.create_index(
-            "ix_elements_site_bbox", ["site_id", "xmin", "xmax", "ymin", "ymax"], unique=False
+            "ix_elements_site_bbox",
+            ["site_id", "bbox_xmin", "bbox_xmax", "bbox_ymin", "bbox_ymax"],
+            unique=False,
         )
         batch_op.create_index(batch_op.f("ix_elements_site_id"), ["site_id"], unique=False)
         batch_op.create_index(batch_op.f("ix_elements_state"), ["state"], unique=False)

@@ -1,0 +1,38 @@
+"""Schema migrations: a database made by the first release of revision 0001 keeps its elements through 0004."""
+
+from pathlib import Path
+
+import sqlalchemy as sa
+
+from app.backend.db import make_engine, upgrade
+
+
+def test_old_bbox_column_names_are_renamed_with_the_data_kept(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'old.db'}"
+    upgrade(url, "0003")
+    engine = make_engine(url)
+    with engine.begin() as connection:  # make it look like the first release of 0001 made it
+        for name in ("xmin", "ymin", "xmax", "ymax"):
+            connection.execute(sa.text(f"ALTER TABLE elements RENAME COLUMN bbox_{name} TO {name}"))
+        connection.execute(
+            sa.text(
+                "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
+                "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
+            )
+        )
+        connection.execute(
+            sa.text(
+                "INSERT INTO elements (id, site_id, class, points, xmin, ymin, xmax, ymax, source, state, "
+                "deleted, version, created_at, updated_at) VALUES (7, 1, 'divider', '[[1, 2], [3, 4]]', "
+                "1, 2, 3, 4, 'human', 'proposed', 0, 1, '2026-11-23', '2026-11-23')"
+            )
+        )
+    upgrade(url)
+    with engine.connect() as connection:
+        columns = {column["name"] for column in sa.inspect(connection).get_columns("elements")}
+        row = connection.execute(sa.text("SELECT bbox_xmin, bbox_ymax FROM elements WHERE id = 7")).one()
+        indexes = {index["name"] for index in sa.inspect(connection).get_indexes("elements")}
+    engine.dispose()
+    assert {"bbox_xmin", "bbox_ymin", "bbox_xmax", "bbox_ymax"} <= columns and "xmin" not in columns
+    assert tuple(row) == (1.0, 4.0)
+    assert "ix_elements_site_bbox" in indexes
