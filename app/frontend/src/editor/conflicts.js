@@ -3,6 +3,7 @@
 import Feature from "ol/Feature.js";
 import { h, replaceChildren } from "../dom.js";
 import { geometryFor } from "./elements.js";
+import { Sync } from "./sync.js";
 import { draftStyle } from "./styles.js";
 
 export class ConflictBanner {
@@ -46,6 +47,9 @@ export class ConflictBanner {
             `) saved version ${theirs.version} first. Their version is on the map; ${what} is kept (orange dashes).`,
           ),
           h("button.small.primary.use-mine", { onclick: () => this.sync.applyDraft(draft.id).then(() => this.render()) }, "Use mine"),
+          Sync.mergedPoints(draft)
+            ? h("button.small.merge-both", { onclick: () => this.sync.mergeDraft(draft.id).then(() => this.render()), title: "Keep their vertex moves and mine" }, "Merge both")
+            : null,
           h("button.small.keep-theirs", { onclick: () => this.sync.discardDraft(draft.id) }, "Keep theirs"),
         );
       }),

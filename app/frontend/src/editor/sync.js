@@ -9,7 +9,7 @@ import { toast } from "../dom.js";
  *   | {op: "update", id: number, body: {class?: string, points?: number[][]}}
  *   | {op: "delete", id: number}
  *   | {op: "review", id: number, state: string}} Step
- * @typedef {{id: number, step: Step, theirs: any}} Draft
+ * @typedef {{id: number, step: Step, theirs: any, base: any}} Draft
  * @typedef {import("./history.js").StepRecord} StepRecord
  */
 
@@ -102,8 +102,9 @@ export class Sync extends EventTarget {
     const current = error instanceof ApiError && error.body ? error.body.current : null;
     const id = step && step.op !== "create" ? step.id : null;
     if (error instanceof ApiError && error.isConflict && current && id !== null && current.version !== this.store.get(id).version) {
+      const base = this.store.get(id);
       this.store.upsert(current);
-      if (step.op !== "review") this.drafts.set(id, { id, step, theirs: current });
+      if (step.op !== "review") this.drafts.set(id, { id, step, theirs: current, base });
       this.emit("conflict", { id, current, draft: this.drafts.get(id) || null });
       return;
     }
@@ -120,6 +121,29 @@ export class Sync extends EventTarget {
     return this.commit("Apply my version", [draft.step]);
   }
 
+  /**
+   * Both sides' vertex moves together, when neither side added or removed vertices: each vertex I moved takes
+   * my position, every other vertex keeps theirs. Null when the drafts cannot be combined that way.
+   * @param {Draft} draft
+   */
+  static mergedPoints(draft) {
+    const mine = draft.step.op === "update" ? draft.step.body.points : null;
+    const base = draft.base.points;
+    const theirs = draft.theirs.points;
+    if (!mine || mine.length !== base.length || theirs.length !== base.length) return null;
+    if (draft.theirs.class !== draft.base.class) return null;
+    return mine.map((p, i) => (Math.abs(p[0] - base[i][0]) > 1e-4 || Math.abs(p[1] - base[i][1]) > 1e-4 ? p : theirs[i]));
+  }
+
+  /** Save the merge of both sides' vertex moves (see mergedPoints). */
+  mergeDraft(id) {
+    const draft = this.drafts.get(id);
+    const points = draft ? Sync.mergedPoints(draft) : null;
+    if (!points) return Promise.resolve(null);
+    this.drafts.delete(id);
+    return this.commit("Merge both versions", [{ op: "update", id, body: { points } }]);
+  }
+
   /** Drop a kept draft: the server's version stands. */
   discardDraft(id) {
     this.drafts.delete(id);
@@ -127,22 +151,22 @@ export class Sync extends EventTarget {
     this.emit("conflict", { id, current: this.store.get(id), draft: null });
   }
 
-  /** Undo the last saved action by restoring each element's earlier version (or deleting a created one). */
+  /** Undo the last saved action (after pending saves) by restoring each element's earlier version. */
   undo() {
-    const transaction = this.history.takeUndo();
-    if (!transaction) return Promise.resolve(false);
-    return this.replay(transaction, "undo", [...transaction.records].reverse());
+    return this.replay("undo");
   }
 
-  /** Redo the last undone action by restoring each element's later version. */
+  /** Redo the last undone action (after pending saves) by restoring each element's later version. */
   redo() {
-    const transaction = this.history.takeRedo();
-    if (!transaction) return Promise.resolve(false);
-    return this.replay(transaction, "redo", transaction.records);
+    return this.replay("redo");
   }
 
-  replay(transaction, direction, records) {
+  /** Take the transaction inside the queue, so an undo pressed during a save undoes that save. */
+  replay(direction) {
     return this.enqueue(async () => {
+      const transaction = direction === "undo" ? this.history.takeUndo() : this.history.takeRedo();
+      if (!transaction) return false;
+      const records = direction === "undo" ? [...transaction.records].reverse() : transaction.records;
       try {
         for (const record of records) {
           const version = this.store.get(record.id).version;

@@ -10,6 +10,28 @@ import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
 import { Stroke, Style, Circle, Fill } from "ol/style.js";
 
 export const MODES = ["select", "divider", "boundary", "ped_crossing"];
+const CLICK_INSERT_TOLERANCE_M = 0.01;
+
+/** Distance from p to segment ab, metres. */
+function segmentDistance(p, a, b) {
+  const dx = b[0] - a[0];
+  const dy = b[1] - a[1];
+  const t = Math.max(0, Math.min(1, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy || 1)));
+  return Math.hypot(p[0] - a[0] - t * dx, p[1] - a[1] - t * dy);
+}
+
+/**
+ * True when `points` is `old` plus vertices that lie on its segments: what Modify leaves after a plain click on
+ * a selected line (it inserts on press); such a click is a selection, not an edit.
+ */
+export function onlyClickInserts(points, old) {
+  if (points.length <= old.length) return false;
+  const kept = points.filter((p, i) => {
+    const isOld = old.some((q) => Math.abs(p[0] - q[0]) < 1e-6 && Math.abs(p[1] - q[1]) < 1e-6);
+    return isOld || i === 0 || i === points.length - 1 || segmentDistance(p, points[i - 1], points[i + 1]) > CLICK_INSERT_TOLERANCE_M;
+  });
+  return samePoints(kept, old);
+}
 
 /** The sketch style while drawing a class. */
 function sketchStyle(cls) {
@@ -81,6 +103,10 @@ export class Tools extends EventTarget {
       const element = this.store.get(/** @type {number} */ (feature.getId()));
       const points = pointsOf(feature);
       if (!element || samePoints(points, element.points)) continue;
+      if (onlyClickInserts(points, element.points)) {
+        this.store.upsert(element);
+        continue;
+      }
       delta += points.length - element.points.length;
       steps.push({ op: "update", id: element.id, body: { points } });
     }

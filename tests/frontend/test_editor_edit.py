@@ -1,0 +1,139 @@
+"""Editing in the browser, checked through the API: vertices, drawing, relabelling, review, undo/redo, split/merge."""
+
+from typing import Any
+
+from editor_browser_helpers import SeededServer, centre_on, drag, open_editor, page_xy, select_at
+from playwright.sync_api import Page, expect
+
+RES_M = 0.05
+"""Map resolution of the editing tests: 20 px per metre."""
+
+
+def divider_at(seeded: SeededServer, x0: float, y: float, n: int = 3, step_m: float = 5.0) -> dict[str, Any]:
+    """A fresh straight divider of n vertices along +x, made through the API by ann."""
+    points = [[x0 + i * step_m, y] for i in range(n)]
+    return seeded.create({"class": "divider", "points": points})
+
+
+def open_on(page: Page, seeded: SeededServer, element: dict[str, Any]) -> None:
+    """Open the editor centred on the element's middle and select it (click on its first segment)."""
+    open_editor(page, seeded)
+    points = element["points"]
+    middle = points[len(points) // 2]
+    centre_on(page, middle[0], middle[1], RES_M)
+    a, b = points[0], points[1]
+    select_at(page, seeded, element["id"], (a[0] + b[0]) / 2, (a[1] + b[1]) / 2)
+
+
+def near(p: list[float], q: tuple[float, float], tol_m: float = 0.15) -> bool:
+    return abs(p[0] - q[0]) <= tol_m and abs(p[1] - q[1]) <= tol_m
+
+
+def test_drag_a_vertex_is_saved(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 4.0, 66.0)
+    open_on(page, seeded, element)
+    drag(page, page_xy(page, 9.0, 66.0), page_xy(page, 9.0, 67.5))
+    saved = seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
+    assert near(saved["points"][1], (9.0, 67.5)), saved["points"]
+    assert near(saved["points"][0], (4.0, 66.0)) and near(saved["points"][2], (14.0, 66.0))
+    expect(page.locator("#save-state")).to_have_text("All changes saved")
+
+
+def test_insert_then_delete_a_vertex(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 20.0, 66.0)
+    open_on(page, seeded, element)
+    drag(page, page_xy(page, 22.5, 66.0), page_xy(page, 22.5, 65.0))
+    inserted = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 4)
+    assert near(inserted["points"][1], (22.5, 65.0)), inserted["points"]
+    page.keyboard.down("Alt")
+    page.mouse.click(*page_xy(page, 22.5, 65.0))
+    page.keyboard.up("Alt")
+    removed = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 3)
+    assert [p[1] for p in removed["points"]] == [66.0, 66.0, 66.0]
+
+
+def test_draw_a_new_divider(page: Page, seeded: SeededServer) -> None:
+    open_editor(page, seeded)
+    centre_on(page, 100.0, 70.0, RES_M)
+    page.keyboard.press("d")
+    expect(page.locator("#mode")).to_contain_text("Drawing divider")
+    for x in (95.0, 100.0, 105.0):
+        page.mouse.click(*page_xy(page, x, 70.0))
+        page.wait_for_timeout(350)
+    page.keyboard.press("Enter")
+    selected = page.locator(".selected-element[data-cls='divider']")
+    expect(selected).to_have_count(1)
+    element = seeded.element(int(selected.get_attribute("data-id") or 0))
+    assert element["class"] == "divider" and element["author"] == "ann" and element["source"] == "human"
+    assert len(element["points"]) == 3
+    assert all(near(p, (x, 70.0)) for p, x in zip(element["points"], (95.0, 100.0, 105.0), strict=True))
+
+
+def test_relabel_with_a_number_key(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 36.0, 66.0)
+    open_on(page, seeded, element)
+    page.keyboard.press("3")
+    saved = seeded.wait_element(element["id"], lambda e: e["class"] == "boundary")
+    assert saved["points"] == element["points"]
+    expect(page.locator(f".selected-element[data-id='{element['id']}']")).to_have_attribute(
+        "data-cls", "boundary"
+    )
+
+
+def test_accept_fix_and_reject(page: Page, seeded: SeededServer) -> None:
+    first = divider_at(seeded, 52.0, 66.0)
+    second = divider_at(seeded, 52.0, 68.0)
+    third = divider_at(seeded, 52.0, 70.0)
+    open_on(page, seeded, first)
+    page.keyboard.press("a")
+    assert seeded.wait_element(first["id"], lambda e: e["state"] == "accepted")["points"] == first["points"]
+    select_at(page, seeded, second["id"], 54.5, 68.0)
+    page.keyboard.press("x")
+    seeded.wait_element(second["id"], lambda e: e["state"] == "rejected")
+    select_at(page, seeded, third["id"], 54.5, 70.0)
+    page.click("button.review[data-state='fixed']")
+    seeded.wait_element(third["id"], lambda e: e["state"] == "fixed")
+    expect(page.locator(f".selected-element[data-id='{third['id']}'] .state")).to_have_text("fixed")
+
+
+def test_undo_and_redo(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 68.0, 66.0)
+    original = element["points"]
+    open_on(page, seeded, element)
+    page.keyboard.press("v")
+    seeded.wait_element(element["id"], lambda e: e["points"] == original[::-1])
+    page.keyboard.press("Control+z")
+    seeded.wait_element(element["id"], lambda e: e["points"] == original and e["version"] == 3)
+    page.keyboard.press("Control+Shift+z")
+    seeded.wait_element(element["id"], lambda e: e["points"] == original[::-1] and e["version"] == 4)
+    select_at(page, seeded, element["id"], 70.5, 66.0)
+    page.keyboard.press("Delete")
+    seeded.wait_element(element["id"], lambda e: e["deleted"])
+    page.click("#undo")
+    restored = seeded.wait_element(element["id"], lambda e: not e["deleted"])
+    assert restored["points"] == original[::-1]
+    expect(page.locator("#redo")).to_be_enabled()
+
+
+def test_split_merge_and_simplify(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 84.0, 66.0, n=5, step_m=2.5)
+    open_on(page, seeded, element)
+    page.mouse.move(*page_xy(page, 89.0, 66.0))
+    page.keyboard.press("k")
+    page.wait_for_selector(".selected-element >> nth=1")
+    head = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 3)
+    assert near(head["points"][-1], (89.0, 66.0))
+    other = next(
+        int(i)
+        for i in page.locator(".selected-element").evaluate_all("els => els.map(e => e.dataset.id)")
+        if int(i) != element["id"]
+    )
+    tail = seeded.element(other)
+    assert tail["class"] == "divider" and len(tail["points"]) == 3 and near(tail["points"][0], (89.0, 66.0))
+    page.keyboard.press("m")
+    merged = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 5)
+    assert near(merged["points"][-1], (94.0, 66.0))
+    assert seeded.wait_element(other, lambda e: e["deleted"])
+    page.keyboard.press("g")
+    simplified = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 2)
+    assert near(simplified["points"][0], (84.0, 66.0)) and near(simplified["points"][1], (94.0, 66.0))
