@@ -49,9 +49,12 @@ class WigoConfig:
     97 % of the time, so ordinary fixes keep full weight and jumps of several sigmas lose it)."""
     ahrs_yaw_sigma_deg: float = 0.3
     """Heading prior from the IMU's own attitude estimate (`ms_imu.q`) at the first node; <= 0 disables."""
-    logged_pose_sigmas: tuple[float, float, float, float] = (0.3, 0.1, 0.5, 1.0)
-    """(horizontal m, vertical m, heading deg, roll/pitch deg) of the logged `ego_pose` as an input; its
-    errors are slow drifts, so the sigmas are spread over `logged_pose_correlation_s`. All <= 0 disables."""
+    logged_pose_sigmas: tuple[float, float, float, float] = (0.3, 0.1, 2.0, 1.0)
+    """(horizontal m, vertical m, heading deg, roll/pitch deg) of the logged `ego_pose` as an input. Its
+    errors are slow drifts (lateral wander, a calibration yaw, a sync offset), so the sigmas are spread over
+    `logged_pose_correlation_s`; heading is loose because the IMU and GNSS track know it better. A value
+    <= 0 leaves that component free; all <= 0 leaves the logged pose out (except as the anchor of a clip
+    without GNSS)."""
     logged_pose_correlation_s: float = 8.0
     """Correlation time of the logged pose's errors: its factors count as one measurement per this long."""
     max_iterations: int = 100

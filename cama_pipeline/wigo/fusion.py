@@ -193,9 +193,9 @@ class _GraphBuilder:
         )
         if len(chosen) == 0:
             chosen = np.array([int(np.argmin(np.abs(self.nodes - cam.times_us[0])))])
-        spread = math.sqrt(max(self.config.logged_pose_correlation_s * self.config.node_rate_hz, 1.0))
-        if anchor_only or not self.config.uses_logged_pose:
-            spread = 1.0
+        # n factors within one correlation time carry the information of one measurement
+        per_window = self.config.logged_pose_correlation_s * self.config.node_rate_hz
+        spread = math.sqrt(min(max(len(chosen), 1), max(per_window, 1.0)))
         base = np.array(
             [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg)]
             + [horizontal, horizontal, vertical]

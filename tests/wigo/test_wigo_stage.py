@@ -1,0 +1,65 @@
+"""The WIGO stage and `cama wigo` on the tiny synthetic site: outputs, reruns, errors."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from cama_pipeline.cli import app
+from cama_pipeline.data import load_dataset
+from cama_pipeline.evaluate.inputs import load_true_poses
+from cama_pipeline.site.workspace import default_workspace, read_wigo
+from cama_pipeline.wigo import WigoConfig, run
+
+runner = CliRunner()
+
+
+def test_run_writes_a_pose_per_image_and_skips_up_to_date_scenes(site_root: Path, tmp_path: Path) -> None:
+    root = site_root / "nuscenes"
+    dataset = load_dataset(root, check_files=False)
+    result = run(WigoConfig(), root, tmp_path, show_progress=False)
+    assert result.skipped == ()
+    truth = load_true_poses(site_root / "ground_truth" / "poses.json")
+    for scene in dataset.scenes:
+        wigo = read_wigo(result.files[scene.name])
+        tokens = [p.token for p in wigo.poses]
+        assert sorted(tokens) == sorted(im.token for im in scene.all_images())
+        assert [p.timestamp_us for p in wigo.poses] == sorted(p.timestamp_us for p in wigo.poses)
+        error = [np.linalg.norm(p.translation - truth[p.token].translation) for p in wigo.poses]
+        assert max(error) < 1.0, scene.name
+        assert all(p.covariance is not None and p.covariance.shape == (6, 6) for p in wigo.poses)
+    again = run(WigoConfig(), root, tmp_path, show_progress=False)
+    assert set(again.skipped) == {s.name for s in dataset.scenes}
+    forced = run(WigoConfig(), root, tmp_path, scenes=["scene-0001"], overwrite=True, show_progress=False)
+    assert forced.skipped == ()
+    changed = run(
+        WigoConfig(gnss_robust="cauchy"), root, tmp_path, scenes=["scene-0001"], show_progress=False
+    )
+    assert changed.skipped == ()
+    assert read_wigo(changed.files["scene-0001"]).config["gnss_robust"] == "cauchy"
+
+
+def test_unknown_scene_is_named(site_root: Path, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="scene-9999"):
+        run(WigoConfig(), site_root / "nuscenes", tmp_path, scenes=["scene-9999"], show_progress=False)
+
+
+def test_default_workspace_sits_beside_the_dataset(tmp_path: Path) -> None:
+    assert default_workspace(tmp_path / "site" / "nuscenes") == (tmp_path / "site" / "workspace").absolute()
+
+
+def test_cli_wigo_runs_and_reports_bad_input(site_root: Path, tmp_path: Path) -> None:
+    result = runner.invoke(
+        app, ["wigo", str(site_root / "nuscenes"), "--workspace", str(tmp_path), "--robust", "cauchy"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "scene(s) fused" in result.output
+    assert json.loads((tmp_path / "wigo" / "scene-0001.json").read_text())["schema"] == "cama.wigo/1"
+    missing = runner.invoke(app, ["wigo", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
+    assert missing.exit_code == 2 and "error" in missing.output
+    bad_kernel = runner.invoke(
+        app, ["wigo", str(site_root / "nuscenes"), "--workspace", str(tmp_path), "--robust", "tukey"]
+    )
+    assert bad_kernel.exit_code == 2 and "gnss_robust" in bad_kernel.output
