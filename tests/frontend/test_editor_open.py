@@ -1,5 +1,7 @@
 """Log in, open a site, see the raster tiles and the elements, the legend, the help overlay and the cursor readout."""
 
+import cv2
+import numpy as np
 from editor_browser_helpers import (
     PROPOSALS,
     SeededServer,
@@ -47,6 +49,34 @@ def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) ->
     expect(page.locator("#cursor-elevation")).to_contain_text(" m")
     page.wait_for_timeout(300)
     screenshot(page, "editor")
+
+
+def map_colours(page: Page, points: list[tuple[float, float]]) -> list[tuple[int, int, int]]:
+    """RGB of the rendered map at site points (from a screenshot, so every layer is composed)."""
+    image = cv2.imdecode(np.frombuffer(page.screenshot(), np.uint8), cv2.IMREAD_COLOR)
+    colours = []
+    for x, y in points:
+        px, py = page_xy(page, x, y)
+        b, g, r = image[round(py), round(px)]
+        colours.append((int(r), int(g), int(b)))
+    return colours
+
+
+def test_tiles_line_up_with_site_coordinates(page: Page, seeded: SeededServer) -> None:
+    """Painted marks land where the site coordinates say, also on the cut right-edge tiles."""
+    open_editor(page, seeded)
+    page.click(".sidebar-tab[data-tab='Layers']")
+    page.uncheck("#layers-panel label.layer-row input")
+    for centre_x in (30.0, 108.0):
+        centre_on(page, centre_x, 40.0, 0.1)
+        page.wait_for_timeout(600)
+        dash, gap, asphalt, grass = map_colours(
+            page,
+            [(centre_x + 1.5, 40.0), (centre_x + 4.5, 40.0), (centre_x, 30.0), (centre_x, 62.0)],
+        )
+        assert min(dash) > 200, f"centre line dash at x={centre_x + 1.5}: {dash}"
+        assert max(gap) < 130 and max(asphalt) < 130, (gap, asphalt)
+        assert grass[1] > grass[0] + 15, f"grass north of the road: {grass}"
 
 
 def test_help_overlay_lists_shortcuts(page: Page, seeded: SeededServer) -> None:

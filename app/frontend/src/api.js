@@ -123,13 +123,13 @@ export class Api {
   }
 
   /**
-   * Fetch an image (tile) with the token; resolves with an object URL, or null for 404 (nothing there).
+   * Fetch an image (tile) with the token; resolves with its blob, or null for 404 (nothing there).
    * @param {string} path
    */
-  async imageUrl(path) {
+  async imageBlob(path) {
     const response = await fetch(path, { headers: this.authHeaders() });
     if (response.status === 404) return null;
     if (!response.ok) throw new ApiError(response.status, `tile ${path}: HTTP ${response.status}`, null);
-    return URL.createObjectURL(await response.blob());
+    return response.blob();
   }
 }

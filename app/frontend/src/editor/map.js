@@ -37,6 +37,22 @@ export function pyramidGrid(pyramid, siteOrigin) {
 }
 
 /**
+ * A tile image drawn at the top-left of a full tile_size square: the backend cuts the right and bottom edge
+ * tiles to the raster, and OpenLayers would stretch them to a full tile.
+ * @param {Blob} blob
+ * @param {number} size
+ */
+async function fullTile(blob, size) {
+  const bitmap = await createImageBitmap(blob);
+  const canvas = document.createElement("canvas");
+  canvas.width = size;
+  canvas.height = size;
+  canvas.getContext("2d").drawImage(bitmap, 0, 0);
+  bitmap.close();
+  return canvas;
+}
+
+/**
  * A tile layer of one raster; tiles come through fetch with the bearer token, 404 tiles are left empty.
  * @param {import("../api.js").Api} api
  * @param {any} layer LayerPublic
@@ -52,18 +68,13 @@ function rasterLayer(api, layer, siteOrigin, projection) {
     transition: 150,
     tileUrlFunction: ([z, x, y]) => template.replace("{z}", String(z)).replace("{x}", String(x)).replace("{y}", String(y)),
     tileLoadFunction: (tile, src) => {
-      const image = /** @type {any} */ (tile).getImage();
-      api.imageUrl(src).then(
-        (url) => {
-          if (url === null) {
-            tile.setState(TileState.EMPTY);
-            return;
-          }
-          image.onload = () => URL.revokeObjectURL(url);
-          image.src = url;
-        },
-        () => tile.setState(TileState.ERROR),
-      );
+      api
+        .imageBlob(src)
+        .then((blob) => (blob ? fullTile(blob, layer.pyramid.tile_size) : null))
+        .then(
+          (canvas) => (canvas ? /** @type {any} */ (tile).setImage(canvas) : tile.setState(TileState.EMPTY)),
+          () => tile.setState(TileState.ERROR),
+        );
     },
   });
   return new TileLayer({

@@ -1,0 +1,71 @@
+"""Lead views: the confidence queue (order, filters, approve/return, open in the editor), figures, jobs."""
+
+from editor_browser_helpers import SeededServer, log_in, screenshot
+from playwright.sync_api import Page, expect
+
+
+def open_lead(page: Page, seeded: SeededServer) -> None:
+    log_in(page, seeded.base_url, "lead", f"#/site/{seeded.site_id}/lead")
+    expect(page.locator("#queue-table tbody tr.queue-row").first).to_be_visible()
+
+
+def review(seeded: SeededServer, element_id: int, state: str, user: str = "ann") -> None:
+    """Move an element to a review state through the API."""
+    with seeded.client() as client:
+        version = seeded.element(element_id)["version"]
+        path = f"/api/sites/{seeded.site_id}/elements/{element_id}/review"
+        response = client.post(path, json={"state": state, "version": version}, headers=seeded.headers[user])
+    assert response.status_code == 200, response.text
+
+
+def test_queue_is_in_confidence_order_and_filters(page: Page, seeded: SeededServer) -> None:
+    open_lead(page, seeded)
+    rows = page.locator("#queue-table tbody tr.queue-row")
+    confidences = rows.evaluate_all("rows => rows.map(r => r.dataset.confidence)")
+    scored = [float(c) for c in confidences if c]
+    assert len(scored) >= 5 and scored == sorted(scored), confidences
+    drawn_first = next((i for i, c in enumerate(confidences) if not c), len(confidences))
+    assert all(not c for c in confidences[drawn_first:]), "drawn elements (no confidence) come last"
+    figures = page.locator("#figures")
+    expect(figures).to_be_visible()
+    screenshot(page, "queue")
+    page.select_option("#filter-class", "boundary")
+    expect(rows.first.locator("td").nth(1)).to_have_text("Boundary")
+    classes = rows.evaluate_all("rows => rows.map(r => r.children[1].textContent)")
+    assert classes and set(classes) == {"Boundary"}
+
+
+def test_approve_return_and_open_in_editor(page: Page, seeded: SeededServer) -> None:
+    first = seeded.create({"class": "divider", "points": [[60.0, 78.0], [65.0, 78.0]]})
+    second = seeded.create({"class": "divider", "points": [[70.0, 78.0], [75.0, 78.0]]})
+    review(seeded, first["id"], "accepted")
+    review(seeded, second["id"], "fixed")
+    open_lead(page, seeded)
+    page.select_option("#filter-state", "accepted")
+    page.locator(f"tr.queue-row[data-id='{first['id']}'] button.approved").click()
+    seeded.wait_element(first["id"], lambda e: e["state"] == "approved")
+    page.select_option("#filter-state", "fixed")
+    page.locator(f"tr.queue-row[data-id='{second['id']}'] button.returned").click()
+    seeded.wait_element(second["id"], lambda e: e["state"] == "returned")
+    page.select_option("#filter-state", "")
+    page.locator(f"tr.queue-row[data-id='{second['id']}'] td").first.click()
+    page.wait_for_function("window.camaEditor && window.camaEditor.firstRenderMs !== null")
+    expect(page.locator(f".selected-element[data-id='{second['id']}']")).to_have_count(1)
+
+
+def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
+    element = seeded.create({"class": "boundary", "points": [[80.0, 78.0], [85.0, 78.0]]})
+    review(seeded, element["id"], "accepted", "bob")
+    open_lead(page, seeded)
+    chart = page.locator("#figures svg.chart")
+    expect(chart).to_be_visible()
+    expect(chart.locator("text.chart-label", has_text="bob")).to_have_count(1)
+    expect(page.locator("#figures .figures-table td.author", has_text="bob").first).to_be_visible()
+    page.click("#launch-retrain")
+    expect(page.locator("#job-message")).to_contain_text("not available yet")
+    page.click("#launch-export")
+    job = page.locator("#job-list .job").first
+    expect(job).to_have_attribute("data-state", "succeeded", timeout=30_000)
+    expect(job.locator(".job-text")).to_contain_text("100%")
+    expect(job.locator(".download")).to_be_visible()
+    screenshot(page, "lead")
