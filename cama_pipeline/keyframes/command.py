@@ -32,7 +32,8 @@ def keyframes_command(
         )
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
         table = Table(title=f"keyframes ({result.workspace / 'keyframes'})")
-        for column in ("scene", "frames", "keyframes", "stationary", "path m", "max diff ms", "max range ms"):
+        table.add_column("scene", no_wrap=True, min_width=10)
+        for column in ("frames", "keyframes", "stationary", "path m", "max diff ms", "max range ms"):
             table.add_column(column)
         for name, path in result.files.items():
             kf = read_keyframes(path)
