@@ -149,13 +149,16 @@ function focusRequested(params, store, view, tools) {
 }
 
 /**
- * A small read-only hook for the browser tests and the bench: map pixel of a site point, element count and
- * the time the elements were first drawn.
+ * A small hook for the browser tests and the bench: map pixel of a site point, element count, when the elements
+ * were first drawn and when all visible tiles were, and (while `recording`) each frame's render time in ms.
  */
 function exposeTestHook({ m, store, sync, siteId }) {
   const hook = {
     siteId,
     firstRenderMs: null,
+    renderCompleteMs: null,
+    recording: false,
+    frameRenderMs: [],
     pixelOf: (x, y) => m.map.getPixelFromCoordinate([x, y]),
     elementCount: () => m.elementSource.getFeatures().length,
     saveState: () => sync.status,
@@ -168,6 +171,16 @@ function exposeTestHook({ m, store, sync, siteId }) {
   };
   m.elementLayer.once("postrender", () => {
     hook.firstRenderMs = performance.now();
+  });
+  m.map.once("rendercomplete", () => {
+    hook.renderCompleteMs = performance.now();
+  });
+  let frameStart = 0;
+  m.map.on("precompose", () => {
+    frameStart = performance.now();
+  });
+  m.map.on("postcompose", () => {
+    if (hook.recording) hook.frameRenderMs.push(performance.now() - frameStart);
   });
   window.camaEditor = hook;
 }
