@@ -63,8 +63,16 @@ def clip_inputs(scene: Scene) -> ClipInputs:
         rotation=np.stack([im.global_from_ego.rotation_matrix() for im in images]),
         translation=np.stack([im.global_from_ego.translation for im in images]),
     )
-    return checked_inputs(
-        ClipInputs(scene.name, cameras, scene.can.wheel, scene.can.imu, scene.can.gnss)  # type: ignore[arg-type]
+    if scene.can.wheel is None:
+        raise _no_wheels(scene.name)
+    return checked_inputs(ClipInputs(scene.name, cameras, scene.can.wheel, scene.can.imu, scene.can.gnss))
+
+
+def _no_wheels(scene: str) -> ValueError:
+    """The error for a clip without usable wheel speeds."""
+    return ValueError(
+        f"scene {scene!r}: no wheel speeds ({WHEEL_MESSAGE}, at least 2 messages needed); "
+        "WIGO needs them for the odometry's scale"
     )
 
 
@@ -76,10 +84,7 @@ def checked_inputs(inputs: ClipInputs) -> ClipInputs:
     if np.any(np.diff(inputs.cameras.times_us) < 0):
         raise ValueError(f"scene {name!r}: camera timestamps are not in time order")
     if inputs.wheel is None or len(inputs.wheel.utime) < 2:
-        raise ValueError(
-            f"scene {name!r}: no wheel speeds ({WHEEL_MESSAGE}, at least 2 messages needed); "
-            "WIGO needs them for the odometry's scale"
-        )
+        raise _no_wheels(name)
     wheel = _in_time_order(inputs.wheel, name, WHEEL_MESSAGE)
     imu = _in_time_order(inputs.imu, name, IMU_MESSAGE) if inputs.imu is not None else None
     if imu is not None and len(imu.utime) < 2:

@@ -1,6 +1,7 @@
 """The WIGO stage and `cama wigo` on the tiny synthetic site: outputs, reruns, errors."""
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -63,3 +64,19 @@ def test_cli_wigo_runs_and_reports_bad_input(site_root: Path, tmp_path: Path) ->
         app, ["wigo", str(site_root / "nuscenes"), "--workspace", str(tmp_path), "--robust", "tukey"]
     )
     assert bad_kernel.exit_code == 2 and "gnss_robust" in bad_kernel.output
+
+
+def test_data_set_without_gnss_or_imu_files_degrades(site_root: Path, tmp_path: Path) -> None:
+    # the stage reads tables and CAN files only, so a copy without the images is enough
+    root = tmp_path / "nuscenes"
+    shutil.copytree(site_root / "nuscenes" / "v1.0-synth", root / "v1.0-synth")
+    shutil.copytree(site_root / "nuscenes" / "can_bus", root / "can_bus")
+    (root / "can_bus" / "scene-0001_gnss.json").unlink()
+    (root / "can_bus" / "scene-0002_ms_imu.json").unlink()
+    (root / "can_bus" / "scene-0003_zoe_veh_info.json").unlink()
+    workspace = tmp_path / "ws"
+    with pytest.raises(ValueError, match="scene-0003.*zoe_veh_info"):
+        run(WigoConfig(), root, workspace, show_progress=False)
+    result = run(WigoConfig(), root, workspace, scenes=["scene-0001", "scene-0002"], show_progress=False)
+    assert any("no GNSS" in d for d in read_wigo(result.files["scene-0001"]).report["degraded"])
+    assert any("no IMU" in d for d in read_wigo(result.files["scene-0002"]).report["degraded"])
