@@ -36,17 +36,16 @@ def wigo_command(
     workspace: WorkspaceOpt = None,
     scene: ScenesOpt = None,
     robust: Annotated[str, typer.Option(help="GNSS robust kernel: huber, cauchy or none.")] = "huber",
-    no_logged_pose: Annotated[
-        bool, typer.Option(help="Do not fuse the logged ego_pose (wheel + IMU + GNSS only).")
-    ] = False,
+    logged_pose: Annotated[
+        bool, typer.Option(help="Fuse the logged ego_pose too (off: wheel + IMU + GNSS only).")
+    ] = True,
     overwrite: OverwriteOpt = False,
 ) -> None:
     """WIGO: pose-graph fusion of wheel + IMU + GNSS into 6-DoF ego poses with covariances."""
     try:
         kernel: RobustKernel = robust  # type: ignore[assignment]  # validated by WigoConfig
-        config = WigoConfig(gnss_robust=kernel)
-        if no_logged_pose:
-            config = WigoConfig(gnss_robust=kernel, logged_pose_sigmas=(0.0, 0.0, 0.0, 0.0))
+        sigmas = WigoConfig.logged_pose_sigmas if logged_pose else (0.0, 0.0, 0.0, 0.0)
+        config = WigoConfig(gnss_robust=kernel, logged_pose_sigmas=sigmas)
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise fail(err) from err

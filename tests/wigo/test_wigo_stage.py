@@ -52,12 +52,18 @@ def test_default_workspace_sits_beside_the_dataset(tmp_path: Path) -> None:
 
 
 def test_cli_wigo_runs_and_reports_bad_input(site_root: Path, tmp_path: Path) -> None:
-    result = runner.invoke(
-        app, ["wigo", str(site_root / "nuscenes"), "--workspace", str(tmp_path), "--robust", "cauchy"]
-    )
+    args = ["wigo", str(site_root / "nuscenes"), "--workspace", str(tmp_path), "--robust", "cauchy"]
+    result = runner.invoke(app, [*args, "--no-logged-pose"])
     assert result.exit_code == 0, result.output
     assert "scene(s) fused" in result.output
-    assert json.loads((tmp_path / "wigo" / "scene-0001.json").read_text())["schema"] == "cama.wigo/1"
+    written = json.loads((tmp_path / "wigo" / "scene-0001.json").read_text())
+    assert written["schema"] == "cama.wigo/1"
+    assert written["config"]["gnss_robust"] == "cauchy" and written["config"]["logged_pose_sigmas"] == [
+        0,
+        0,
+        0,
+        0,
+    ]
     missing = runner.invoke(app, ["wigo", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
     assert missing.exit_code == 2 and "error" in missing.output
     bad_kernel = runner.invoke(
