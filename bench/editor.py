@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-from playwright.sync_api import Page, sync_playwright
+from playwright.sync_api import Page, ViewportSize, sync_playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "frontend"))
 from editor_browser_helpers import (  # noqa: E402
@@ -40,7 +40,7 @@ from editor_browser_helpers import (  # noqa: E402
 logger = logging.getLogger(__name__)
 RESULTS = Path(__file__).parent / "results"
 DRAG_STEPS = 120
-VIEWPORT = {"width": 1440, "height": 900}
+VIEWPORT: ViewportSize = {"width": 1440, "height": 900}
 
 
 def load_polylines(seeded: SeededServer, n_elements: int, n_vertices: int) -> int:

@@ -4,9 +4,9 @@ from collections.abc import Iterator
 
 import pytest
 from editor_browser_helpers import SeededServer, launch_chromium, seeded_server
-from playwright.sync_api import Browser, Page, sync_playwright
+from playwright.sync_api import Browser, Page, ViewportSize, sync_playwright
 
-VIEWPORT = {"width": 1440, "height": 900}
+VIEWPORT: ViewportSize = {"width": 1440, "height": 900}
 
 
 @pytest.fixture(scope="session")

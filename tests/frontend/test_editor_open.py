@@ -28,7 +28,11 @@ def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) ->
     log_in(page, seeded.base_url, "ann")
     page.click(f".site-card[data-site-id='{seeded.site_id}']")
     page.wait_for_function("window.camaEditor && window.camaEditor.firstRenderMs !== null")
-    assert page.evaluate("window.camaEditor.elementCount()") == len(PROPOSALS)
+    with seeded.client() as client:
+        live = client.get(f"/api/sites/{seeded.site_id}/elements", headers=seeded.headers["ann"]).json()
+    assert len(live) >= len(PROPOSALS)
+    assert page.evaluate("window.camaEditor.elementCount()") == len(live)
+    expect(page.locator("#element-count")).to_have_text(f"{len(live)} elements")
     page.wait_for_function(
         "() => [...document.querySelectorAll('#map canvas')].length > 0 && performance.getEntriesByType('resource')"
         ".filter(e => e.name.includes('/tiles/photometric/')).length >= 2"
@@ -54,6 +58,7 @@ def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) ->
 def map_colours(page: Page, points: list[tuple[float, float]]) -> list[tuple[int, int, int]]:
     """RGB of the rendered map at site points (from a screenshot, so every layer is composed)."""
     image = cv2.imdecode(np.frombuffer(page.screenshot(), np.uint8), cv2.IMREAD_COLOR)
+    assert image is not None, "the screenshot did not decode"
     colours = []
     for x, y in points:
         px, py = page_xy(page, x, y)
