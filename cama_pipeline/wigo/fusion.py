@@ -35,6 +35,8 @@ logger = logging.getLogger(__name__)
 _UP = gtsam.Unit3(np.array([0.0, 0.0, 1.0]))
 _LOOSE_TILT_RAD = 0.5
 """Sigma left on roll and pitch by priors that only mean to fix the heading."""
+_FREE_SIGMA = 1e3
+"""Sigma of a prior component the configuration leaves free."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,28 +186,31 @@ class _GraphBuilder:
         self.report["heading_prior"] = True
 
     def logged_pose_factors(self, anchor_only: bool) -> None:
-        """The logged ego pose as priors whose sigmas are spread over its errors' correlation time."""
-        horizontal, vertical, heading_deg, tilt_deg = self.config.logged_pose_sigmas
+        """The logged ego pose as priors whose sigmas are spread over its errors' correlation time; with
+        `anchor_only`, one prior at the first image (default sigmas) that places a clip without GNSS."""
         cam = self.inputs.cameras
-        inside = (self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1])
-        chosen = (
-            np.flatnonzero(inside) if self.config.uses_logged_pose and not anchor_only else np.zeros(0, int)
-        )
-        if len(chosen) == 0:
-            chosen = np.array([int(np.argmin(np.abs(self.nodes - cam.times_us[0])))])
+        first = np.array([int(np.argmin(np.abs(self.nodes - cam.times_us[0])))])
+        if anchor_only:
+            chosen, sigmas = first, WigoConfig.logged_pose_sigmas
+        elif self.config.uses_logged_pose:
+            inside = np.flatnonzero((self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1]))
+            chosen, sigmas = (inside if len(inside) else first), self.config.logged_pose_sigmas
+        else:
+            return
+        horizontal, vertical, heading_deg, tilt_deg = sigmas
         # n factors within one correlation time carry the information of one measurement
         per_window = self.config.logged_pose_correlation_s * self.config.node_rate_hz
-        spread = math.sqrt(min(max(len(chosen), 1), max(per_window, 1.0)))
+        spread = math.sqrt(min(len(chosen), max(per_window, 1.0)))
         base = np.array(
             [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg)]
             + [horizontal, horizontal, vertical]
         )
-        base = np.where(base > 0, base, 1e3)
-        noise = gtsam.noiseModel.Diagonal.Sigmas(base * spread)
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.where(base > 0, base, _FREE_SIGMA) * spread)
         for k in chosen:
             prior = logged_pose_at(cam, int(self.nodes[k]))
             self.graph.add(gtsam.PriorFactorPose3(X(int(k)), prior, noise))
         self.report["logged_pose_factors"] = len(chosen)
+        self.report["logged_pose_anchor_only"] = anchor_only
 
 
 def _solve(builder: _GraphBuilder) -> gtsam.Values:
@@ -265,7 +270,10 @@ def camera_poses(
 
 
 def fuse_clip(inputs: ClipInputs, config: WigoConfig) -> FusedPoses:
-    """Fuse one clip's (checked) inputs into poses at its camera timestamps."""
+    """Fuse one clip's (checked) inputs into poses at its camera timestamps.
+
+    Camera covariances are the neighbour nodes' marginals blended linearly (an approximation: the
+    odometry between nodes adds little over 0.1 s)."""
     start, stop = graph_span(inputs, config)
     nodes = node_times(inputs, config, start, stop)
     cam_times = inputs.cameras.times_us

@@ -75,10 +75,13 @@ def test_no_gnss_falls_back_to_the_logged_pose(clip, caplog: pytest.LogCaptureFi
     with caplog.at_level(logging.WARNING):
         inputs = checked_inputs(replace(clip.inputs, gnss=None))
     assert "no GNSS" in caplog.text
-    for config in (WigoConfig(), GNSS_ONLY):
+    for config, anchor_only in ((WigoConfig(), False), (GNSS_ONLY, True)):
         fused = fuse_clip(inputs, config)
         assert any("no GNSS" in d for d in fused.report["degraded"])
+        assert fused.report["logged_pose_anchor_only"] is anchor_only
         assert position_rmse(fused.rotation, fused.translation, clip) < 1.0
+        # anchored, not floating: the first pose's position sigma is the logged pose's
+        assert np.sqrt(fused.covariance[0, 3, 3]) < 1.0
 
 
 def test_empty_gnss_file_counts_as_no_gnss(clip) -> None:
