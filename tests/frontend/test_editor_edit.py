@@ -2,8 +2,11 @@
 
 from typing import Any
 
+import pytest
 from editor_browser_helpers import SeededServer, centre_on, drag, open_editor, page_xy, select_at
 from playwright.sync_api import Page, expect
+
+pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
 RES_M = 0.05
 """Map resolution of the editing tests: 20 px per metre."""

@@ -2,6 +2,7 @@
 
 import cv2
 import numpy as np
+import pytest
 from editor_browser_helpers import (
     PROPOSALS,
     SeededServer,
@@ -10,8 +11,11 @@ from editor_browser_helpers import (
     open_editor,
     page_xy,
     screenshot,
+    select_at,
 )
 from playwright.sync_api import Page, expect
+
+pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
 
 def test_login_rejects_a_wrong_password(page: Page, seeded: SeededServer) -> None:
@@ -51,7 +55,13 @@ def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) ->
     page.mouse.move(*page_xy(page, 30.0, 40.0))
     expect(page.locator("#cursor-xy")).to_contain_text("x 30.0")
     expect(page.locator("#cursor-elevation")).to_contain_text(" m")
-    page.wait_for_timeout(300)
+    low = seeded.element(2)
+    centre_on(page, 62.0, 42.0, 0.09)
+    (ax, ay), (bx, by) = low["points"][:2]
+    select_at(page, seeded, low["id"], (ax + bx) / 2, (ay + by) / 2)
+    expect(page.locator(".selected-element .sel-meta").first).to_contain_text("(low)")
+    page.mouse.move(*page_xy(page, 75.0, 50.0))
+    page.wait_for_timeout(400)
     screenshot(page, "editor")
 
 

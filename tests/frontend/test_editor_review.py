@@ -1,7 +1,10 @@
 """Conflicts between two clients, the annotator queue's "next", findings and issue threads (text, never HTML)."""
 
+import pytest
 from editor_browser_helpers import SeededServer, centre_on, drag, open_editor, page_xy, screenshot, select_at
 from playwright.sync_api import Page, expect
+
+pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
 INJECTION = '<img src=x onerror="window.__xss=1"><script>window.__xss=2</script>'
 

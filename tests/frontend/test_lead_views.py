@@ -1,7 +1,10 @@
 """Lead views: the confidence queue (order, filters, approve/return, open in the editor), figures, jobs."""
 
+import pytest
 from editor_browser_helpers import SeededServer, log_in, screenshot
 from playwright.sync_api import Page, expect
+
+pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
 
 def open_lead(page: Page, seeded: SeededServer) -> None:

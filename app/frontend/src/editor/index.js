@@ -102,6 +102,7 @@ export async function mountEditor(container, api, siteId, params) {
     destroy() {
       shortcuts.destroy();
       statusBar.destroy();
+      review.release();
       m.map.setTarget(undefined);
       delete window.camaEditor;
     },

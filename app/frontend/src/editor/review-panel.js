@@ -4,6 +4,7 @@ import { h, replaceChildren, toast } from "../dom.js";
 import { CLASS_COLORS, CLASS_LABELS, HIGH_CONFIDENCE, LOW_CONFIDENCE, confidenceBucket } from "./styles.js";
 
 const NEXT_RESOLUTION_M = 0.06;
+const RENEW_EVERY_MS = 4 * 60 * 1000;
 
 export class ReviewPanel {
   /**
@@ -14,6 +15,7 @@ export class ReviewPanel {
   constructor(context) {
     Object.assign(this, context);
     this.lease = null;
+    this.renewTimer = 0;
     this.info = h("div.selection-info#selection-info");
     this.queueInfo = h("div.muted.small#queue-info");
     const button = (label, key, state, cls = "") =>
@@ -66,10 +68,32 @@ export class ReviewPanel {
     replaceChildren(this.info, ...rows);
   }
 
+  /** Give the current work item back (on "next" and when leaving the editor). */
+  async release() {
+    clearInterval(this.renewTimer);
+    const lease = this.lease;
+    this.lease = null;
+    if (lease) await this.api.post(`/api/leases/${lease.id}/release`, {}).catch(() => undefined);
+  }
+
+  /** Keep the lease while the annotator works on the item (the backend's lease lasts 10 minutes). */
+  keepLease() {
+    clearInterval(this.renewTimer);
+    this.renewTimer = setInterval(async () => {
+      if (!this.lease) return;
+      try {
+        this.lease = await this.api.post(`/api/leases/${this.lease.id}/renew`, {});
+      } catch (error) {
+        clearInterval(this.renewTimer);
+        this.queueInfo.textContent = `Lease lost: ${error.message}`;
+      }
+    }, RENEW_EVERY_MS);
+  }
+
   /** Lease the next item of my queue, centre the map on it and select it (the previous lease is released). */
   async next() {
     try {
-      if (this.lease) await this.api.post(`/api/leases/${this.lease.id}/release`, {}).catch(() => undefined);
+      await this.release();
       const lease = await this.api.post(`/api/sites/${this.siteId}/queue/next`, {});
       this.lease = lease;
       if (!lease) {
@@ -77,6 +101,7 @@ export class ReviewPanel {
         toast("Your queue is empty");
         return;
       }
+      this.keepLease();
       const feature = this.store.upsert(lease.element);
       this.queueInfo.textContent = `Item #${lease.element.id} leased until ${new Date(lease.expires_at).toLocaleTimeString()}`;
       if (feature) {
