@@ -6,7 +6,7 @@ import { ElementStore } from "./elements.js";
 import { Findings } from "./findings.js";
 import { History } from "./history.js";
 import { layersPanel } from "./layers-panel.js";
-import { createMap } from "./map.js";
+import { createMap, fitSite } from "./map.js";
 import { Operations } from "./operations.js";
 import { ReviewPanel } from "./review-panel.js";
 import { Shortcuts } from "./shortcuts.js";
@@ -87,6 +87,7 @@ export async function mountEditor(container, api, siteId, params) {
   ];
   const side = sidebar({ Review: review.element, Layers: layersPanel(m.rasters, overlays), Findings: findings.element });
   root.insertBefore(side.element, mapWrap);
+  fitSite(m);
   const shortcuts = new Shortcuts(editorShortcuts({ tools, ops, sync, review, findings, view: m.view, side, help: () => shortcuts.toggleHelp() }));
   mapWrap.appendChild(buildToolbar({ tools, ops, sync, history, help: () => shortcuts.toggleHelp() }));
   mapWrap.appendChild(conflicts.element);

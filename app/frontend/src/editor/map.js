@@ -87,7 +87,16 @@ function rasterLayer(api, layer, siteOrigin, projection) {
 }
 
 /**
- * Build the map for a site.
+ * Show the whole site; call once the page layout is final (the map measures its element).
+ * @param {{map: Map, view: View, extent: number[]}} m
+ */
+export function fitSite(m) {
+  m.map.updateSize();
+  m.view.fit(m.extent, { size: m.map.getSize(), padding: [60, 20, 20, 20] });
+}
+
+/**
+ * Build the map for a site (call `fitSite` once the layout is final).
  * @param {HTMLElement} target
  * @param {import("../api.js").Api} api
  * @param {any} site SiteDetail
@@ -128,6 +137,5 @@ export function createMap(target, api, site, layers) {
     interactions: defaultInteractions({ doubleClickZoom: false, pinchRotate: false, altShiftDragRotate: false }),
     keyboardEventTarget: undefined,
   });
-  view.fit(extent, { padding: [20, 20, 20, 20] });
-  return { map, view, rasters, elementSource, elementLayer, findingSource, draftSource };
+  return { map, view, extent, rasters, elementSource, elementLayer, findingSource, draftSource };
 }

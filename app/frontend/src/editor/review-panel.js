@@ -20,14 +20,17 @@ export class ReviewPanel {
     this.queueInfo = h("div.muted.small#queue-info");
     const button = (label, key, state, cls = "") =>
       h(`button.review${cls}`, { onclick: () => this.ops.review(state), title: `${label} (${key})`, dataset: { state } }, label, h("kbd", {}, key));
-    const leadButtons = this.isLead ? [button("Approve", "Shift+A", "approved"), button("Return", "Shift+R", "returned")] : [];
+    const leadButtons = this.isLead
+      ? h("div.review-buttons.lead-buttons", {}, button("Approve", "⇧A", "approved", ".ok"), button("Return", "⇧R", "returned", ".bad"))
+      : null;
     this.element = h(
       "div.review-panel",
       {},
       h("button.primary.wide#next-item", { onclick: () => this.next(), title: "Next item of my queue (N)" }, "Next item ", h("kbd", {}, "N")),
       this.queueInfo,
       this.info,
-      h("div.review-buttons", {}, button("Accept", "A", "accepted", ".ok"), button("Fixed", "F", "fixed", ".fix"), button("Reject", "X", "rejected", ".bad"), ...leadButtons),
+      h("div.review-buttons", {}, button("Accept", "A", "accepted", ".ok"), button("Fixed", "F", "fixed", ".fix"), button("Reject", "X", "rejected", ".bad")),
+      leadButtons,
       this.key(),
     );
     this.update();
