@@ -17,6 +17,7 @@ Prints the figures and writes them to bench/results/editor.json.
 import argparse
 import json
 import logging
+import os
 import platform
 import statistics
 import sys
@@ -123,7 +124,9 @@ def measure_drag(page: Page, seeded: SeededServer, element: dict[str, Any]) -> d
 
 
 def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
-    """Seed a server, load the polylines, measure in Chromium; the figures."""
+    """Seed a server, load the polylines, measure in Chromium; the figures (with the machine's load, since
+    other work on a shared machine shows in the frame times)."""
+    load_before = round(os.getloadavg()[0], 2)
     with tempfile.TemporaryDirectory() as tmp, seeded_server(Path(tmp) / "server") as seeded:
         vertices = load_polylines(seeded, n_elements, n_vertices)
         with seeded.client() as client:
@@ -147,7 +150,9 @@ def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
         "elements": len(listed),
         "chromium": version,
         "viewport": VIEWPORT,
-        "machine": f"{platform.machine()}, {platform.processor() or 'cpu'}, software rendering (no GPU)",
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, software rendering (no GPU)",
+        "load_average_1m_before": load_before,
+        "load_average_1m_after": round(os.getloadavg()[0], 2),
         "load": load,
         "drag": drag,
     }

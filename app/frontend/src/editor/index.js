@@ -96,7 +96,7 @@ export async function mountEditor(container, api, siteId, params) {
 
   wireStatus({ m, store, sync, tools, ops, review, statusBar, findings });
   m.elementSource.on("removefeature", (event) => tools.select.getFeatures().remove(event.feature));
-  exposeTestHook({ m, store, sync, siteId });
+  exposeTestHook({ m, siteId });
   findings.refresh();
   focusRequested(params, store, m.view, tools);
   return {
@@ -154,7 +154,7 @@ function focusRequested(params, store, view, tools) {
  * A small hook for the browser tests and the bench: map pixel of a site point, element count, when the elements
  * were first drawn and when all visible tiles were, and (while `recording`) each frame's render time in ms.
  */
-function exposeTestHook({ m, store, sync, siteId }) {
+function exposeTestHook({ m, siteId }) {
   const hook = {
     siteId,
     firstRenderMs: null,
@@ -163,8 +163,6 @@ function exposeTestHook({ m, store, sync, siteId }) {
     frameRenderMs: [],
     pixelOf: (x, y) => m.map.getPixelFromCoordinate([x, y]),
     elementCount: () => m.elementSource.getFeatures().length,
-    saveState: () => sync.status,
-    element: (id) => store.get(id),
     centerOn: (x, y, resolution) => {
       m.view.setCenter([x, y]);
       if (resolution) m.view.setResolution(resolution);

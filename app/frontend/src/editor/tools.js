@@ -9,7 +9,6 @@ import { pointsOf, samePoints } from "./elements.js";
 import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
 import { Stroke, Style, Circle, Fill } from "ol/style.js";
 
-export const MODES = ["select", "divider", "boundary", "ped_crossing"];
 const CLICK_INSERT_TOLERANCE_M = 0.01;
 
 /** Distance from p to segment ab, metres. */
@@ -117,7 +116,7 @@ export class Tools extends EventTarget {
 
   /**
    * Switch between selecting/editing and drawing a class.
-   * @param {string} mode one of MODES
+   * @param {"select"|"divider"|"boundary"|"ped_crossing"} mode
    */
   setMode(mode) {
     if (this.draw) {
