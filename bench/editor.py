@@ -8,7 +8,8 @@ with the whole site in view and the timings are read from the page:
   opening (the server builds the tile pyramids in its `/layers` call), `warm` a second page load;
 - drag: one vertex of a selected polyline dragged in DRAG_STEPS pointer moves; per frame, the map's render time
   (precompose -> postcompose, the OpenLayers work per frame) and the interval between animation frames (what the
-  user sees; 16.7 ms at 60 Hz is the floor).
+  user sees; 16.7 ms at 60 Hz is the floor);
+- pan: the same two series while the whole-site view is dragged away and back.
 
 Usage: .venv/bin/python bench/editor.py [--elements 500] [--vertices 20]
 Prints the figures and writes them to bench/results/editor.json.
@@ -101,6 +102,20 @@ def measure_drag(page: Page, seeded: SeededServer, element: dict[str, Any]) -> d
     page.wait_for_selector(f".selected-element[data-id='{element['id']}']")
     vertex = element["points"][len(element["points"]) // 2]
     start = page_xy(page, *vertex)
+    start_recording(page)
+    page.mouse.move(start[0] - 2, start[1] - 2)
+    page.mouse.move(*start)
+    page.mouse.down()
+    page.mouse.move(start[0] + 150, start[1] + 90, steps=DRAG_STEPS)
+    page.mouse.up()
+    page.wait_for_timeout(200)
+    figures = stop_recording(page)
+    seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
+    return figures
+
+
+def start_recording(page: Page) -> None:
+    """Start collecting per-frame render times and animation-frame intervals in the page."""
     page.evaluate("""() => {
         const hook = window.camaEditor;
         hook.frameRenderMs = [];
@@ -110,17 +125,30 @@ def measure_drag(page: Page, seeded: SeededServer, element: dict[str, Any]) -> d
         const tick = (now) => { hook.rafMs.push(now - last); last = now; if (hook.recording) requestAnimationFrame(tick); };
         requestAnimationFrame(tick);
     }""")
-    page.mouse.move(start[0] - 2, start[1] - 2)
-    page.mouse.move(*start)
-    page.mouse.down()
-    page.mouse.move(start[0] + 150, start[1] + 90, steps=DRAG_STEPS)
-    page.mouse.up()
-    page.wait_for_timeout(200)
+
+
+def stop_recording(page: Page) -> dict[str, Any]:
+    """Stop collecting; frame count and the quantiles of both series."""
     render, raf = page.evaluate(
         "() => { const h = window.camaEditor; h.recording = false; return [h.frameRenderMs, h.rafMs.slice(1)]; }"
     )
-    seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
     return {"frames": len(render), "render_ms": quantiles(render), "frame_interval_ms": quantiles(raf)}
+
+
+def measure_pan(page: Page) -> dict[str, Any]:
+    """Pan the whole-site view by dragging the map (Escape first, so nothing is selected), then back."""
+    page.keyboard.press("Escape")
+    box = page.locator("#map").bounding_box()
+    assert box is not None, "the map is not on the page"
+    x, y = box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.9
+    start_recording(page)
+    page.mouse.move(x, y)
+    page.mouse.down()
+    page.mouse.move(x + 400, y - 250, steps=DRAG_STEPS // 2)
+    page.mouse.move(x, y, steps=DRAG_STEPS // 2)
+    page.mouse.up()
+    page.wait_for_timeout(200)
+    return stop_recording(page)
 
 
 def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
@@ -141,6 +169,7 @@ def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
             page = browser.new_page(viewport=VIEWPORT, bypass_csp=True)
             log_in(page, seeded.base_url, "ann")
             load = {"cold": measure_load(page, seeded), "warm": measure_load(page, seeded)}
+            pan = measure_pan(page)
             drag = measure_drag(page, seeded, element)
             version = browser.version
             browser.close()
@@ -154,6 +183,7 @@ def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
         "load_average_1m_before": load_before,
         "load_average_1m_after": round(os.getloadavg()[0], 2),
         "load": load,
+        "pan": pan,
         "drag": drag,
     }
 

@@ -140,3 +140,29 @@ def test_split_merge_and_simplify(page: Page, seeded: SeededServer) -> None:
     page.keyboard.press("g")
     simplified = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 2)
     assert near(simplified["points"][0], (84.0, 66.0)) and near(simplified["points"][1], (94.0, 66.0))
+
+
+def test_draw_a_crosswalk_polygon(page: Page, seeded: SeededServer) -> None:
+    open_editor(page, seeded)
+    centre_on(page, 100.0, 74.0, RES_M)
+    page.keyboard.press("c")
+    corners = [(96.0, 72.0), (104.0, 72.0), (104.0, 76.0), (96.0, 76.0)]
+    for corner in corners:
+        page.mouse.click(*page_xy(page, *corner))
+        page.wait_for_timeout(350)
+    page.keyboard.press("Enter")
+    selected = page.locator(".selected-element[data-cls='ped_crossing']")
+    expect(selected).to_have_count(1)
+    ring = seeded.element(int(selected.get_attribute("data-id") or 0))["points"]
+    assert len(ring) == 5 and ring[0] == ring[-1], ring
+    assert all(any(near(p, c) for p in ring) for c in corners), ring
+
+
+def test_a_dragged_vertex_snaps_to_a_neighbour(page: Page, seeded: SeededServer) -> None:
+    anchor = divider_at(seeded, 100.0, 64.0)
+    element = divider_at(seeded, 100.0, 62.0)
+    open_on(page, seeded, element)
+    near_anchor = page_xy(page, 110.0 + 0.2, 64.0 - 0.2)
+    drag(page, page_xy(page, 110.0, 62.0), near_anchor)
+    saved = seeded.wait_element(element["id"], lambda e: e["version"] > 1)
+    assert saved["points"][2] == anchor["points"][2], "the end vertex lands exactly on the neighbour's"
