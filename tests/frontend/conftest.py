@@ -4,9 +4,10 @@ from collections.abc import Iterator
 
 import pytest
 from editor_browser_helpers import SeededServer, launch_chromium, seeded_server
-from playwright.sync_api import Browser, Page, ViewportSize, sync_playwright
+from playwright.sync_api import Browser, Page, ViewportSize, expect, sync_playwright
 
 VIEWPORT: ViewportSize = {"width": 1440, "height": 900}
+expect.set_options(timeout=10_000)  # the machine is shared: give slow renders room
 
 
 @pytest.fixture(scope="session")

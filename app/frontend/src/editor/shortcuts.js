@@ -20,6 +20,14 @@ export function chordOf(event) {
   return parts.join("+");
 }
 
+/** How a chord is shown: "Mod+Shift+z" -> "Ctrl+⇧Z". */
+function keyLabel(chord) {
+  return chord
+    .replace("Mod+", "Ctrl+")
+    .replace("Shift+", "⇧")
+    .replace(/(^|\+|⇧)([a-z])$/, (_, before, letter) => before + letter.toUpperCase());
+}
+
 /** True when the event comes from a text field (shortcuts must not steal typing). */
 function typing(event) {
   const target = /** @type {HTMLElement} */ (event.target);
@@ -65,7 +73,7 @@ export class Shortcuts {
         h(
           "dl",
           {},
-          ...shortcuts.flatMap((s) => [h("dt", {}, ...s.keys.map((k) => h("kbd", {}, k.replace("Mod", "Ctrl")))), h("dd", {}, s.label)]),
+          ...shortcuts.flatMap((s) => [h("dt", {}, ...s.keys.map((k) => h("kbd", {}, keyLabel(k)))), h("dd", {}, s.label)]),
         ),
       ),
     );
