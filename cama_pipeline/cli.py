@@ -76,6 +76,13 @@ def _register_stage_commands() -> None:
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.wigo.command import wigo_command
+    from models.vma.commands import (
+        propose_command,
+        retrain_command,
+        train_command,
+        vma_eval_command,
+        vma_split_command,
+    )
 
     app.command("eval")(eval_command)
     app.command("export")(export_command)
@@ -84,6 +91,11 @@ def _register_stage_commands() -> None:
     app.command("wigo")(wigo_command)
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)
+    app.command("propose")(propose_command)
+    app.command("train")(train_command)
+    app.command("retrain")(retrain_command)
+    app.command("vma-eval")(vma_eval_command)
+    app.command("vma-split")(vma_split_command)
 
 
 _register_stage_commands()

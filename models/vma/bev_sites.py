@@ -1,0 +1,78 @@
+"""BEV-only synthetic sites for training and held-out evaluation: rasters and vector map, no camera images.
+
+Rendering camera images is slow and the VMA only reads BEV rasters, so this builds a generator site with a
+layout drawn from `seed` (road lengths, lanes, curve, cross roads vary) and writes only what `cama synth`
+writes under `ground_truth/` for it (every cell observed). Seeds name sites: disjoint seed ranges give
+location-disjoint training and held-out sets.
+"""
+
+import logging
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cama_pipeline.io import atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.synthetic import ground_truth as gt
+from cama_pipeline.synthetic.config import LayoutConfig, SynthConfig
+from cama_pipeline.synthetic.site_model import build_synthetic_site
+
+logger = logging.getLogger(__name__)
+
+
+def layout_for_seed(seed: int) -> LayoutConfig:
+    """A varied but valid road layout drawn from `seed`."""
+    rng = np.random.default_rng([seed, 77])
+    cross_x: tuple[float, ...] = (0.0,)
+    if rng.random() < 0.4:
+        cross_x = (float(-rng.uniform(55.0, 80.0)), 0.0)
+    return replace(
+        LayoutConfig(),
+        main_west_length_m=float(rng.uniform(40.0, 90.0)),
+        main_east_length_m=float(rng.uniform(25.0, 60.0)),
+        curve_radius_m=float(rng.uniform(30.0, 60.0)),
+        curve_angle_deg=float(rng.uniform(30.0, 90.0)),
+        curve_exit_length_m=float(rng.uniform(10.0, 35.0)),
+        cross_road_x_m=cross_x,
+        cross_road_half_length_m=float(rng.uniform(35.0, 60.0)),
+        main_lanes_per_direction=int(rng.integers(1, 4)),
+        cross_lanes_per_direction=int(rng.integers(1, 3)),
+        lane_width_m=float(rng.uniform(3.0, 3.75)),
+        bike_lane_width_m=float(rng.uniform(1.5, 2.0)),
+        crosswalk_depth_m=float(rng.uniform(3.0, 5.0)),
+    )
+
+
+def write_bev_site(seed: int, out_dir: Path, *, resolution_m: float = 0.1, overwrite: bool = False) -> Path:
+    """Write `<out_dir>/ground_truth/{vector_map.json, bev/...}` for the site of `seed`; skip if already there."""
+    out_dir = Path(out_dir)
+    marker = out_dir / "ground_truth" / "bev" / "georeference.json"
+    if marker.is_file() and not overwrite:
+        logger.info("%s is up to date; nothing to do", out_dir)
+        return out_dir
+    cfg = SynthConfig(preset="vma", seed=seed, layout=layout_for_seed(seed), bev_resolution_m=resolution_m)
+    site = build_synthetic_site(cfg)
+    gt_dir = out_dir / "ground_truth"
+    atomic_write_json(
+        gt_dir / "vector_map.json", {"elements": gt.vector_map(site.layout, site.world, cfg.site_origin_xy)}
+    )
+    grid = gt.bev_grid_for(site.world, resolution_m)
+    semantic, photometric, elevation = gt.render_bev(site.world, grid)
+    bev = gt_dir / "bev"
+    atomic_write_image(bev / "semantic.png", semantic)
+    atomic_write_image(bev / "photometric.png", cv2.cvtColor(photometric, cv2.COLOR_RGB2BGR))
+    atomic_write_npy(bev / "elevation.npy", elevation)
+    atomic_write_json(
+        out_dir / "manifest.json",
+        {"seed": seed, "config": {"site_origin_xy": list(cfg.site_origin_xy)}},
+        indent=2,
+    )
+    atomic_write_json(marker, grid.georeference(cfg.site_origin_xy), indent=2)
+    logger.info("wrote BEV site of seed %d to %s", seed, out_dir)
+    return out_dir
+
+
+def ensure_bev_sites(seeds: list[int], root: Path) -> list[Path]:
+    """`<root>/seed-<seed>` for each seed, generated where missing."""
+    return [write_bev_site(seed, Path(root) / f"seed-{seed}") for seed in seeds]

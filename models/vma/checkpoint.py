@@ -1,0 +1,114 @@
+"""Versioned VMA checkpoints: weights with their model config, metrics and the data they saw.
+
+A registry folder holds one sub-folder per version (`v0001`, `v0002`, ...), each with `model.pt` (float16
+state dict) and `checkpoint.json` (version, parent, model config and its fingerprint, train config, metrics,
+data), plus `current.json` naming the promoted version that proposers load. Versions are written atomically
+(staged, then renamed) and never changed afterwards, except that a rejected candidate stays unpromoted.
+"""
+
+import json
+import logging
+import shutil
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from cama_pipeline.io import atomic_write_json
+from models.vma.config import ModelConfig, config_dict, config_fingerprint
+from models.vma.model import VmaNet
+
+logger = logging.getLogger(__name__)
+
+CURRENT = "current.json"
+WEIGHTS = "model.pt"
+META = "checkpoint.json"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used (missing, unreadable, or made for another model config)."""
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """A loaded checkpoint: the model (eval mode) and its metadata."""
+
+    model: VmaNet
+    config: ModelConfig
+    meta: dict[str, Any]
+    path: Path
+
+
+def save_version(registry: Path, model: VmaNet, meta: dict[str, Any]) -> Path:
+    """Write the model as the next version of `registry`; returns its folder (not promoted yet)."""
+    registry = Path(registry)
+    registry.mkdir(parents=True, exist_ok=True)
+    existing = sorted(p.name for p in registry.glob("v[0-9][0-9][0-9][0-9]") if p.is_dir())
+    version = f"v{int(existing[-1][1:]) + 1 if existing else 1:04d}"
+    staging = registry / f".{version}.partial"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    state = {k: v.half() if v.is_floating_point() else v for k, v in model.state_dict().items()}
+    torch.save(state, staging / WEIGHTS)
+    full_meta = {
+        **meta,
+        "version": version,
+        "model_config": config_dict(model.config),
+        "config_fingerprint": config_fingerprint(model.config),
+        "created_at": datetime.now(UTC).isoformat(),
+    }
+    atomic_write_json(staging / META, full_meta, indent=2)
+    staging.rename(registry / version)
+    logger.info("saved checkpoint %s", registry / version)
+    return registry / version
+
+
+def promote(registry: Path, version: str) -> None:
+    """Make `version` the one proposers load."""
+    if not (Path(registry) / version / META).is_file():
+        raise CheckpointError(f"{registry}: no checkpoint version {version!r} to promote")
+    atomic_write_json(Path(registry) / CURRENT, {"version": version}, indent=2)
+    logger.info("promoted %s/%s", registry, version)
+
+
+def current_version(registry: Path) -> Path:
+    """The promoted version folder of a registry (or `registry` itself when it is a version folder)."""
+    registry = Path(registry)
+    if (registry / META).is_file():
+        return registry
+    pointer = registry / CURRENT
+    if not pointer.is_file():
+        raise CheckpointError(f"{registry}: neither a checkpoint ({META}) nor a registry with {CURRENT}")
+    try:
+        version = json.loads(pointer.read_text(encoding="utf-8"))["version"]
+    except (json.JSONDecodeError, KeyError, TypeError) as err:
+        raise CheckpointError(f"{pointer}: needs {{'version': 'vNNNN'}}: {err!r}") from None
+    return registry / str(version)
+
+
+def load_checkpoint(path: Path, expected: ModelConfig | None = None, device: str = "cpu") -> Checkpoint:
+    """Load a checkpoint folder (or a registry's promoted one); CheckpointError on another model config."""
+    folder = current_version(path)
+    meta_path = folder / META
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        config = ModelConfig(**meta["model_config"])
+    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+        raise CheckpointError(f"{meta_path}: unreadable checkpoint metadata: {err!r}") from None
+    if meta.get("config_fingerprint") != config_fingerprint(config):
+        raise CheckpointError(f"{meta_path}: config_fingerprint does not match its model_config")
+    if expected is not None and config_fingerprint(expected) != config_fingerprint(config):
+        raise CheckpointError(
+            f"{meta_path}: checkpoint was trained for another model config "
+            f"({config_fingerprint(config)} != expected {config_fingerprint(expected)})"
+        )
+    model = VmaNet(config)
+    try:
+        state = torch.load(folder / WEIGHTS, map_location=device, weights_only=True)
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+    except (OSError, RuntimeError) as err:
+        raise CheckpointError(f"{folder / WEIGHTS}: weights do not fit the model config: {err}") from None
+    model.to(device).eval()
+    return Checkpoint(model, config, meta, folder)

@@ -1,0 +1,192 @@
+"""The VMA commands of the `cama` CLI: propose, train, retrain, vma-eval, vma-split (thin layers over the API)."""
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from annotations import AnnotationSet
+from cama_pipeline.data import DatasetError
+from cama_pipeline.evaluate.inputs import EvaluationInputError
+from cama_pipeline.io import atomic_write_json
+from models.vma.bev_sites import ensure_bev_sites
+from models.vma.checkpoint import CheckpointError, load_checkpoint
+from models.vma.config import ModelConfig, TrainConfig
+from models.vma.evaluate import evaluate_proposer
+from models.vma.infer import InferenceConfig, predict_site
+from models.vma.propose import propose
+from models.vma.retrain import Corrections, RetrainConfig, retrain_from_corrections
+from models.vma.rule_based import propose_rule_based
+from models.vma.split import SplitConfig, split_dataset
+from models.vma.train import train
+
+logger = logging.getLogger(__name__)
+console = Console()
+
+DEFAULT_REGISTRY = Path("models/vma/checkpoints")
+_ERRORS = (ValueError, FileNotFoundError, CheckpointError, EvaluationInputError)
+
+
+def _fail(err: Exception) -> typer.Exit:
+    console.print(f"[red]error:[/red] {err}")
+    return typer.Exit(code=2)
+
+
+def seed_range(text: str) -> list[int]:
+    """'1000-1007' or '1000,1003' as a list of seeds."""
+    try:
+        if "-" in text:
+            lo, hi = (int(v) for v in text.split("-", 1))
+            return list(range(lo, hi + 1))
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--bev-seeds: expected 'A-B' or 'A,B,...', got {text!r}") from None
+
+
+def propose_command(
+    site: Annotated[Path, typer.Argument(help="Site folder (rasters in it or in ground_truth/bev/).")],
+    out: Annotated[Path, typer.Option(help="Proposals JSON (an annotation set) to write.")] = Path(
+        "proposals.json"
+    ),
+    proposer: Annotated[str, typer.Option(help="learned (needs --checkpoint) or rule.")] = "learned",
+    checkpoint: Annotated[
+        Path, typer.Option(help="Checkpoint version folder or registry.")
+    ] = DEFAULT_REGISTRY,
+    min_confidence: Annotated[float, typer.Option(help="Drop proposals scoring lower.")] = 0.1,
+    overwrite: Annotated[bool, typer.Option(help="Propose again even if the output is up to date.")] = False,
+) -> None:
+    """Propose map vectors with confidence for a whole site from its BEV rasters."""
+    try:
+        if proposer not in ("learned", "rule"):
+            raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
+        result = propose(
+            site,
+            out,
+            proposer="rule" if proposer == "rule" else "learned",
+            checkpoint=checkpoint,
+            min_confidence=min_confidence,
+            overwrite=overwrite,
+        )
+    except _ERRORS as err:
+        raise _fail(err) from err
+    state = (
+        "up to date, nothing done"
+        if result.skipped
+        else f"{result.count} proposals in {result.seconds:.1f} s"
+    )
+    console.print(f"[green]proposals[/green] {result.out} ({state})")
+
+
+def train_command(
+    site: Annotated[
+        list[Path] | None, typer.Option(help="Training site folder with vector_map.json (repeatable).")
+    ] = None,
+    bev_seeds: Annotated[
+        str, typer.Option(help="Also train on BEV-only synthetic sites of these seeds ('A-B').")
+    ] = "",
+    bev_root: Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")] = Path(
+        "data/vma/train"
+    ),
+    registry: Annotated[
+        Path, typer.Option(help="Checkpoint registry to add the new version to.")
+    ] = DEFAULT_REGISTRY,
+    init: Annotated[
+        Path | None, typer.Option(help="Continue from this checkpoint (same model config).")
+    ] = None,
+    steps: Annotated[int, typer.Option(help="Training batches.")] = 2000,
+    max_minutes: Annotated[
+        float, typer.Option(help="Time budget; training stops at --steps or here.")
+    ] = 40.0,
+    batch_size: Annotated[int, typer.Option(help="Patches per batch.")] = 8,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Train the learned VMA model and save it as a new, promoted checkpoint version."""
+    try:
+        sites = list(site or []) + ensure_bev_sites(seed_range(bev_seeds), bev_root)
+        folder = train(
+            ModelConfig(),
+            TrainConfig(steps=steps, batch_size=batch_size, seed=seed, max_seconds=max_minutes * 60),
+            sites,
+            registry,
+            init=init,
+        )
+    except _ERRORS as err:
+        raise _fail(err) from err
+    console.print(f"[green]checkpoint[/green] {folder} (promoted)")
+
+
+def retrain_command(
+    corrections: Annotated[
+        list[str],
+        typer.Option(
+            help="SITE=ANNOTATIONS.json: a site folder and its reviewed annotation set (repeatable)."
+        ),
+    ],
+    val: Annotated[list[Path], typer.Option(help="Validation site with ground truth (repeatable).")],
+    registry: Annotated[
+        Path, typer.Option(help="Checkpoint registry (its promoted version is fine-tuned).")
+    ] = DEFAULT_REGISTRY,
+    steps: Annotated[int, typer.Option(help="Fine-tuning batches.")] = 300,
+    tolerance: Annotated[float, typer.Option(help="Promote when mAP >= current mAP - tolerance.")] = 0.0,
+) -> None:
+    """Fine-tune on accepted/fixed annotations (rejected = negatives); promote only if validation mAP holds."""
+    try:
+        items = []
+        for pair in corrections:
+            if "=" not in pair:
+                raise ValueError(f"--corrections: expected SITE=ANNOTATIONS.json, got {pair!r}")
+            site, annotations = pair.split("=", 1)
+            items.append(Corrections(Path(site), AnnotationSet.read_json(Path(annotations))))
+        config = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4), tolerance=tolerance)
+        result = retrain_from_corrections(registry, items, val, config, show_progress=True)
+    except _ERRORS as err:
+        raise _fail(err) from err
+    verdict = "[green]promoted[/green]" if result.promoted else "[yellow]not promoted[/yellow] (gate)"
+    console.print(
+        f"candidate {result.candidate}: mAP {result.candidate_metrics['mean_ap']} vs current "
+        f"{result.current_metrics['mean_ap']} -> {verdict}"
+    )
+
+
+def vma_eval_command(
+    site: Annotated[list[Path], typer.Argument(help="Site folders with ground truth (vector_map.json).")],
+    proposer: Annotated[str, typer.Option(help="learned or rule.")] = "learned",
+    checkpoint: Annotated[
+        Path, typer.Option(help="Checkpoint version folder or registry.")
+    ] = DEFAULT_REGISTRY,
+    out: Annotated[Path, typer.Option(help="JSON report to write.")] = Path("vma_eval.json"),
+) -> None:
+    """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer."""
+    try:
+        if proposer == "learned":
+            model = load_checkpoint(checkpoint).model
+            report = evaluate_proposer(lambda r: predict_site(model, r, InferenceConfig()), site)
+        elif proposer == "rule":
+            report = evaluate_proposer(propose_rule_based, site)
+        else:
+            raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
+    except _ERRORS as err:
+        raise _fail(err) from err
+    atomic_write_json(out, report, indent=1)
+    for cls, ap in report["class_ap"].items():
+        console.print(f"  {cls:13s} AP {'-' if ap is None else f'{ap:.3f}'}")
+    console.print(f"[green]mAP[/green] {report['mean_ap']}  (report: {out})")
+
+
+def vma_split_command(
+    dataset: Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")],
+    out: Annotated[Path, typer.Option(help="Split JSON to write.")] = Path("split.json"),
+    val_share: Annotated[float, typer.Option(help="Target share of scenes in validation.")] = 0.25,
+    overlap_m: Annotated[
+        float, typer.Option(help="Scenes passing within this distance share a location.")
+    ] = 50.0,
+    seed: Annotated[int, typer.Option(help="Random seed of the group order.")] = 0,
+) -> None:
+    """Location-disjoint train/validation split of a data set's scenes."""
+    try:
+        split = split_dataset(dataset, out, SplitConfig(val_share, overlap_m, seed))
+    except (*_ERRORS, DatasetError) as err:
+        raise _fail(err) from err
+    console.print(f"[green]split[/green] {len(split.train)} train / {len(split.val)} val scenes -> {out}")

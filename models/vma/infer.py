@@ -1,0 +1,147 @@
+"""Whole-site inference of the learned model: overlapping sliding windows, merged into site vectors.
+
+Windows of the model's patch size step by `patch - overlap` over the site's model-resolution grid (the last
+row/column of windows is flush with the far edge; a site smaller than one patch is zero-padded). Each window's
+predictions above `min_score` become global vectors (score: the best class probability), clipped to the
+window's core and merged (`models.vma.merge`).
+"""
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from models.vma.config import ModelConfig
+from models.vma.merge import MergeConfig, clip_to_core, core_bounds, merge_windows
+from models.vma.model import VmaNet
+from models.vma.patches import SiteGrid, site_grid
+from models.vma.rasters import SiteRasters
+from models.vma.vectors import CLASSES, Vector
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """Sliding-window inference settings."""
+
+    overlap_px: int = 32
+    """Overlap of neighbouring windows in model pixels (8 m at 0.25 m/px)."""
+    min_score: float = 0.05
+    """Predictions scoring lower are dropped before merging."""
+    batch_size: int = 8
+    merge: MergeConfig = MergeConfig()
+
+    def __post_init__(self) -> None:
+        if self.overlap_px < 0 or not 0.0 <= self.min_score < 1.0 or self.batch_size < 1:
+            raise ValueError(
+                "InferenceConfig: overlap_px >= 0, 0 <= min_score < 1 and batch_size >= 1 required"
+            )
+
+
+def window_origins(length: int, patch: int, overlap: int) -> list[int]:
+    """Start offsets of windows covering [0, length) with at least `overlap` shared between neighbours."""
+    if overlap >= patch:
+        raise ValueError(f"InferenceConfig.overlap_px {overlap} must be smaller than the patch ({patch} px)")
+    if length <= patch:
+        return [0]
+    count = int(np.ceil((length - patch) / (patch - overlap))) + 1
+    return [int(round(v)) for v in np.linspace(0, length - patch, count)]
+
+
+def predict_site(
+    model: VmaNet, rasters: SiteRasters, config: InferenceConfig | None = None, *, show_progress: bool = True
+) -> list[Vector]:
+    """Site vectors (global metres, with confidence) predicted by `model` over the whole site."""
+    config = config or InferenceConfig()
+    grid = site_grid(rasters, model.config)
+    windows = _windows(grid, model.config, config.overlap_px)
+    device = next(model.parameters()).device
+    pieces: list[Vector] = []
+    columns = (TextColumn("proposing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, disable=not show_progress) as progress, torch.no_grad():
+        bar = progress.add_task("windows", total=len(windows))
+        for start in range(0, len(windows), config.batch_size):
+            chunk = windows[start : start + config.batch_size]
+            images = torch.as_tensor(
+                np.stack([_crop(grid, model.config, w[0], w[1]) for w in chunk]), device=device
+            )
+            logits, points = model(images)
+            scores = torch.sigmoid(logits).cpu().numpy()
+            final = points[-1].cpu().numpy()
+            for (col, row, core), s, p in zip(chunk, scores, final, strict=True):
+                window_vectors = _window_vectors(grid, model.config, col, row, s, p, config.min_score)
+                pieces += clip_to_core(window_vectors, core, config.merge.min_length_m)
+            progress.advance(bar, len(chunk))
+    vectors = merge_windows(pieces, config.merge)
+    logger.info(
+        "learned proposer: %d vectors from %d windows on %s", len(vectors), len(windows), rasters.name
+    )
+    return vectors
+
+
+def _windows(
+    grid: SiteGrid, model_config: ModelConfig, overlap: int
+) -> list[tuple[int, int, tuple[float, float, float, float]]]:
+    """(col, row, core bounds in global metres) of every window."""
+    _, height, width = grid.image.shape
+    size = model_config.patch_px
+    cols = window_origins(width, size, overlap)
+    rows = window_origins(height, size, overlap)
+    centre_x = [grid.global_from_pixel(np.array([[c + (size - 1) / 2, 0]]))[0, 0] for c in cols]
+    centre_y = [grid.global_from_pixel(np.array([[0, r + (size - 1) / 2]]))[0, 1] for r in rows]
+    out = []
+    for j, row in enumerate(rows):
+        # y decreases with rows: core bounds over ascending y, mapped back to this row's index
+        ys = centre_y[::-1]
+        y_lo, y_hi = core_bounds(ys, len(rows) - 1 - j)
+        for i, col in enumerate(cols):
+            x_lo, x_hi = core_bounds(centre_x, i)
+            out.append((col, row, (x_lo, x_hi, y_lo, y_hi)))
+    return out
+
+
+def _crop(grid: SiteGrid, model_config: ModelConfig, col: int, row: int) -> np.ndarray:
+    """The window's input, zero-padded where it passes the site edge."""
+    size = model_config.patch_px
+    out = np.zeros((grid.image.shape[0], size, size), np.float32)
+    part = grid.image[:, row : row + size, col : col + size]
+    out[:, : part.shape[1], : part.shape[2]] = part
+    return out
+
+
+def _window_vectors(
+    grid: SiteGrid,
+    model_config: ModelConfig,
+    col: int,
+    row: int,
+    scores: np.ndarray,
+    points: np.ndarray,
+    min_score: float,
+) -> list[Vector]:
+    """A window's predictions above `min_score` as global vectors (rings closed exactly)."""
+    out = []
+    for query_scores, query_points in zip(scores, points, strict=True):
+        k = int(np.argmax(query_scores))
+        if query_scores[k] < min_score:
+            continue
+        pixels = query_points * model_config.patch_px - 0.5 + np.array([col, row])
+        xy = grid.global_from_pixel(pixels)
+        if CLASSES[k] == "ped_crossing":
+            xy = np.vstack([xy[:-1], xy[:1]])
+        out.append(Vector(CLASSES[k], xy, float(query_scores[k])))
+    return out
+
+
+def predict_patch(model: VmaNet, image: np.ndarray, min_score: float = 0.05) -> list[Vector]:
+    """Predictions of one (C, S, S) patch in patch pixels (col, row), for tests and diagnostics."""
+    grid = SiteGrid(image, (0.0, 0.0), 1.0)
+    with torch.no_grad():
+        logits, points = model(torch.as_tensor(image[None], device=next(model.parameters()).device))
+    scores = torch.sigmoid(logits)[0].cpu().numpy()
+    return [
+        Vector(v.cls, np.column_stack([v.points[:, 0], -v.points[:, 1]]), v.score)
+        for v in _window_vectors(grid, model.config, 0, 0, scores, points[-1][0].cpu().numpy(), min_score)
+    ]

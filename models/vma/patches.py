@@ -1,0 +1,137 @@
+"""Training samples: square patches (model input + target vectors in normalised patch coordinates).
+
+Targets are the patch's vectors resampled to the model's fixed point count, with x = col / S and
+y = row / S in [0, 1]; rings keep first == last. Site patches are cut at random centres and rotations from a
+site's model-resolution input, with the site's vectors mapped through the same transform.
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from cama_pipeline.evaluate.chamfer_ap import resample
+from models.vma.config import ModelConfig
+from models.vma.procedural import procedural_patch
+from models.vma.rasters import NUM_SEMANTIC, SiteRasters, model_input
+from models.vma.vectors import CLASSES, Vector, clip_vectors
+
+MIN_TARGET_LENGTH_PX = 4.0
+"""Target pieces shorter than this (1 m at 0.25 m/px) are not asked for."""
+
+
+@dataclass(frozen=True, eq=False)
+class Sample:
+    """One training patch."""
+
+    image: np.ndarray
+    """(C, S, S) float32 model input."""
+    labels: np.ndarray
+    """(G,) int64 class indices into CLASSES."""
+    points: np.ndarray
+    """(G, P, 2) float32 normalised patch coordinates."""
+
+
+@dataclass(frozen=True, eq=False)
+class SiteGrid:
+    """A site's model-resolution input with the pixel <-> global mapping of that grid."""
+
+    image: np.ndarray
+    """(C, H, W) float32."""
+    origin_xy: tuple[float, float]
+    """Global metres of grid pixel (0, 0)'s centre."""
+    resolution_m: float
+
+    def pixel_from_global(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return (
+            np.column_stack([(xy[:, 0] - self.origin_xy[0]), (self.origin_xy[1] - xy[:, 1])])
+            / self.resolution_m
+        )
+
+    def global_from_pixel(self, colrow: np.ndarray) -> np.ndarray:
+        colrow = np.asarray(colrow, dtype=np.float64).reshape(-1, 2) * self.resolution_m
+        return np.column_stack([self.origin_xy[0] + colrow[:, 0], self.origin_xy[1] - colrow[:, 1]])
+
+
+def site_grid(rasters: SiteRasters, config: ModelConfig) -> SiteGrid:
+    """The model input of a whole site; grid pixel i's centre is native pixel (i + 0.5) / scale - 0.5."""
+    shift = 0.5 * config.resolution_m - 0.5 * rasters.resolution_m
+    origin = (rasters.origin_xy[0] + shift, rasters.origin_xy[1] - shift)
+    return SiteGrid(model_input(rasters, config.resolution_m), origin, config.resolution_m)
+
+
+def targets(vectors: Sequence[Vector], size_px: int, num_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Labels and (G, P, 2) normalised points of vectors given in patch pixels (col, row)."""
+    pieces = clip_vectors(vectors, (0.0, float(size_px), 0.0, float(size_px)), MIN_TARGET_LENGTH_PX)
+    labels = np.array([CLASSES.index(v.cls) for v in pieces], np.int64)
+    points = np.zeros((len(pieces), num_points, 2), np.float32)
+    for k, v in enumerate(pieces):
+        points[k] = resample(v.points, num_points) / size_px
+    return labels, points
+
+
+def procedural_sample(config: ModelConfig, rng: np.random.Generator) -> Sample:
+    """A procedurally drawn patch as a training sample."""
+    semantic, photometric, vectors = procedural_patch(config.patch_px, config.resolution_m, rng)
+    image = _input_from(semantic, photometric)
+    labels, points = targets(vectors, config.patch_px, config.num_points)
+    return Sample(image, labels, points)
+
+
+def _input_from(semantic: np.ndarray, photometric: np.ndarray) -> np.ndarray:
+    """(C, S, S) input of a patch drawn at model resolution."""
+    one_hot = np.stack([(semantic == c).astype(np.float32) for c in range(NUM_SEMANTIC)])
+    return np.concatenate([one_hot, photometric.astype(np.float32).transpose(2, 0, 1) / 255.0])
+
+
+def site_sample(
+    grid: SiteGrid, vectors: Sequence[Vector], config: ModelConfig, centre_px: np.ndarray, angle_rad: float
+) -> Sample:
+    """The patch centred at grid pixel `centre_px`, rotated by `angle_rad`, with its vectors."""
+    size = config.patch_px
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    rotation = np.array([[c, -s], [s, c]])
+    # site pixel = rotation @ (patch pixel - half) + centre
+    half = np.array([(size - 1) / 2, (size - 1) / 2])
+    site_from_patch = np.hstack([rotation, (centre_px - rotation @ half)[:, None]])
+    channels = [
+        cv2.warpAffine(ch, site_from_patch, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        for ch in grid.image
+    ]
+    patch_vectors = []
+    for v in vectors:
+        site_px = grid.pixel_from_global(v.points)
+        patch_px = (site_px - site_from_patch[:, 2]) @ rotation + 0.5  # pixel centres at +0.5 in patch coords
+        patch_vectors.append(Vector(v.cls, patch_px))
+    labels, points = targets(patch_vectors, size, config.num_points)
+    return Sample(np.stack(channels).astype(np.float32), labels, points)
+
+
+def random_site_sample(
+    grid: SiteGrid, vectors: Sequence[Vector], config: ModelConfig, rng: np.random.Generator
+) -> Sample:
+    """A site patch at a random road cell (any rotation)."""
+    road = grid.image[1:NUM_SEMANTIC].sum(axis=0) > 0.5
+    rows, cols = np.nonzero(road[::4, ::4])
+    k = int(rng.integers(len(rows)))
+    centre = np.array([cols[k] * 4, rows[k] * 4], np.float64) + rng.uniform(-2, 2, 2)
+    return site_sample(grid, vectors, config, centre, float(rng.uniform(0, 2 * np.pi)))
+
+
+def degrade(sample: Sample, rng: np.random.Generator) -> Sample:
+    """Reconstruction-like noise on the semantic channels: speckle and a few markings erased to road."""
+    image = sample.image.copy()
+    _, h, w = image.shape
+    speckle = rng.random((h, w)) < rng.uniform(0.0, 0.01)
+    image[:NUM_SEMANTIC, speckle] = 0.0
+    image[rng.integers(NUM_SEMANTIC, size=int(speckle.sum())), *np.nonzero(speckle)] = 1.0
+    for _ in range(int(rng.integers(0, 4))):
+        r, c = rng.integers(0, h - 8), rng.integers(0, w - 8)
+        size = int(rng.integers(4, 12))
+        block = (slice(None), slice(r, r + size), slice(c, c + size))
+        marking = image[3][block[1:]] > 0
+        image[1][block[1:]][marking] = 1.0
+        image[3][block[1:]][marking] = 0.0
+    return Sample(image, sample.labels, sample.points)

@@ -1,0 +1,93 @@
+"""`cama propose` as a function: a site's rasters -> proposals JSON (an AnnotationSet of `proposal` elements).
+
+Output coordinates are site metres: the site origin is the generator's `manifest.json` `config.site_origin_xy`
+when the site has one, else the raster origin. A rerun whose output is newer than the rasters and the
+checkpoint does nothing unless `overwrite`.
+"""
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from annotations import Georeference
+from models.vma.checkpoint import META, current_version, load_checkpoint
+from models.vma.infer import InferenceConfig, predict_site
+from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, raster_dir_of
+from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.train import device_for
+from models.vma.vectors import Vector, proposals_as_annotations
+
+logger = logging.getLogger(__name__)
+
+Proposer = Literal["learned", "rule"]
+
+
+@dataclass(frozen=True)
+class ProposeResult:
+    """Where the proposals went and what they hold."""
+
+    out: Path
+    count: int
+    seconds: float
+    skipped: bool
+
+
+def site_origin_of(site: Path, rasters: SiteRasters) -> tuple[float, float]:
+    """The site origin from a generated site's manifest, else the raster's origin."""
+    manifest = Path(site) / "manifest.json"
+    if manifest.is_file():
+        try:
+            x, y = json.loads(manifest.read_text(encoding="utf-8"))["config"]["site_origin_xy"]
+            return float(x), float(y)
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+            raise SiteInputError(f"{manifest}: config.site_origin_xy must be [x, y]: {err!r}") from None
+    return rasters.origin_xy
+
+
+def propose(
+    site: Path,
+    out: Path,
+    *,
+    proposer: Proposer = "learned",
+    checkpoint: Path | None = None,
+    min_confidence: float = 0.1,
+    inference: InferenceConfig | None = None,
+    rule: RuleConfig | None = None,
+    overwrite: bool = False,
+    show_progress: bool = True,
+) -> ProposeResult:
+    """Propose vectors for a site with the learned model (needs `checkpoint`) or the rule-based proposer."""
+    site, out = Path(site), Path(out)
+    if proposer == "learned" and checkpoint is None:
+        raise ValueError("propose: the learned proposer needs a checkpoint (a version folder or a registry)")
+    inputs = [raster_dir_of(site) / name for name in ("semantic.png", "photometric.png", "georeference.json")]
+    if proposer == "learned" and checkpoint is not None:
+        inputs.append(current_version(Path(checkpoint)) / META)
+    if (
+        out.is_file()
+        and not overwrite
+        and all(p.is_file() and p.stat().st_mtime <= out.stat().st_mtime for p in inputs)
+    ):
+        logger.info("%s is up to date; nothing to do", out)
+        return ProposeResult(out, -1, 0.0, skipped=True)
+    started = time.perf_counter()
+    rasters = load_site_rasters(site)
+    vectors: list[Vector]
+    if proposer == "learned" and checkpoint is not None:
+        loaded = load_checkpoint(Path(checkpoint), device=str(device_for()))
+        vectors = predict_site(loaded.model, rasters, inference, show_progress=show_progress)
+        author = f"vma-{loaded.path.name}"
+    else:
+        vectors = propose_rule_based(rasters, rule)
+        author = "vma-rule-based"
+    vectors = [v for v in vectors if v.score >= min_confidence]
+    geo = json.loads((raster_dir_of(site) / "georeference.json").read_text(encoding="utf-8"))
+    georeference = Georeference.from_raster_json(geo, site_origin_xy=site_origin_of(site, rasters))
+    proposals = proposals_as_annotations(vectors, georeference, site.name or "site", author)
+    proposals.write_json(out)
+    seconds = time.perf_counter() - started
+    logger.info("wrote %d proposals to %s in %.1f s", len(vectors), out, seconds)
+    return ProposeResult(out, len(vectors), seconds, skipped=False)

@@ -1,0 +1,210 @@
+"""Retraining from people's corrections, behind an evaluation gate: the function the backend's job calls.
+
+Accepted, fixed and approved annotations are labels; rejected proposals are negatives (patches are cut
+around them too, where the labels say nothing is there). The promoted checkpoint is fine-tuned on patches
+around corrected elements mixed with procedural patches (against forgetting), then both it and the candidate
+are evaluated with Chamfer-AP on held-out validation sites; the candidate is saved as a new version with
+its metrics and data either way, and promoted only if its mAP does not drop (by more than `tolerance`).
+
+Patches are cut wherever corrections are; unreviewed elements inside such a patch count as background,
+so correction batches should cover whole regions (the lead view retrains after regions are reviewed).
+"""
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from annotations import AnnotationSet
+from models.vma.checkpoint import load_checkpoint, promote, save_version
+from models.vma.config import ModelConfig, TrainConfig, config_dict
+from models.vma.evaluate import evaluate_proposer
+from models.vma.infer import InferenceConfig, predict_site
+from models.vma.model import VmaNet
+from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, site_grid, site_sample
+from models.vma.rasters import load_site_rasters
+from models.vma.train import Sampler, fit
+from models.vma.vectors import Vector, vectors_from_annotations
+
+logger = logging.getLogger(__name__)
+
+LABEL_STATES = ("accepted", "fixed", "approved")
+NEGATIVE_STATES = ("rejected",)
+
+
+@dataclass(frozen=True)
+class Corrections:
+    """Reviewed annotations of one site and where its rasters are."""
+
+    site: Path
+    """Site folder (rasters in it or in ground_truth/bev/)."""
+    annotations: AnnotationSet
+
+
+@dataclass(frozen=True)
+class RetrainConfig:
+    """Fine-tuning and gate settings."""
+
+    train: TrainConfig = field(default_factory=lambda: TrainConfig(steps=300, learning_rate=2e-4))
+    replay_share: float = 0.3
+    """Share of procedural patches in each fine-tuning batch."""
+    tolerance: float = 0.0
+    """The candidate is promoted when its mAP >= current mAP - tolerance."""
+    min_labels: int = 1
+    """Fewer labelled elements than this: nothing to learn from, a ValueError."""
+    inference: InferenceConfig = field(default_factory=InferenceConfig)
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.replay_share < 1.0 or self.tolerance < 0 or self.min_labels < 1:
+            raise ValueError(
+                "RetrainConfig: replay_share in [0, 1), tolerance >= 0, min_labels >= 1 required"
+            )
+
+
+@dataclass(frozen=True)
+class RetrainResult:
+    """What a retraining run did."""
+
+    candidate: Path
+    """The new checkpoint version folder."""
+    promoted: bool
+    current_metrics: dict[str, Any]
+    candidate_metrics: dict[str, Any]
+    labels: int
+    negatives: int
+
+
+def passes_gate(current_map: float | None, candidate_map: float | None, tolerance: float) -> bool:
+    """The evaluation gate: a candidate with no mAP never passes; one whose mAP did not drop does."""
+    if candidate_map is None:
+        return False
+    return current_map is None or candidate_map >= current_map - tolerance
+
+
+def correction_sampler(
+    corrections: Sequence[tuple[SiteGrid, list[Vector], list[Vector]]],
+    config: ModelConfig,
+    replay_share: float,
+) -> Sampler:
+    """Patches centred on a random labelled or rejected element (random point along it, any rotation)."""
+
+    def draw(rng: np.random.Generator) -> Sample:
+        if rng.random() < replay_share:
+            return procedural_sample(config, rng)
+        grid, labels, negatives = corrections[int(rng.integers(len(corrections)))]
+        anchors = labels + negatives
+        anchor = anchors[int(rng.integers(len(anchors)))]
+        point = anchor.points[int(rng.integers(len(anchor.points)))] + rng.normal(0, 4.0, 2)
+        centre = grid.pixel_from_global(point)[0]
+        sample = site_sample(grid, labels, config, centre, float(rng.uniform(0, 2 * np.pi)))
+        return degrade(sample, rng) if rng.random() < 0.5 else sample
+
+    return draw
+
+
+def evaluate_model(model: VmaNet, sites: Sequence[Path], inference: InferenceConfig) -> dict[str, Any]:
+    """Chamfer-AP of a model's site proposals on validation sites."""
+    return evaluate_proposer(
+        lambda rasters: predict_site(model, rasters, inference, show_progress=False), sites
+    )
+
+
+def retrain_from_corrections(
+    registry: Path,
+    corrections: Sequence[Corrections],
+    validation_sites: Sequence[Path],
+    config: RetrainConfig | None = None,
+    *,
+    show_progress: bool = False,
+) -> RetrainResult:
+    """Fine-tune the promoted model of `registry` on corrections; save the candidate; promote it if the gate passes."""
+    config = config or RetrainConfig()
+    started = time.perf_counter()
+    current = load_checkpoint(Path(registry))
+    prepared = []
+    for item in corrections:
+        labels = vectors_from_annotations(item.annotations, LABEL_STATES)
+        negatives = [v for v in vectors_from_annotations(item.annotations, NEGATIVE_STATES)]
+        if labels or negatives:
+            prepared.append((site_grid(load_site_rasters(item.site), current.config), labels, negatives))
+    num_labels = sum(len(p[1]) for p in prepared)
+    num_negatives = sum(len(p[2]) for p in prepared)
+    if num_labels < config.min_labels:
+        raise ValueError(
+            f"retrain: {num_labels} accepted/fixed annotations, need at least {config.min_labels}"
+        )
+    current_metrics = evaluate_model(current.model, validation_sites, config.inference)
+    candidate = load_checkpoint(current.path).model  # a fresh copy to fine-tune
+    fit(
+        candidate,
+        correction_sampler(prepared, current.config, config.replay_share),
+        config.train,
+        show_progress=show_progress,
+    )
+    candidate.cpu()
+    candidate_metrics = evaluate_model(candidate, validation_sites, config.inference)
+    promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)
+    meta = {
+        "parent": current.path.name,
+        "train_config": config_dict(config.train),
+        "metrics": {
+            "validation": candidate_metrics,
+            "parent_validation": current_metrics,
+            "seconds": round(time.perf_counter() - started, 1),
+        },
+        "data": {
+            "corrections": [
+                {
+                    "site": str(c.site),
+                    "site_id": c.annotations.site_id,
+                    "elements": len(c.annotations.elements),
+                }
+                for c in corrections
+            ],
+            "labels": num_labels,
+            "negatives": num_negatives,
+            "validation_sites": [str(s) for s in validation_sites],
+        },
+        "promoted": promoted,
+    }
+    folder = save_version(Path(registry), candidate, meta)
+    if promoted:
+        promote(Path(registry), folder.name)
+    logger.info(
+        "retrain: candidate %s mAP %s vs current %s -> %s",
+        folder.name,
+        candidate_metrics["mean_ap"],
+        current_metrics["mean_ap"],
+        "promoted" if promoted else "kept out",
+    )
+    return RetrainResult(folder, promoted, current_metrics, candidate_metrics, num_labels, num_negatives)
+
+
+def gate_checkpoint(
+    registry: Path, candidate: Path, validation_sites: Sequence[Path], config: RetrainConfig | None = None
+) -> tuple[bool, dict[str, Any], dict[str, Any]]:
+    """Evaluate a candidate version of `registry` against the promoted one; promote it if the gate passes.
+
+    Returns (promoted, current metrics, candidate metrics). A candidate for another model config is refused
+    with a CheckpointError before any evaluation.
+    """
+    config = config or RetrainConfig()
+    current = load_checkpoint(Path(registry))
+    challenger = load_checkpoint(Path(candidate), current.config)
+    current_metrics = evaluate_model(current.model, validation_sites, config.inference)
+    candidate_metrics = evaluate_model(challenger.model, validation_sites, config.inference)
+    promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)
+    if promoted:
+        promote(Path(registry), challenger.path.name)
+    logger.info(
+        "gate: %s mAP %s vs current %s -> %s",
+        challenger.path.name,
+        candidate_metrics["mean_ap"],
+        current_metrics["mean_ap"],
+        promoted,
+    )
+    return promoted, current_metrics, candidate_metrics

@@ -1,0 +1,123 @@
+"""The rule-based proposer: semantic raster -> class masks -> skeletons -> simplified polylines with confidence.
+
+The cold-start proposer of the paper and the baseline the learned model must beat. Lane markings give
+dividers (double lines closed into one, dashes joined along their direction), curbs give boundaries, and
+crosswalk stripes closed into blocks give `ped_crossing` rectangles. Confidence is mask support: the share of
+a vector's length with its mask nearby (bridged dash gaps lower it), damped for short vectors.
+"""
+
+import logging
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from shapely.geometry import LineString
+
+from cama_pipeline.semantics import Semantic
+from models.vma.merge import join_polylines
+from models.vma.rasters import SiteRasters
+from models.vma.skeleton_paths import skeleton_paths
+from models.vma.vectors import Vector
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RuleConfig:
+    """Settings of the rule-based proposer (metres, converted to pixels by the raster's resolution)."""
+
+    close_line_m: float = 0.4
+    """Closing radius that merges a double line into one stroke."""
+    close_crosswalk_m: float = 0.8
+    """Closing radius that merges zebra stripes into one block."""
+    join_gap_m: float = 7.0
+    """Largest gap between aligned pieces joined into one divider (dash gaps)."""
+    join_angle_deg: float = 20.0
+    """Largest direction change across a joined gap."""
+    min_length_m: float = 2.0
+    """Shorter polylines are dropped."""
+    min_crosswalk_area_m2: float = 4.0
+    simplify_m: float = 0.1
+    """Douglas-Peucker tolerance."""
+    support_radius_m: float = 0.4
+    """A vector point is supported when its class mask lies within this distance."""
+    full_confidence_length_m: float = 10.0
+    """Vectors at least this long keep their full support as confidence; shorter ones are damped."""
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not value > 0:
+                raise ValueError(f"RuleConfig.{name} must be > 0, got {value}")
+
+
+def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -> list[Vector]:
+    """Dividers, boundaries and crosswalks of a site from its semantic raster, global metres, with confidence."""
+    config = config or RuleConfig()
+    semantic = rasters.semantic
+    vectors = [
+        *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, join=True),
+        *_line_vectors(rasters, semantic == int(Semantic.CURB), "boundary", config, join=False),
+        *_crosswalks(rasters, semantic == int(Semantic.CROSSWALK), config),
+    ]
+    logger.info("rule-based proposer: %d vectors on %s", len(vectors), rasters.name)
+    return vectors
+
+
+def _disk(radius_px: float) -> np.ndarray:
+    size = 2 * max(1, round(radius_px)) + 1
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+
+
+def _line_vectors(
+    rasters: SiteRasters, mask: np.ndarray, cls: str, config: RuleConfig, *, join: bool
+) -> list[Vector]:
+    """Skeleton polylines of one class mask; aligned pieces joined across gaps when `join`."""
+    res = rasters.resolution_m
+    closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_line_m / res))
+    paths = [rasters.global_from_pixel(p) for p in skeleton_paths(closed > 0)]
+    paths = [p for p in paths if len(p) >= 2]
+    if join:
+        joined = join_polylines([(p, 1.0) for p in paths], config.join_gap_m, config.join_angle_deg)
+        paths = [p for p, _ in joined]
+    support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
+    out = []
+    for path in paths:
+        line = LineString(path).simplify(config.simplify_m)
+        if line.length < config.min_length_m:
+            continue
+        points = np.asarray(line.coords)
+        out.append(Vector(cls, points, _confidence(rasters, support, points, config)))
+    return out
+
+
+def _confidence(rasters: SiteRasters, support: np.ndarray, points: np.ndarray, config: RuleConfig) -> float:
+    """Share of the polyline (sampled every 0.25 m) on supported pixels, damped when short."""
+    line = LineString(points)
+    stations = np.linspace(0.0, line.length, max(2, int(line.length / 0.25)))
+    samples = np.array([line.interpolate(s).coords[0] for s in stations])
+    colrow = np.rint(rasters.pixel_from_global(samples)).astype(int)
+    h, w = support.shape
+    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    hits = np.zeros(len(samples), bool)
+    hits[inside] = support[colrow[inside, 1], colrow[inside, 0]]
+    damping = min(1.0, line.length / config.full_confidence_length_m) ** 0.5
+    return float(hits.mean() * damping)
+
+
+def _crosswalks(rasters: SiteRasters, mask: np.ndarray, config: RuleConfig) -> list[Vector]:
+    """Rotated rectangles around crosswalk stripe blocks; confidence = stripe fill within the closed block."""
+    res = rasters.resolution_m
+    closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_crosswalk_m / res))
+    count, labels = cv2.connectedComponents(closed)
+    out = []
+    for index in range(1, count):
+        rows, cols = np.nonzero(labels == index)
+        if rows.size * res**2 < config.min_crosswalk_area_m2:
+            continue
+        rect = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
+        corners = rasters.global_from_pixel(cv2.boxPoints(rect))
+        ring = np.vstack([corners, corners[:1]])
+        block_fill = rows.size / max(1.0, rect[1][0] * rect[1][1])
+        stripe_share = mask[rows, cols].mean() / 0.5  # zebra stripes cover about half of a block
+        out.append(Vector("ped_crossing", ring, float(np.clip(min(block_fill, stripe_share), 0, 1))))
+    return out

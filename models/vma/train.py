@@ -1,0 +1,159 @@
+"""Training the learned VMA model from site patches and procedural patches, with a progress bar.
+
+`train` is the `cama train` stage: it builds a fresh model (or continues from a checkpoint of the same
+config), trains it for `TrainConfig.steps` batches mixing procedural patches with patches of the training
+sites, and saves the result as a new version of a checkpoint registry with the data it saw.
+"""
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from models.vma.checkpoint import load_checkpoint, promote, save_version
+from models.vma.config import ModelConfig, TrainConfig, config_dict
+from models.vma.matching import batch_targets, match_and_loss
+from models.vma.model import VmaNet
+from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, random_site_sample, site_grid
+from models.vma.rasters import load_site_rasters, vector_map_of
+from models.vma.vectors import Vector, read_vectors
+
+logger = logging.getLogger(__name__)
+
+Sampler = Callable[[np.random.Generator], Sample]
+
+
+@dataclass(frozen=True, eq=False)
+class TrainingSite:
+    """A site ready for patch sampling: its model-resolution grid and vectors."""
+
+    name: str
+    grid: SiteGrid
+    vectors: list[Vector]
+
+
+def load_training_site(path: Path, config: ModelConfig) -> TrainingSite:
+    """Rasters and ground-truth vectors of a site folder (errors name the file)."""
+    rasters = load_site_rasters(path)
+    return TrainingSite(str(path), site_grid(rasters, config), read_vectors(vector_map_of(path)))
+
+
+def device_for() -> torch.device:
+    """CUDA when present, else CPU."""
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def mixed_sampler(sites: Sequence[TrainingSite], config: ModelConfig, procedural_share: float) -> Sampler:
+    """Draws a procedural patch with probability `procedural_share` (always when no site), else a site patch."""
+
+    def draw(rng: np.random.Generator) -> Sample:
+        if not sites or rng.random() < procedural_share:
+            sample = procedural_sample(config, rng)
+        else:
+            site = sites[int(rng.integers(len(sites)))]
+            sample = random_site_sample(site.grid, site.vectors, config, rng)
+        return degrade(sample, rng) if rng.random() < 0.5 else sample
+
+    return draw
+
+
+def learning_rate_at(progress: float, peak: float, warmup: float = 0.05) -> float:
+    """Linear warm-up to `peak`, then cosine decay to 5% of it, by training progress in [0, 1]."""
+    if progress < warmup:
+        return peak * max(progress, 0.01) / warmup
+    t = min(1.0, (progress - warmup) / (1.0 - warmup))
+    return peak * (0.05 + 0.95 * 0.5 * (1.0 + np.cos(np.pi * t)))
+
+
+def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: bool = True) -> list[float]:
+    """Train `model` in place for `config.steps` batches or `config.max_seconds`, whichever ends first.
+
+    The learning-rate schedule follows progress (the larger of the step and time fractions), so a run cut
+    by its time budget still ends with a decayed rate. Returns the loss of each step.
+    """
+    device = device_for()
+    if device.type == "cpu":
+        torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    model.to(device).train()
+    optimiser = torch.optim.AdamW(
+        model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay
+    )
+    started = time.perf_counter()
+    losses = []
+    columns = (
+        TextColumn("training {task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, disable=not show_progress) as progress:
+        bar = progress.add_task("", total=config.steps)
+        for step in range(config.steps):
+            batch = [sampler(rng) for _ in range(config.batch_size)]
+            images = torch.as_tensor(np.stack([s.image for s in batch]), device=device)
+            labels, points = batch_targets([s.labels for s in batch], [s.points for s in batch], device)
+            logits, layer_points = model(images)
+            loss, parts = match_and_loss(
+                logits, layer_points, labels, points, config.class_weight, config.point_weight
+            )
+            optimiser.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            done = max((step + 1) / config.steps, (time.perf_counter() - started) / config.max_seconds)
+            for group in optimiser.param_groups:
+                group["lr"] = learning_rate_at(done, config.learning_rate)
+            optimiser.step()
+            losses.append(float(loss.detach()))
+            progress.update(bar, advance=1, description=f"loss {np.mean(losses[-20:]):.3f}")
+            if step % 50 == 0 or done >= 1.0:
+                logger.info("step %d/%d loss %.4f %s", step + 1, config.steps, np.mean(losses[-50:]), parts)
+            if done >= 1.0:
+                break
+    model.eval()
+    return losses
+
+
+def train(
+    model_config: ModelConfig,
+    train_config: TrainConfig,
+    sites: Sequence[Path],
+    registry: Path,
+    *,
+    init: Path | None = None,
+    show_progress: bool = True,
+) -> Path:
+    """Train a model on `sites` (+ procedural patches), save it as a new promoted version of `registry`."""
+    started = time.perf_counter()
+    training_sites = [load_training_site(Path(p), model_config) for p in sites]
+    model = load_checkpoint(init, model_config).model if init is not None else VmaNet(model_config)
+    losses = fit(
+        model,
+        mixed_sampler(training_sites, model_config, train_config.procedural_share),
+        train_config,
+        show_progress=show_progress,
+    )
+    meta = {
+        "parent": str(init) if init is not None else None,
+        "train_config": config_dict(train_config),
+        "metrics": {
+            "final_loss": float(np.mean(losses[-50:])),
+            "steps_done": len(losses),
+            "seconds": round(time.perf_counter() - started, 1),
+        },
+        "data": {
+            "sites": [str(p) for p in sites],
+            "procedural_share": train_config.procedural_share,
+            "samples_seen": train_config.steps * train_config.batch_size,
+            "seed": train_config.seed,
+        },
+    }
+    folder = save_version(registry, model.cpu(), meta)
+    promote(registry, folder.name)
+    return folder

@@ -1,0 +1,117 @@
+"""The VMA commands of the `cama` CLI: propose, train, retrain, vma-eval, vma-split."""
+
+from pathlib import Path
+
+from typer.testing import CliRunner
+from vma_test_sites import drawn_semantic, write_raster_site
+
+from annotations import AnnotationSet
+from cama_pipeline.cli import app
+
+runner = CliRunner()
+
+
+def test_propose_rule_based_writes_an_annotation_set_and_skips_when_up_to_date(
+    drawn_site: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "proposals.json"
+    result = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    proposals = AnnotationSet.read_json(out)
+    assert {e.cls for e in proposals.elements} == {"divider", "boundary", "ped_crossing"}
+    assert all(e.source == "proposal" and e.confidence is not None for e in proposals.elements)
+    assert proposals.georeference.site_origin_xy == (500.0, 800.0)  # no manifest: the raster origin
+    again = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)])
+    assert "up to date" in again.output
+
+
+def test_propose_reports_bad_input(tmp_path: Path) -> None:
+    semantic, vectors = drawn_semantic()
+    geo = {"origin_xy": [0.0, 0.0], "resolution": 0.1, "width": 10, "height": 10}
+    site = write_raster_site(tmp_path / "site", semantic, vectors, geo)
+    result = runner.invoke(
+        app, ["propose", str(site), "--proposer", "rule", "--out", str(tmp_path / "p.json")]
+    )
+    assert result.exit_code == 2 and "wrong georeference" in result.output
+    result = runner.invoke(app, ["propose", str(site), "--proposer", "magic"])
+    assert result.exit_code == 2 and "--proposer" in result.output
+
+
+def test_train_propose_eval_retrain(drawn_site: Path, tmp_path: Path) -> None:
+    registry = tmp_path / "registry"
+    result = runner.invoke(
+        app,
+        [
+            "train",
+            "--site",
+            str(drawn_site),
+            "--registry",
+            str(registry),
+            "--steps",
+            "2",
+            "--batch-size",
+            "2",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert (registry / "v0001" / "model.pt").is_file() and (registry / "current.json").is_file()
+
+    out = tmp_path / "learned.json"
+    result = runner.invoke(
+        app,
+        [
+            "propose",
+            str(drawn_site),
+            "--checkpoint",
+            str(registry),
+            "--out",
+            str(out),
+            "--min-confidence",
+            "0",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert AnnotationSet.read_json(out).site_id == "drawn"
+
+    report = tmp_path / "eval.json"
+    result = runner.invoke(app, ["vma-eval", str(drawn_site), "--proposer", "rule", "--out", str(report)])
+    assert result.exit_code == 0 and report.is_file() and "mAP" in result.output
+
+    rule = tmp_path / "rule.json"
+    runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(rule)])
+    reviewed = AnnotationSet.read_json(rule)
+    reviewed = reviewed.model_copy(
+        update={"elements": [e.with_changes(review_state="accepted") for e in reviewed.elements]}
+    )
+    reviewed.write_json(rule)
+    result = runner.invoke(
+        app,
+        [
+            "retrain",
+            "--registry",
+            str(registry),
+            "--corrections",
+            f"{drawn_site}={rule}",
+            "--val",
+            str(drawn_site),
+            "--steps",
+            "2",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert (registry / "v0002" / "checkpoint.json").is_file()
+    assert "candidate" in result.output
+
+
+def test_retrain_rejects_malformed_corrections(tmp_path: Path) -> None:
+    result = runner.invoke(
+        app, ["retrain", "--registry", str(tmp_path), "--corrections", "nosign", "--val", str(tmp_path)]
+    )
+    assert result.exit_code == 2 and "SITE=ANNOTATIONS.json" in result.output
+
+
+def test_split_of_a_one_location_data_set_is_refused(site_root: Path, tmp_path: Path) -> None:
+    result = runner.invoke(
+        app, ["vma-split", str(site_root / "nuscenes"), "--out", str(tmp_path / "split.json")]
+    )
+    assert result.exit_code == 2 and "one location" in result.output

@@ -1,0 +1,108 @@
+"""The human-in-the-loop: corrections of proposals retrain the model, and the evaluation gate guards promotion."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from annotations import Georeference
+from cama_pipeline.evaluate.chamfer_ap import chamfer_distance, resample
+from models.vma.checkpoint import current_version, promote, save_version
+from models.vma.config import ModelConfig, TrainConfig
+from models.vma.model import VmaNet
+from models.vma.rasters import load_site_rasters, vector_map_of
+from models.vma.retrain import (
+    Corrections,
+    RetrainConfig,
+    gate_checkpoint,
+    passes_gate,
+    retrain_from_corrections,
+)
+from models.vma.rule_based import propose_rule_based
+from models.vma.vectors import Vector, proposals_as_annotations, read_vectors
+
+LOOP = ModelConfig(
+    resolution_m=0.5, patch_px=64, num_queries=12, num_points=8, dim=64, decoder_layers=2, heads=4
+)
+
+
+def simulated_review(site: Path, proposals: list[Vector], share: float, rng: np.random.Generator):
+    """A reviewer works through `share` of the proposals: matched ones are fixed to the truth, others rejected;
+    the truth nobody proposed is drawn by hand. Returns the reviewed annotation set."""
+    truth = read_vectors(vector_map_of(site))
+    reviewed = [p for p in proposals if rng.random() < share]
+    fixed, rejected, used = [], [], set()
+    for proposal in reviewed:
+        same = [(k, t) for k, t in enumerate(truth) if t.cls == proposal.cls and k not in used]
+        dist = [chamfer_distance(resample(proposal.points, 50), resample(t.points, 50)) for _, t in same]
+        if dist and min(dist) < 3.0:
+            k, t = same[int(np.argmin(dist))]
+            used.add(k)
+            fixed.append(Vector(t.cls, t.points, 1.0))
+        else:
+            rejected.append(proposal)
+    drawn = [t for k, t in enumerate(truth) if k not in used]
+    rasters = load_site_rasters(site)
+    georeference = Georeference(
+        site_origin_xy=rasters.origin_xy,
+        origin_xy=rasters.origin_xy,
+        resolution=rasters.resolution_m,
+        width=rasters.shape[1],
+        height=rasters.shape[0],
+    )
+    labelled = proposals_as_annotations(fixed + drawn + rejected, georeference, site.name, "reviewer")
+    states = ["fixed"] * (len(fixed) + len(drawn)) + ["rejected"] * len(rejected)
+    elements = [e.with_changes(review_state=s) for e, s in zip(labelled.elements, states, strict=True)]
+    return labelled.model_copy(update={"elements": elements}), len(fixed), len(rejected)
+
+
+@pytest.mark.slow
+def test_corrections_raise_validation_map(bev_sites: dict[str, Path], tmp_path: Path) -> None:
+    registry = tmp_path / "registry"
+    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}, "data": {"sites": []}}).name)
+    proposals = propose_rule_based(load_site_rasters(bev_sites["train"]))
+    annotations, fixed, rejected = simulated_review(
+        bev_sites["train"], proposals, 0.7, np.random.default_rng(0)
+    )
+    assert fixed > 0
+    config = RetrainConfig(train=TrainConfig(steps=120, batch_size=4, learning_rate=2e-3), replay_share=0.1)
+    result = retrain_from_corrections(
+        registry, [Corrections(bev_sites["train"], annotations)], [bev_sites["val"]], config
+    )
+    assert result.labels == len(annotations.elements) - rejected and result.negatives == rejected
+    assert result.candidate_metrics["mean_ap"] > result.current_metrics["mean_ap"]
+    assert result.promoted and current_version(registry) == result.candidate
+
+
+@pytest.mark.slow
+def test_gate_refuses_a_deliberately_bad_checkpoint(bev_sites: dict[str, Path], tmp_path: Path) -> None:
+    shipped = Path(__file__).parents[2] / "models" / "vma" / "checkpoints"
+    registry = tmp_path / "registry"
+    good = current_version(shipped)
+    (registry / "v0001").mkdir(parents=True)
+    for name in ("model.pt", "checkpoint.json"):
+        (registry / "v0001" / name).write_bytes((good / name).read_bytes())
+    promote(registry, "v0001")
+    bad = VmaNet(ModelConfig())  # untrained weights: proposes nothing useful
+    candidate = save_version(registry, bad, {"metrics": {}, "data": {"note": "deliberately bad"}})
+    promoted, current, challenger = gate_checkpoint(registry, candidate, [bev_sites["val"]])
+    assert current["mean_ap"] > 0.0
+    assert not promoted and challenger["mean_ap"] < current["mean_ap"]
+    assert current_version(registry).name == "v0001"
+
+
+def test_gate_rule() -> None:
+    assert passes_gate(0.5, 0.5, 0.0) and passes_gate(None, 0.1, 0.0) and passes_gate(0.5, 0.48, 0.05)
+    assert not passes_gate(0.5, 0.49, 0.0) and not passes_gate(0.5, None, 0.0)
+
+
+def test_retrain_needs_labels(drawn_site: Path, tmp_path: Path) -> None:
+    registry = tmp_path / "registry"
+    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}}).name)
+    rasters = load_site_rasters(drawn_site)
+    georeference = Georeference(
+        site_origin_xy=rasters.origin_xy, origin_xy=rasters.origin_xy, resolution=0.1, width=600, height=400
+    )
+    empty = proposals_as_annotations([], georeference, "drawn", "nobody")
+    with pytest.raises(ValueError, match="accepted/fixed annotations"):
+        retrain_from_corrections(registry, [Corrections(drawn_site, empty)], [drawn_site])
