@@ -24,6 +24,7 @@ class App {
     this.root = root;
     /** @type {{destroy: () => void}|null} */
     this.view = null;
+    this.routeCount = 0;
     this.userBox = h("div.user");
     this.nav = h("nav.tabs");
     this.content = h("main.content");
@@ -70,29 +71,35 @@ class App {
     }
   }
 
+  /** Show the view of the current hash; a view whose mount finishes after a newer route is dropped. */
   async route() {
+    const ticket = ++this.routeCount;
     const { parts, params } = parseRoute();
     if (this.view) this.view.destroy();
     this.view = null;
-    replaceChildren(this.content);
+    const host = h("div.view-host");
+    replaceChildren(this.content, host);
+    let view;
     if (!this.api.me) {
       this.renderChrome(null, "");
-      this.view = mountLogin(this.content, this.api, () => {
-        window.location.hash = parts.length && parts[0] !== "login" ? window.location.hash : "#/sites";
-        this.route();
+      view = mountLogin(host, this.api, () => {
+        if (parts[0] === "login" || !parts.length) window.location.hash = "#/sites";
+        else this.route();
       });
-      return;
-    }
-    if (parts[0] === "site" && /^\d+$/.test(parts[1] || "")) {
+    } else if (parts[0] === "site" && /^\d+$/.test(parts[1] || "")) {
       const siteId = Number(parts[1]);
       const lead = parts[2] === "lead";
       this.renderChrome(siteId, lead ? "lead" : "editor");
-      const mount = lead ? mountLead : mountEditor;
-      this.view = await mount(this.content, this.api, siteId, params);
-      return;
+      view = await (lead ? mountLead : mountEditor)(host, this.api, siteId, params);
+    } else {
+      this.renderChrome(null, "");
+      view = await mountSites(host, this.api);
     }
-    this.renderChrome(null, "");
-    this.view = await mountSites(this.content, this.api);
+    if (ticket === this.routeCount) this.view = view;
+    else {
+      view.destroy();
+      host.remove();
+    }
   }
 }
 
