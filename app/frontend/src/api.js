@@ -30,7 +30,12 @@ export function errorMessage(body, status) {
   const detail = body && body.detail;
   if (typeof detail === "string") return detail;
   if (Array.isArray(detail)) {
-    return detail.map((item) => `${(item.loc || []).slice(1).join(".") || "request"}: ${item.msg}`).join("; ");
+    return detail
+      .map((item) => {
+        const field = (item.loc || []).slice(1).join(".") || "request";
+        return String(item.msg).startsWith(`${field}:`) ? item.msg : `${field}: ${item.msg}`;
+      })
+      .join("; ");
   }
   return `HTTP ${status}`;
 }
