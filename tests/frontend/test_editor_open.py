@@ -1,12 +1,17 @@
 """Log in, open a site, see the raster tiles and the elements, the legend, the help overlay and the cursor readout."""
 
+import json
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 from editor_browser_helpers import (
     PROPOSALS,
+    SITE_ORIGIN_XY,
     SeededServer,
     centre_on,
+    georeference,
     log_in,
     open_editor,
     page_xy,
@@ -104,3 +109,31 @@ def test_help_overlay_lists_shortcuts(page: Page, seeded: SeededServer) -> None:
     screenshot(page, "help")
     page.keyboard.press("Escape")
     expect(overlay).to_have_count(0)
+
+
+def test_a_site_with_unreadable_rasters_still_opens_for_vector_work(
+    page: Page, seeded: SeededServer, tmp_path: Path
+) -> None:
+    rasters = tmp_path / "broken"
+    rasters.mkdir()
+    (rasters / "semantic.png").write_bytes(b"not a png")
+    (rasters / "georeference.json").write_text(json.dumps(georeference()))
+    body = {
+        "name": "broken rasters",
+        "site_origin_xy": list(SITE_ORIGIN_XY),
+        "georeference": georeference(),
+        "raster_dir": str(rasters),
+    }
+    with seeded.client() as client:
+        response = client.post("/api/sites", json=body, headers=seeded.headers["lead"])
+        assert response.status_code == 201, response.text
+        site_id = response.json()["id"]
+        element = {"class": "divider", "points": [[10.0, 10.0], [20.0, 10.0]]}
+        path = f"/api/sites/{site_id}/elements"
+        assert client.post(path, json=element, headers=seeded.headers["ann"]).status_code == 201
+    log_in(page, seeded.base_url, "ann", f"#/site/{site_id}")
+    page.wait_for_function("window.camaEditor && window.camaEditor.firstRenderMs !== null")
+    expect(page.locator(".toast.error")).to_contain_text("Raster layers unavailable")
+    assert page.evaluate("window.camaEditor.elementCount()") == 1
+    page.click(".sidebar-tab[data-tab='Layers']")
+    expect(page.locator("#layers-panel")).to_contain_text("no raster layers")

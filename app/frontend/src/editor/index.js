@@ -18,17 +18,17 @@ import { editorShortcuts } from "./keymap.js";
 import { buildToolbar } from "./toolbar.js";
 
 /**
- * Load the site's description, rasters and elements.
+ * Load the site's description, rasters and elements (a site whose rasters cannot be tiled still opens).
  * @param {import("../api.js").Api} api
  * @param {number} siteId
  */
 async function loadSite(api, siteId) {
   const base = `/api/sites/${siteId}`;
-  const [site, layers, elements] = await Promise.all([
-    api.get(base),
-    api.get(`${base}/layers`),
-    api.get(`${base}/elements`, { limit: 100000 }),
-  ]);
+  const layersOrNone = api.get(`${base}/layers`).catch((error) => {
+    toast(`Raster layers unavailable, editing vectors only: ${error.message}`, "error");
+    return [];
+  });
+  const [site, layers, elements] = await Promise.all([api.get(base), layersOrNone, api.get(`${base}/elements`, { limit: 100000 })]);
   return { site, layers, elements };
 }
 
