@@ -73,7 +73,9 @@ def _register_stage_commands() -> None:
     from annotations.export_command import export_command, import_command
     from app.backend.serve import serve_command
     from cama_pipeline.evaluate.command import eval_command
+    from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
+    from cama_pipeline.pairs.command import pairs_command
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.wigo.command import wigo_command
     from models.vma.commands import (
@@ -91,6 +93,8 @@ def _register_stage_commands() -> None:
     app.command("wigo")(wigo_command)
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)
+    app.command("pairs")(pairs_command)
+    app.command("features")(features_command)
     app.command("propose")(propose_command)
     app.command("train")(train_command)
     app.command("retrain")(retrain_command)

@@ -1,0 +1,1 @@
+"""Image pairs to match: sequential pairs within a clip and homography-guided spatial pairs (HSP) across clips."""

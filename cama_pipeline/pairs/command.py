@@ -1,0 +1,58 @@
+"""`cama pairs`: choose the image pairs to match for every site (sequential + homography-guided spatial pairs)."""
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.stage import run
+from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
+
+console = Console()
+
+
+def pairs_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    sequential_window: Annotated[
+        int, typer.Option(help="Same-camera pairs up to this many keyframes apart.")
+    ] = 3,
+    knn: Annotated[
+        int,
+        typer.Option(
+            help="Nearest cameras considered per image for spatial pairs; 0: all within the radius."
+        ),
+    ] = 0,
+    knn_radius_m: Annotated[float, typer.Option(help="Spatial pairs are at most this far apart.")] = 30.0,
+    max_dz_m: Annotated[
+        float, typer.Option(help="Largest camera height difference of a spatial pair.")
+    ] = 3.0,
+    min_footprint_overlap: Annotated[
+        float, typer.Option(help="Least shared ground (share of the larger footprint) of a spatial pair.")
+    ] = 0.15,
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """Sequential and HSP pairs of each site's keyframe images (after `cama sites`)."""
+    try:
+        config = PairsConfig(
+            sequential_window=sequential_window,
+            knn=knn,
+            knn_radius_m=knn_radius_m,
+            max_dz_m=max_dz_m,
+            min_footprint_overlap=min_footprint_overlap,
+        )
+        result = run(config, dataset, workspace, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise fail(err) from err
+    table = Table(title=f"pairs ({result.workspace / 'pairs'})")
+    for column in ("site", "images", "exhaustive", "temporal", "rig", "hsp", "total", "share"):
+        table.add_column(column)
+    for site in result.sites:
+        counts = site.counts
+        share = counts["total"] / max(counts["exhaustive"], 1)
+        name = site.site_id + (" (up to date)" if site.skipped else "")
+        values = [counts[k] for k in ("exhaustive", "temporal", "rig", "hsp", "total")]
+        table.add_row(name, str(site.images), *map(str, values), f"{share:.1%}")
+    console.print(table)

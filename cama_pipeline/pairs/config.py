@@ -1,0 +1,51 @@
+"""Every parameter of pair selection in one frozen, validated config."""
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class PairsConfig:
+    """Parameters of sequential pairs and of the HSP rules (paper: "Homography-guided Spatial Pairs")."""
+
+    sequential_window: int = 3
+    """A keyframe image is paired with the same camera's images up to this many keyframes later."""
+    rig_window: int = 1
+    """Overlapping rig cameras are paired within the same keyframe and up to this many keyframes apart."""
+    rig_max_axis_angle_deg: float = 80.0
+    """Two rig cameras overlap when their optical axes are at most this far apart (from the extrinsics)."""
+    knn: int = 0
+    """Nearest camera centres considered per image (scipy cKDTree); 0 considers every camera within the
+    radius (a fixed k misses co-visible cameras where many clips, or a stationary clip, crowd one place)."""
+    knn_radius_m: float = 30.0
+    """Neighbours farther than this are never spatial pairs."""
+    max_dz_m: float = 3.0
+    """Largest height difference of two camera centres (the paper's Δz): other levels, other roads."""
+    face_to_face_angle_deg: float = 150.0
+    """Optical axes at least this far apart, each camera in front of the other: facing each other."""
+    face_to_face_max_distance_m: float = 12.0
+    """Facing cameras closer than this are dropped (huge viewpoint change over little shared ground)."""
+    footprint_max_range_m: float = 25.0
+    """Ground footprints reach at most this far from the camera (far road is too oblique to match)."""
+    footprint_grid: tuple[int, int] = (20, 72)
+    """Ground samples around the camera (ranges, azimuths) projected into the image to trace the footprint."""
+    min_footprint_overlap: float = 0.15
+    """Least overlap of two ground footprints, as a share of the smaller one, to keep a spatial pair."""
+
+    def __post_init__(self) -> None:
+        for name in ("sequential_window", "rig_window", "knn"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"PairsConfig.{name} must be positive, got {getattr(self, name)}")
+        for name in ("knn_radius_m", "max_dz_m", "face_to_face_max_distance_m", "footprint_max_range_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"PairsConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("rig_max_axis_angle_deg", "face_to_face_angle_deg"):
+            if not 0 < getattr(self, name) <= 180:
+                raise ValueError(f"PairsConfig.{name} must be in (0, 180], got {getattr(self, name)}")
+        if not 0 <= self.min_footprint_overlap <= 1:
+            raise ValueError(
+                f"PairsConfig.min_footprint_overlap must be in [0, 1], got {self.min_footprint_overlap}"
+            )
+        if min(self.footprint_grid) < 2:
+            raise ValueError(
+                f"PairsConfig.footprint_grid needs at least 2 x 2 samples, got {self.footprint_grid}"
+            )

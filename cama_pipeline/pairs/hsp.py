@@ -1,0 +1,108 @@
+"""Homography-guided spatial pairs: KNN over camera centres, then the HSP rules, then ground-footprint overlap."""
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+from scipy.spatial import cKDTree
+
+from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.footprint import ground_footprint
+from cama_pipeline.pairs.rules import face_to_face, height_compatible, view_cones_overlap
+from cama_pipeline.pairs.sequential import Pair, ordered
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class HspStats:
+    """How many candidates each rule removed: the funnel reported by `cama pairs`."""
+
+    candidates: int = 0
+    dropped: dict[str, int] = field(
+        default_factory=lambda: {"height": 0, "view_cone": 0, "face_to_face": 0, "footprint": 0}
+    )
+    kept: int = 0
+
+
+def knn_candidates(views: list[CameraView], config: PairsConfig, exclude: set[Pair]) -> list[Pair]:
+    """Neighbour pairs within `knn_radius_m`, among each camera's `knn` nearest (0: all within the radius),
+    minus `exclude` (already paired)."""
+    if len(views) < 2:
+        return []
+    centers = np.array([view.center for view in views])
+    tree = cKDTree(centers)
+    if config.knn == 0:
+        found = {(int(i), int(j)) for i, j in tree.query_pairs(config.knn_radius_m)}
+    else:
+        k = min(config.knn + 1, len(views))
+        distances, neighbours = tree.query(centers, k=k, distance_upper_bound=config.knn_radius_m)
+        found = {
+            ordered(i, int(j))
+            for i, (row_d, row_j) in enumerate(zip(distances, neighbours, strict=True))
+            for d, j in zip(row_d, row_j, strict=True)
+            if np.isfinite(d) and int(j) != i
+        }
+    return sorted(found - exclude)
+
+
+def _passes_rules(a: CameraView, b: CameraView, config: PairsConfig) -> str | None:
+    """The name of the first geometric rule that rejects the pair, or None."""
+    if not height_compatible(a.center, b.center, config.max_dz_m):
+        return "height"
+    if not view_cones_overlap(a.center, a.axis, b.center, b.axis):
+        return "view_cone"
+    if face_to_face(
+        a.center,
+        a.axis,
+        b.center,
+        b.axis,
+        min_angle_deg=config.face_to_face_angle_deg,
+        max_distance_m=config.face_to_face_max_distance_m,
+    ):
+        return "face_to_face"
+    return None
+
+
+def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: PairsConfig) -> np.ndarray:
+    """(len(pairs),) mutual ground-footprint overlap of each pair: the shared area as a share of the larger
+    footprint, so both cameras see that much of each other's ground (vectorised with shapely)."""
+    if not pairs:
+        return np.zeros(0)
+    used = sorted({index for pair in pairs for index in pair})
+    polygons = {
+        index: ground_footprint(views[index], config.footprint_grid, config.footprint_max_range_m)
+        for index in used
+    }
+    first = np.array([polygons[i] for i, _ in pairs], dtype=object)
+    second = np.array([polygons[j] for _, j in pairs], dtype=object)
+    shared = shapely.area(shapely.intersection(first, second))
+    larger = np.maximum(shapely.area(first), shapely.area(second))
+    return np.where(larger > 0, shared / np.where(larger > 0, larger, 1.0), 0.0)
+
+
+def spatial_pairs(
+    views: list[CameraView], config: PairsConfig, exclude: set[Pair]
+) -> tuple[dict[Pair, str], HspStats]:
+    """HSP pairs not already in `exclude`, with the funnel of what each rule removed."""
+    stats = HspStats()
+    survivors: list[Pair] = []
+    for i, j in knn_candidates(views, config, exclude):
+        stats.candidates += 1
+        rejected = _passes_rules(views[i], views[j], config)
+        if rejected is None:
+            survivors.append((i, j))
+        else:
+            stats.dropped[rejected] += 1
+    overlaps = footprint_overlaps(views, survivors, config)
+    pairs = {
+        pair: "hsp"
+        for pair, share in zip(survivors, overlaps, strict=True)
+        if share >= config.min_footprint_overlap
+    }
+    stats.dropped["footprint"] = len(survivors) - len(pairs)
+    stats.kept = len(pairs)
+    logger.info("HSP: %d candidates, dropped %s, kept %d", stats.candidates, stats.dropped, stats.kept)
+    return pairs, stats

@@ -1,0 +1,57 @@
+"""The pairs stage and `cama pairs` on the tiny synthetic site, after the upstream stages."""
+
+from pathlib import Path
+
+import pytest
+from site_workspace import build_site_workspace
+from typer.testing import CliRunner
+
+from cama_pipeline.cli import app
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.io import read_pairs
+from cama_pipeline.pairs.stage import run
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def workspace(tiny_site: object, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tiny_site.result.out_dir / "nuscenes"  # type: ignore[attr-defined]
+    return build_site_workspace(root, tmp_path_factory.mktemp("pairs-ws"))
+
+
+@pytest.fixture(scope="module")
+def dataset_root(tiny_site: object) -> Path:
+    return Path(tiny_site.result.out_dir) / "nuscenes"  # type: ignore[attr-defined]
+
+
+def test_pairs_are_written_counted_and_skipped_when_up_to_date(dataset_root: Path, workspace: Path) -> None:
+    first = run(PairsConfig(), dataset_root, workspace)
+    (site,) = first.sites
+    assert not site.skipped
+    stored = read_pairs(site.folder)
+    lines = (site.folder / "pairs.txt").read_text().splitlines()
+    assert len(lines) == len(stored["pairs"]) == site.counts["total"] > 0
+    assert site.counts["total"] == site.counts["temporal"] + site.counts["rig"] + site.counts["hsp"]
+    assert site.counts["total"] < 0.3 * site.counts["exhaustive"]
+    assert all((dataset_root / name).is_file() for line in lines[:20] for name in line.split())
+    assert all(name.split("/")[0] in ("samples", "sweeps") for line in lines for name in line.split())
+    assert run(PairsConfig(), dataset_root, workspace).sites[0].skipped
+    assert not run(PairsConfig(min_footprint_overlap=0.5), dataset_root, workspace).sites[0].skipped
+
+
+def test_cross_clip_pairs_exist_on_the_tiny_site(dataset_root: Path, workspace: Path) -> None:
+    (site,) = run(PairsConfig(), dataset_root, workspace).sites
+    stored = read_pairs(site.folder)
+    hsp = [p for p in stored["pairs"] if p[2] == "hsp"]
+    assert hsp and stored["hsp_funnel"]["kept"] == len(hsp)
+
+
+def test_cli_and_missing_upstream_stage(dataset_root: Path, workspace: Path, tmp_path: Path) -> None:
+    done = runner.invoke(app, ["pairs", str(dataset_root), "--workspace", str(workspace)])
+    assert done.exit_code == 0, done.output
+    assert "site-001" in done.output
+    missing = runner.invoke(app, ["pairs", str(dataset_root), "--workspace", str(tmp_path)])
+    assert missing.exit_code == 2 and "cama sites" in missing.output
+    bad = runner.invoke(app, ["pairs", str(dataset_root), "--workspace", str(workspace), "--max-dz-m", "0"])
+    assert bad.exit_code == 2 and "max_dz_m" in bad.output
