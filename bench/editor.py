@@ -9,7 +9,8 @@ with the whole site in view and the timings are read from the page:
 - drag: one vertex of a selected polyline dragged in DRAG_STEPS pointer moves; per frame, the map's render time
   (precompose -> postcompose, the OpenLayers work per frame) and the interval between animation frames (what the
   user sees; 16.7 ms at 60 Hz is the floor);
-- pan: the same two series while the whole-site view is dragged away and back.
+- pan: the same two series while the whole-site view is dragged away and back;
+- idle: the frame intervals over 2 s with nothing happening (the shared machine's own stalls, a baseline).
 
 Usage: .venv/bin/python bench/editor.py [--elements 500] [--vertices 20]
 Prints the figures and writes them to bench/results/editor.json.
@@ -64,8 +65,10 @@ def load_polylines(seeded: SeededServer, n_elements: int, n_vertices: int) -> in
     return n_elements * n_vertices
 
 
-def quantiles(values: list[float]) -> dict[str, float]:
-    """Median, 95th percentile and maximum, rounded to 0.01 ms."""
+def quantiles(values: list[float]) -> dict[str, float] | None:
+    """Median, 95th percentile and maximum, rounded to 0.01 ms; None without values (no frame rendered)."""
+    if not values:
+        return None
     ordered = sorted(values)
     p95 = ordered[min(len(ordered) - 1, round(0.95 * (len(ordered) - 1)))]
     return {
@@ -135,6 +138,13 @@ def stop_recording(page: Page) -> dict[str, Any]:
     return {"frames": len(render), "render_ms": quantiles(render), "frame_interval_ms": quantiles(raf)}
 
 
+def measure_idle(page: Page) -> dict[str, Any]:
+    """Frame intervals with nothing happening: the machine's own noise, as a baseline for pan and drag."""
+    start_recording(page)
+    page.wait_for_timeout(2000)
+    return stop_recording(page)
+
+
 def measure_pan(page: Page) -> dict[str, Any]:
     """Pan the whole-site view by dragging the map (Escape first, so nothing is selected), then back."""
     page.keyboard.press("Escape")
@@ -169,6 +179,7 @@ def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
             page = browser.new_page(viewport=VIEWPORT, bypass_csp=True)
             log_in(page, seeded.base_url, "ann")
             load = {"cold": measure_load(page, seeded), "warm": measure_load(page, seeded)}
+            idle = measure_idle(page)
             pan = measure_pan(page)
             drag = measure_drag(page, seeded, element)
             version = browser.version
@@ -183,6 +194,7 @@ def run(n_elements: int, n_vertices: int) -> dict[str, Any]:
         "load_average_1m_before": load_before,
         "load_average_1m_after": round(os.getloadavg()[0], 2),
         "load": load,
+        "idle": idle,
         "pan": pan,
         "drag": drag,
     }
