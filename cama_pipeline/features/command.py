@@ -1,0 +1,45 @@
+"""`cama features`: masked SIFT of every keyframe image and matching on the selected pairs."""
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.stage import run
+from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
+
+console = Console()
+
+
+def features_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    max_features: Annotated[int, typer.Option(help="SIFT keypoints per image at most.")] = 4096,
+    mask_dilation_px: Annotated[
+        int, typer.Option(help="Growth of the vehicle / ego-body masks, pixels.")
+    ] = 9,
+    threads: Annotated[int, typer.Option(help="Extraction and matching threads.")] = 2,
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """Extract masked SIFT into each site's COLMAP database and match the pairs from `cama pairs`."""
+    try:
+        config = FeaturesConfig(
+            max_num_features=max_features, mask_dilation_px=mask_dilation_px, num_threads=threads
+        )
+        sites = run(config, dataset, workspace, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise fail(err) from err
+    for site in sites:
+        report = site.report
+        counts = [c["features"] for c in report["images"].values()]
+        mean = sum(counts) / max(len(counts), 1)
+        console.print(
+            f"[green]{site.site_id}[/green]: {len(counts)} images, {mean:.0f} features each on average, "
+            f"{report['pairs_verified']} of {report['pairs_listed']} pairs verified "
+            f"(median {report['median_inliers']} inliers) -> {site.database}"
+        )
+        if report["low_feature_images"]:
+            console.print(
+                f"  [yellow]{len(report['low_feature_images'])} image(s) with few features[/yellow]"
+            )

@@ -1,0 +1,38 @@
+"""Parameters of feature extraction, masking and matching in one frozen, validated config."""
+
+from dataclasses import dataclass
+
+from cama_pipeline.semantics import Semantic
+
+
+@dataclass(frozen=True)
+class FeaturesConfig:
+    """What is extracted where, and how pairs are matched and verified."""
+
+    max_num_features: int = 4096
+    """SIFT keypoints kept per image at most."""
+    first_octave: int = -1
+    """SIFT's first octave: -1 upsamples small images (512 x 288 needs it for enough road features)."""
+    masked_classes: tuple[int, ...] = (int(Semantic.VEHICLE), int(Semantic.EGO))
+    """Semantic classes whose pixels carry no features: moving/parked vehicles and the ego body."""
+    mask_dilation_px: int = 9
+    """Masked regions grow by this many pixels (SIFT support regions reach past object outlines)."""
+    min_features_warning: int = 150
+    """Images with fewer features than this are reported (night, blank or blurred images)."""
+    max_ratio: float = 0.8
+    """Lowe's ratio test of the matcher."""
+    min_num_inliers: int = 15
+    """Geometric verification keeps a pair only with at least this many inliers."""
+    num_threads: int = 2
+
+    def __post_init__(self) -> None:
+        if self.max_num_features < 1:
+            raise ValueError(f"FeaturesConfig.max_num_features must be >= 1, got {self.max_num_features}")
+        if self.mask_dilation_px < 0:
+            raise ValueError(f"FeaturesConfig.mask_dilation_px must be >= 0, got {self.mask_dilation_px}")
+        if not 0 < self.max_ratio <= 1:
+            raise ValueError(f"FeaturesConfig.max_ratio must be in (0, 1], got {self.max_ratio}")
+        if self.min_num_inliers < 4:
+            raise ValueError(f"FeaturesConfig.min_num_inliers must be >= 4, got {self.min_num_inliers}")
+        if self.num_threads < 1:
+            raise ValueError(f"FeaturesConfig.num_threads must be >= 1, got {self.num_threads}")

@@ -1,0 +1,57 @@
+"""SIFT through pycolmap (CPU; COLMAP's GPU SIFT when built with it) and COLMAP's matcher on a pair list."""
+
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.interface import Features
+
+
+SIFT_DIMENSIONS = 128
+
+
+class SiftExtractor:
+    """COLMAP SIFT with this project's options."""
+
+    name = "colmap-sift"
+
+    def __init__(self, config: FeaturesConfig) -> None:
+        options = pycolmap.FeatureExtractionOptions()
+        options.num_threads = config.num_threads
+        options.sift.max_num_features = config.max_num_features
+        options.sift.first_octave = config.first_octave
+        self._extractor = pycolmap.FeatureExtractor.create(options, device=pycolmap.Device.cpu)
+
+    def extract(self, gray: np.ndarray) -> Features:
+        """SIFT keypoints (with affine shape) and uint8 descriptors of a grey image."""
+        keypoints, descriptors = self._extractor.extract_from_uint8_array(np.ascontiguousarray(gray))
+        shape = np.array([[k.x, k.y, k.a11, k.a12, k.a21, k.a22] for k in keypoints], dtype=np.float32)
+        data = np.asarray(descriptors.data, dtype=np.uint8).reshape(len(shape), SIFT_DIMENSIONS)
+        return Features(shape.reshape(-1, 6), data)
+
+
+class ColmapMatcher:
+    """COLMAP's nearest-neighbour matcher with ratio and cross check, then two-view geometric verification."""
+
+    name = "colmap-nn"
+
+    def __init__(self, config: FeaturesConfig) -> None:
+        self._matching = pycolmap.FeatureMatchingOptions()
+        self._matching.num_threads = config.num_threads
+        self._matching.sift.max_ratio = config.max_ratio
+        self._verification = pycolmap.TwoViewGeometryOptions()
+        self._verification.min_num_inliers = config.min_num_inliers
+
+    def match(self, database: Path, pairs_file: Path) -> None:
+        """Match the listed pairs (COLMAP skips pairs the database already holds)."""
+        pairing = pycolmap.ImportedPairingOptions()
+        pairing.match_list_path = str(pairs_file)
+        pycolmap.match_image_pairs(
+            str(database),
+            matching_options=self._matching,
+            pairing_options=pairing,
+            verification_options=self._verification,
+            device=pycolmap.Device.cpu,
+        )

@@ -1,0 +1,185 @@
+"""The features stage: masked features of every keyframe image into the site's COLMAP database, then
+matching with geometric verification on the pairs chosen by `cama pairs`.
+
+    <workspace>/features/<site_id>/database.db     COLMAP database (cameras, images, keypoints, matches)
+    <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
+        counts {"name": {"features", "masked"}}, "low_feature_images" [name], "pairs_listed",
+        "pairs_verified", "median_inliers", "seconds": {"extract", "match"}
+Reruns reuse the database: images already in it are not extracted again and matched pairs are not
+matched again. A change of extractor needs `--overwrite`.
+"""
+
+import json
+import logging
+import statistics
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
+from cama_pipeline.features.interface import FeatureExtractor, PairMatcher
+from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
+from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
+from cama_pipeline.io import atomic_write_json
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.pairs.io import pairs_dir
+from cama_pipeline.site.workspace import (
+    WorkspaceError,
+    default_workspace,
+    read_site_manifest,
+    read_sites_index,
+    site_manifest_path,
+    sites_index_path,
+)
+
+logger = logging.getLogger(__name__)
+FEATURES_SCHEMA = "cama.features/1"
+
+
+@dataclass(frozen=True)
+class SiteFeatures:
+    """One site's database and what went into it."""
+
+    site_id: str
+    database: Path
+    report: dict[str, Any]
+
+
+def features_dir(workspace: Path, site_id: str) -> Path:
+    """`<workspace>/features/<site_id>/`."""
+    return Path(workspace) / "features" / site_id
+
+
+def image_features(
+    dataset: Dataset, view: CameraView, extractor: FeatureExtractor, config: FeaturesConfig
+) -> tuple[Any, int]:
+    """The view's features with those on the ego body and vehicles removed, and how many were removed."""
+    image = dataset.image(view.token)
+    gray = cv2.cvtColor(image.load_rgb(), cv2.COLOR_RGB2GRAY)
+    features = extractor.extract(gray)
+    if image.semantic_mask_path is None:
+        logger.warning("%s has no semantic mask: its features are not masked", view.name)
+        return features, 0
+    blocked = blocked_pixels(image.load_semantic(), config.masked_classes, config.mask_dilation_px)
+    keep = keypoints_allowed(features.keypoints[:, :2], blocked)
+    return features.subset(keep), int((~keep).sum())
+
+
+def _extract_all(
+    dataset: Dataset,
+    views: list[CameraView],
+    store: FeatureStore,
+    extractor: FeatureExtractor,
+    config: FeaturesConfig,
+) -> dict[str, dict[str, int]]:
+    """Extract the views the database lacks, with a progress bar; counts per newly extracted image."""
+    counts: dict[str, dict[str, int]] = {}
+    todo = [view for view in views if not store.has(view.name)]
+    columns = (TextColumn("features"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, transient=True) as progress:
+        for view in progress.track(todo, description="features"):
+            features, masked = image_features(dataset, view, extractor, config)
+            store.add(view, features)
+            counts[view.name] = {"features": len(features.keypoints), "masked": masked}
+    return counts
+
+
+def _previous_report(path: Path, extractor: FeatureExtractor) -> dict[str, Any]:
+    """The stored report (empty when none); WorkspaceError when it was made by another extractor."""
+    if not path.is_file():
+        return {}
+    report: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    if report.get("extractor") != extractor.name:
+        raise WorkspaceError(
+            f"{path}: database made with extractor {report.get('extractor')!r}, not {extractor.name!r}; "
+            "rerun with --overwrite"
+        )
+    return report
+
+
+def run_site(
+    dataset: Dataset,
+    workspace: Path,
+    site_id: str,
+    config: FeaturesConfig,
+    *,
+    extractor: FeatureExtractor,
+    matcher: PairMatcher,
+    overwrite: bool = False,
+) -> SiteFeatures:
+    """Extract and match one site (see the module docstring for the files)."""
+    folder = features_dir(workspace, site_id)
+    database, report_path = folder / "database.db", folder / "features.json"
+    pairs_file = pairs_dir(workspace, site_id) / "pairs.txt"
+    if not pairs_file.is_file():
+        raise FileNotFoundError(f"{pairs_file}: not found; run `cama pairs` first")
+    if overwrite:
+        database.unlink(missing_ok=True)
+        report_path.unlink(missing_ok=True)
+    previous = _previous_report(report_path, extractor)
+    views = site_views(dataset, read_site_manifest(site_manifest_path(workspace, site_id)))
+    started = time.perf_counter()
+    with open_database(database) as db:
+        counts = {
+            **previous.get("images", {}),
+            **_extract_all(dataset, views, FeatureStore(db), extractor, config),
+        }
+    extracted = time.perf_counter()
+    matcher.match(database, pairs_file)
+    with open_database(database) as db:
+        verified = verified_pairs(db)
+    low = sorted(name for name, c in counts.items() if c["features"] < config.min_features_warning)
+    if low:
+        logger.warning(
+            "%d image(s) with under %d features, e.g. %s", len(low), config.min_features_warning, low[:3]
+        )
+    report = {
+        "schema": FEATURES_SCHEMA,
+        "site_id": site_id,
+        "extractor": extractor.name,
+        "matcher": matcher.name,
+        "images": counts,
+        "low_feature_images": low,
+        "pairs_listed": sum(1 for line in pairs_file.read_text().splitlines() if line.strip()),
+        "pairs_verified": len(verified),
+        "median_inliers": statistics.median(verified.values()) if verified else 0,
+        "seconds": {"extract": extracted - started, "match": time.perf_counter() - extracted},
+    }
+    atomic_write_json(report_path, report, indent=1)
+    return SiteFeatures(site_id, database, report)
+
+
+def run(
+    config: FeaturesConfig,
+    dataset_root: Path,
+    workspace: Path | None = None,
+    *,
+    extractor: FeatureExtractor | None = None,
+    matcher: PairMatcher | None = None,
+    overwrite: bool = False,
+) -> list[SiteFeatures]:
+    """Features and matches for every site of the workspace (after `cama pairs`); SIFT and COLMAP's matcher
+    unless another extractor/matcher pair is given."""
+    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
+    index = read_sites_index(sites_index_path(workspace))
+    dataset = load_dataset(Path(dataset_root))
+    extractor = extractor or SiftExtractor(config)
+    matcher = matcher or ColmapMatcher(config)
+    return [
+        run_site(
+            dataset,
+            workspace,
+            site["site_id"],
+            config,
+            extractor=extractor,
+            matcher=matcher,
+            overwrite=overwrite,
+        )
+        for site in index["sites"]
+    ]

@@ -1,0 +1,123 @@
+"""`cama features` on a few keyframes of the tiny site: masked SIFT into COLMAP's database, matched pairs."""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+from typer.testing import CliRunner
+
+sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
+from site_workspace import build_site_workspace  # noqa: E402
+
+from cama_pipeline.cli import app  # noqa: E402
+from cama_pipeline.data import load_dataset  # noqa: E402
+from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
+from cama_pipeline.features.database import FeatureStore, open_database  # noqa: E402
+from cama_pipeline.features.sift import SiftExtractor  # noqa: E402
+from cama_pipeline.features.stage import features_dir, run  # noqa: E402
+from cama_pipeline.pairs.cameras import site_views  # noqa: E402
+from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
+from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
+from cama_pipeline.semantics import Semantic  # noqa: E402
+from cama_pipeline.site.workspace import WorkspaceError, read_site_manifest  # noqa: E402
+
+KEYFRAMES_PER_SCENE = 2
+runner = CliRunner()
+pytestmark = pytest.mark.slow
+
+
+def keep_first_keyframes(manifest_path: Path, n: int) -> None:
+    """Trim a site manifest to the first `n` keyframes of each scene (a small site for a quick test)."""
+    manifest = json.loads(manifest_path.read_text())
+    for scene in manifest["scenes"]:
+        seen = 0
+        for frame in scene["frames"]:
+            seen += bool(frame["keyframe"])
+            frame["keyframe"] = bool(frame["keyframe"]) and seen <= n
+    manifest_path.write_text(json.dumps(manifest))
+
+
+@pytest.fixture(scope="module")
+def dataset_root(tiny_site: object) -> Path:
+    return Path(tiny_site.result.out_dir) / "nuscenes"  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module")
+def workspace(dataset_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = build_site_workspace(dataset_root, tmp_path_factory.mktemp("features-ws"))
+    keep_first_keyframes(folder / "sites" / "site-001" / "manifest.json", KEYFRAMES_PER_SCENE)
+    run_pairs(PairsConfig(), dataset_root, folder)
+    return folder
+
+
+def test_features_are_masked_stored_and_matched(dataset_root: Path, workspace: Path) -> None:
+    (site,) = run(FeaturesConfig(), dataset_root, workspace)
+    report = site.report
+    views = site_views(
+        load_dataset(dataset_root), read_site_manifest(workspace / "sites" / "site-001" / "manifest.json")
+    )
+    assert set(report["images"]) == {v.name for v in views}
+    assert report["pairs_verified"] > 0 and report["median_inliers"] >= 15
+    assert sum(c["masked"] for c in report["images"].values()) > 0  # the trunk and vehicles removed features
+    dataset = load_dataset(dataset_root)
+    with open_database(site.database) as db:
+        assert db.num_images() == len(views)
+        on_blocked = 0
+        for view in views:
+            image = db.read_image_with_name(view.name)
+            keypoints = db.read_keypoints(image.image_id)[:, :2]
+            semantic = dataset.image(view.token).load_semantic()
+            rows = np.clip(np.round(keypoints[:, 1]).astype(int), 0, semantic.shape[0] - 1)
+            cols = np.clip(np.round(keypoints[:, 0]).astype(int), 0, semantic.shape[1] - 1)
+            on_blocked += int(np.isin(semantic[rows, cols], [Semantic.VEHICLE, Semantic.EGO]).sum())
+    assert on_blocked == 0
+
+
+def test_rerun_reuses_the_database_and_another_extractor_is_refused(
+    dataset_root: Path, workspace: Path
+) -> None:
+    report_path = features_dir(workspace, "site-001") / "features.json"
+    before = json.loads(report_path.read_text())
+    (again,) = run(FeaturesConfig(), dataset_root, workspace)
+    assert again.report["images"] == before["images"]
+    assert again.report["seconds"]["extract"] < 0.5 * max(before["seconds"]["extract"], 0.5)
+    stale = json.loads(report_path.read_text())
+    stale["extractor"] = "someone-elses-features"
+    report_path.write_text(json.dumps(stale))
+    with pytest.raises(WorkspaceError, match="overwrite"):
+        run(FeaturesConfig(), dataset_root, workspace)
+    report_path.write_text(json.dumps(before))
+
+
+def test_blank_and_dark_images_give_few_features_and_a_warning_not_a_crash(
+    dataset_root: Path, workspace: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    extractor = SiftExtractor(FeaturesConfig())
+    blank = extractor.extract(np.zeros((288, 512), dtype=np.uint8))
+    assert len(blank.keypoints) == 0
+    copy = tmp_path / "ws"
+    shutil.copytree(workspace, copy)
+    views = site_views(
+        load_dataset(dataset_root), read_site_manifest(copy / "sites" / "site-001" / "manifest.json")
+    )
+    with open_database(tmp_path / "blank.db") as db:
+        assert FeatureStore(db).add(views[0], blank) > 0
+        assert db.num_keypoints_for_image(1) == 0
+    with caplog.at_level("WARNING"):
+        (site,) = run(FeaturesConfig(min_features_warning=10**6), dataset_root, copy)
+    assert len(site.report["low_feature_images"]) == len(views)
+    assert "features" in caplog.text
+
+
+def test_cli_reports_and_names_missing_pairs(dataset_root: Path, workspace: Path, tmp_path: Path) -> None:
+    done = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(workspace)])
+    assert done.exit_code == 0, done.output
+    assert "pairs verified" in done.output
+    shutil.copytree(workspace / "sites", tmp_path / "sites")
+    missing = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(tmp_path)])
+    assert missing.exit_code == 2 and "cama pairs" in missing.output
+    assert pycolmap is not None
