@@ -8,7 +8,6 @@ import pycolmap
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.interface import Features
 
-
 SIFT_DIMENSIONS = 128
 
 
