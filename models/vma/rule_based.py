@@ -34,9 +34,15 @@ class RuleConfig:
     """Largest gap between aligned pieces joined into one divider (dash gaps)."""
     join_angle_deg: float = 20.0
     """Largest direction change across a joined gap."""
+    join_boundary_gap_m: float = 1.5
+    """Largest gap joined between boundary pieces (curbs have no dashes; this bridges noise breaks)."""
     min_length_m: float = 2.0
     """Shorter polylines are dropped."""
     min_crosswalk_area_m2: float = 4.0
+    min_blob_m2: float = 0.1
+    """Mask pieces smaller than this are noise and removed before skeletonising."""
+    min_piece_m: float = 0.5
+    """Skeleton pieces shorter than this are dropped before joining."""
     simplify_m: float = 0.1
     """Douglas-Peucker tolerance."""
     support_radius_m: float = 0.4
@@ -55,8 +61,10 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
     config = config or RuleConfig()
     semantic = rasters.semantic
     vectors = [
-        *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, join=True),
-        *_line_vectors(rasters, semantic == int(Semantic.CURB), "boundary", config, join=False),
+        *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m),
+        *_line_vectors(
+            rasters, semantic == int(Semantic.CURB), "boundary", config, config.join_boundary_gap_m
+        ),
         *_crosswalks(rasters, semantic == int(Semantic.CROSSWALK), config),
     ]
     logger.info("rule-based proposer: %d vectors on %s", len(vectors), rasters.name)
@@ -69,16 +77,16 @@ def _disk(radius_px: float) -> np.ndarray:
 
 
 def _line_vectors(
-    rasters: SiteRasters, mask: np.ndarray, cls: str, config: RuleConfig, *, join: bool
+    rasters: SiteRasters, mask: np.ndarray, cls: str, config: RuleConfig, join_gap_m: float
 ) -> list[Vector]:
-    """Skeleton polylines of one class mask; aligned pieces joined across gaps when `join`."""
+    """Skeleton polylines of one class mask; aligned pieces joined across gaps up to `join_gap_m`."""
     res = rasters.resolution_m
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_line_m / res))
-    paths = [rasters.global_from_pixel(p) for p in skeleton_paths(closed > 0)]
-    paths = [p for p in paths if len(p) >= 2]
-    if join:
-        joined = join_polylines([(p, 1.0) for p in paths], config.join_gap_m, config.join_angle_deg)
-        paths = [p for p, _ in joined]
+    closed = remove_small_blobs(closed, round(config.min_blob_m2 / res**2))
+    min_pixels = max(2, round(config.min_piece_m / res))
+    paths = [rasters.global_from_pixel(p) for p in skeleton_paths(closed > 0, min_pixels)]
+    joined = join_polylines([(p, 1.0) for p in paths], join_gap_m, config.join_angle_deg)
+    paths = [p for p, _ in joined]
     support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
     out = []
     for path in paths:
@@ -88,6 +96,14 @@ def _line_vectors(
         points = np.asarray(line.coords)
         out.append(Vector(cls, points, _confidence(rasters, support, points, config)))
     return out
+
+
+def remove_small_blobs(mask: np.ndarray, min_pixels: int) -> np.ndarray:
+    """`mask` (uint8) without the 8-connected pieces of fewer than `min_pixels` cells."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_pixels
+    keep[0] = False
+    return keep[labels].astype(np.uint8)
 
 
 def _confidence(rasters: SiteRasters, support: np.ndarray, points: np.ndarray, config: RuleConfig) -> float:
@@ -107,6 +123,7 @@ def _confidence(rasters: SiteRasters, support: np.ndarray, points: np.ndarray, c
 def _crosswalks(rasters: SiteRasters, mask: np.ndarray, config: RuleConfig) -> list[Vector]:
     """Rotated rectangles around crosswalk stripe blocks; confidence = stripe fill within the closed block."""
     res = rasters.resolution_m
+    mask = remove_small_blobs(mask.astype(np.uint8), round(config.min_blob_m2 / res**2)) > 0
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_crosswalk_m / res))
     count, labels = cv2.connectedComponents(closed)
     out = []
