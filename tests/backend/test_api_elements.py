@@ -170,3 +170,20 @@ def test_history_restore_and_soft_delete(
         == 409
     )
     assert len(client.get(f"{url}/history", headers=headers["lead"]).json()) == 4
+
+
+def test_only_a_lead_restores_across_a_leads_decision(
+    client: TestClient, headers: Headers, site_id: int, make_element: MakeElement
+) -> None:
+    url = f"/api/sites/{site_id}/elements/{make_element()['id']}"
+    assert review(client, url, "accepted", 1, headers["annotator"]).status_code == 200
+    undone = client.post(f"{url}/history/1/restore", json={"version": 2}, headers=headers["annotator"])
+    assert undone.status_code == 200, undone.text  # an annotator may undo their own verdict
+    assert review(client, url, "accepted", 3, headers["annotator"]).status_code == 200
+    assert review(client, url, "approved", 4, headers["lead"]).status_code == 200
+    refused = client.post(f"{url}/history/4/restore", json={"version": 5}, headers=headers["annotator"])
+    assert refused.status_code == 403 and "lead" in refused.json()["detail"]
+    by_lead = client.post(f"{url}/history/4/restore", json={"version": 5}, headers=headers["lead"])
+    assert by_lead.status_code == 200 and by_lead.json()["state"] == "accepted"
+    back = client.post(f"{url}/history/5/restore", json={"version": 6}, headers=headers["annotator"])
+    assert back.status_code == 403  # nor bring an approval back

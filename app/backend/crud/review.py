@@ -78,9 +78,12 @@ def element_history(*, session: Session, site_id: int, element_id: int) -> list[
 
 
 def restore_version(
-    *, session: Session, site_id: int, element_id: int, restore: int, version: int, username: str
+    *, session: Session, site_id: int, element_id: int, restore: int, version: int, username: str, role: str
 ) -> Element:
-    """Make the content of an earlier version the new current version (a new log entry; nothing erased)."""
+    """Make the content of an earlier version the new current version (a new log entry; nothing erased).
+
+    Only a lead (or admin) may restore across a lead's decision: an annotator can neither undo an approval or
+    return nor bring one back, as the review transitions forbid the same moves."""
     element = get_element(session=session, site_id=site_id, element_id=element_id)
     check_version(element, version)
     entry = session.scalar(
@@ -88,8 +91,12 @@ def restore_version(
     )
     if entry is None:
         raise NotFoundError(f"element {element_id} has no version {restore}")
-    before = snapshot(element)
     content = entry.after
+    if role not in ("lead", "admin") and LEAD_STATES & {element.state, content["state"]}:
+        raise ForbiddenError(
+            f"state: only a lead may restore between {element.state!r} and {content['state']!r} (a lead's decision)"
+        )
+    before = snapshot(element)
     element.cls = content["class"]
     _set_points(element, [(p[0], p[1]) for p in content["points"]])
     element.confidence = content["confidence"]

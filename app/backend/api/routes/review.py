@@ -51,7 +51,8 @@ def restore(
     session: SessionDep,
     user: CurrentUser,
 ) -> ElementPublic:
-    """Make an earlier version's content current again, as a new version."""
+    """Make an earlier version's content current again, as a new version (across a lead's approve/return:
+    leads only, 403 otherwise)."""
     element = crud.restore_version(
         session=session,
         site_id=site_id,
@@ -59,5 +60,6 @@ def restore(
         restore=restore_version,
         version=request.version,
         username=user.username,
+        role=user.role,
     )
     return crud.public(element)
