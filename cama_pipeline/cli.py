@@ -71,6 +71,7 @@ def synth(
 def _register_stage_commands() -> None:
     """Commands whose implementation lives beside their stage (imported here, registered by name)."""
     from annotations.export_command import export_command, import_command
+    from app.backend.demo import demo_command
     from app.backend.serve import serve_command
     from cama_pipeline.evaluate.command import eval_command
     from cama_pipeline.features.command import features_command
@@ -90,6 +91,7 @@ def _register_stage_commands() -> None:
     app.command("export")(export_command)
     app.command("import")(import_command)
     app.command("serve")(serve_command)
+    app.command("demo")(demo_command)
     app.command("wigo")(wigo_command)
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)

@@ -1,0 +1,100 @@
+"""`cama demo`: load a generated site and its VMA proposals into a backend database, then serve the editor.
+
+The demo server keeps its database in `--data-dir`; a rerun reuses it (the site and its proposals are loaded
+once, so people's edits survive restarts). Three demo accounts are made on first run, one per role, with the
+password from CAMA_DEMO_PASSWORD (default `cama-demo`): they are printed with the URL.
+"""
+
+import logging
+import os
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from annotations.schema import AnnotationSet
+from app.backend import crud
+from app.backend.config import Settings
+from app.backend.errors import InvalidInputError
+from app.backend.models import Site, User
+from app.backend.schemas import ElementCreate, SiteCreate
+
+logger = logging.getLogger(__name__)
+DEMO_USERS = (("admin", "admin"), ("lead", "lead"), ("annotator", "annotator"))
+DEFAULT_PASSWORD = "cama-demo"
+
+
+def ensure_demo_users(session: Session, password: str, scrypt_n: int) -> None:
+    """One account per role, made only when missing."""
+    for username, role in DEMO_USERS:
+        if session.scalar(select(User).where(User.username == username)) is None:
+            crud.create_user(
+                session=session, username=username, password=password, role=role, scrypt_n=scrypt_n
+            )
+
+
+def load_site(
+    session: Session, site_dir: Path, proposals: Path | None, name: str, *, margin_m: float
+) -> tuple[Site, int]:
+    """Register the site (once) and bulk-load its proposals (once); returns the site and how many were loaded."""
+    existing = session.scalar(select(Site).where(Site.name == name))
+    if existing is not None:
+        return existing, 0
+    site = crud.create_site(session=session, site_in=SiteCreate(name=name, synthetic_dir=str(site_dir)))
+    if proposals is None:
+        return site, 0
+    try:
+        annotation_set = AnnotationSet.read_json(proposals)
+    except (OSError, ValueError) as err:
+        raise InvalidInputError("proposals", f"{proposals}: {err}") from None
+    elements = [
+        ElementCreate(cls=e.cls, points=list(e.points_2d), confidence=e.confidence, source="proposal")
+        for e in annotation_set.elements
+    ]
+    if elements:
+        crud.create_elements(
+            session=session, site_id=site.id, elements_in=elements, username="vma", margin_m=margin_m
+        )
+    return site, len(elements)
+
+
+def demo_command(
+    site_dir: Annotated[Path, typer.Argument(help="A site folder written by `cama synth`.")] = Path(
+        "data/synthetic/default"
+    ),
+    proposals: Annotated[
+        Path | None, typer.Option(help="Proposals JSON from `cama propose` to load into the site.")
+    ] = None,
+    data_dir: Annotated[Path, typer.Option(help="The demo server's database and tiles.")] = Path(
+        "data/demo-server"
+    ),
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port.")] = 8000,
+) -> None:
+    """Load the site and its proposals into the backend and serve the editor (Ctrl+C stops it)."""
+    import uvicorn
+
+    from app.backend.main import create_app
+
+    password = os.environ.get("CAMA_DEMO_PASSWORD", DEFAULT_PASSWORD)
+    settings = Settings(data_dir=data_dir)
+    app = create_app(settings)
+    try:
+        with app.state.sessionmaker() as session:
+            ensure_demo_users(session, password, settings.scrypt_n)
+            site, loaded = load_site(
+                session, site_dir, proposals, site_dir.resolve().name, margin_m=settings.extent_margin_m
+            )
+            site_id = site.id
+    except InvalidInputError as err:
+        typer.echo(f"error: {err.field}: {err.message}", err=True)
+        raise typer.Exit(code=2) from err
+    url = f"http://{host}:{port}/"
+    typer.echo(f"site {site_dir} loaded as site {site_id}" + (f" with {loaded} proposals" if loaded else ""))
+    typer.echo(f"editor: {url}#/site/{site_id}   API docs: {url}docs")
+    typer.echo(
+        f"log in as annotator, lead or admin; password {password!r} (set CAMA_DEMO_PASSWORD to change)"
+    )
+    uvicorn.run(app, host=host, port=port, log_level="warning")

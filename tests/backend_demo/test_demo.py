@@ -1,0 +1,60 @@
+"""`cama demo`: a generated site and its proposals loaded once into the backend, demo accounts, then serving."""
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from annotations.schema import AnnotationSet, Georeference, MapElement
+from app.backend.config import Settings
+from app.backend.main import create_app
+from app.backend.models import Element
+from cama_pipeline.cli import app as cli
+
+runner = CliRunner()
+
+
+def proposals_file(site_dir: Path, path: Path) -> Path:
+    """Two proposals in the middle of the site, written as `cama propose` writes them."""
+    origin = json.loads((site_dir / "manifest.json").read_text())["config"]["site_origin_xy"]
+    georef = Georeference.from_raster_file(
+        site_dir / "ground_truth" / "bev" / "georeference.json", site_origin_xy=tuple(origin)
+    )
+    cx = georef.origin_xy[0] - origin[0] + georef.width * georef.resolution / 2
+    cy = georef.origin_xy[1] - origin[1] - georef.height * georef.resolution / 2
+    elements = [
+        MapElement(
+            id=str(i),
+            cls="divider",
+            points_2d=[(cx + i, cy), (cx + i, cy + 10)],
+            source="proposal",
+            confidence=0.2 + 0.3 * i,
+        )
+        for i in range(2)
+    ]
+    AnnotationSet(site_id="demo", georeference=georef, elements=elements).write_json(path)
+    return path
+
+
+def test_demo_loads_once_and_serves(site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    served: list[object] = []
+    monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: served.append(kwargs))
+    proposals = proposals_file(site_root, tmp_path / "proposals.json")
+    args = ["demo", str(site_root), "--proposals", str(proposals), "--data-dir", str(tmp_path / "server")]
+    first = runner.invoke(cli, args)
+    assert first.exit_code == 0, first.output
+    assert "with 2 proposals" in first.output and "#/site/1" in first.output and "cama-demo" in first.output
+    again = runner.invoke(cli, args)
+    assert again.exit_code == 0 and "proposals" not in again.output.splitlines()[0]
+    assert len(served) == 2 and served[0]["port"] == 8000
+    app = create_app(Settings(data_dir=tmp_path / "server"))
+    with app.state.sessionmaker() as session:
+        assert session.query(Element).count() == 2  # loaded once, not twice
+        assert {e.confidence for e in session.query(Element)} == {0.2, 0.5}
+
+
+def test_demo_names_a_folder_that_is_not_a_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: None)
+    result = runner.invoke(cli, ["demo", str(tmp_path), "--data-dir", str(tmp_path / "server")])
+    assert result.exit_code == 2 and "synthetic_dir" in result.output
