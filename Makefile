@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_ROOT ?= data/synthetic/default
 
-.PHONY: demo test setup lint clean frontend chromium
+.PHONY: demo test setup lint clean frontend chromium postgresql
 
 # The browser editor: `npm ci` when the lock file changed, the Vite build when its output is older than a source.
 FRONTEND := app/frontend
@@ -14,6 +14,8 @@ FRONTEND_BUILT := $(FRONTEND)/dist/index.html
 FRONTEND_SOURCES := $(shell find $(FRONTEND)/src -type f) $(addprefix $(FRONTEND)/,index.html vite.config.js package.json)
 # Debian's Chromium for the browser tests, installed only when missing.
 CHROMIUM := /usr/bin/chromium
+# Debian's PostgreSQL server programs: the backend tests also run on a throwaway PostgreSQL cluster.
+INITDB := $(firstword $(wildcard /usr/lib/postgresql/*/bin/initdb))
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -39,15 +41,20 @@ $(CHROMIUM):
 
 chromium: $(CHROMIUM)
 
+postgresql:
+ifeq ($(INITDB),)
+	apt-get update && apt-get install -y postgresql
+endif
+
 demo: $(STAMP) frontend
 	$(BIN)/cama synth --preset default --out $(DEMO_ROOT)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy annotations app/backend cama_pipeline/data cama_pipeline/evaluate
+	$(BIN)/mypy annotations app/backend cama_pipeline models
 
-test: $(STAMP) frontend chromium
+test: $(STAMP) frontend chromium postgresql
 	$(MAKE) lint
 	$(BIN)/python -m pytest -q
 

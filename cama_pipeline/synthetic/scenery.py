@@ -229,7 +229,8 @@ def plan_traffic(
         lane = layout.lanes[name]
         s0 = float(np.clip(ego_start_s_m + rng.uniform(-10, 45), 0, lane.length))
         size = VAN_SIZE_M if rng.uniform() < 0.25 else CAR_SIZE_M
-        color = tuple(float(c) for c in rng.uniform(0.1, 0.9, size=3))
+        red, green, blue = (float(c) for c in rng.uniform(0.1, 0.9, size=3))
+        color = (red, green, blue)
         vehicles.append(MovingVehicle(lane, s0, float(rng.uniform(4.0, 10.0)), start_time_us, size, color))
     return tuple(vehicles)
 
