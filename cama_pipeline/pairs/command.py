@@ -31,7 +31,7 @@ def pairs_command(
     ] = 3.0,
     min_footprint_overlap: Annotated[
         float, typer.Option(help="Least shared ground (share of the larger footprint) of a spatial pair.")
-    ] = 0.15,
+    ] = 0.3,
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Sequential and HSP pairs of each site's keyframe images (after `cama sites`)."""

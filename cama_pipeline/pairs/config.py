@@ -28,7 +28,7 @@ class PairsConfig:
     """Ground footprints reach at most this far from the camera (far road is too oblique to match)."""
     footprint_grid: tuple[int, int] = (20, 72)
     """Ground samples around the camera (ranges, azimuths) projected into the image to trace the footprint."""
-    min_footprint_overlap: float = 0.15
+    min_footprint_overlap: float = 0.3
     """Least overlap of two ground footprints, as a share of the smaller one, to keep a spatial pair."""
 
     def __post_init__(self) -> None:

@@ -1,0 +1,199 @@
+"""Pair-selection benchmark: exhaustive vs sequential vs sequential + HSP on a synthetic site.
+
+For the keyframe images of each site (after wigo -> keyframes -> sites, run here into a temporary workspace):
+  pairs      how many pairs each strategy selects;
+  recall     the share of truly co-visible pairs each strategy selects. Ground truth (true poses, true elevation
+             raster, `cama_pipeline/evaluate/covisibility.py`): C[a, b] = share of camera a's ground within 25 m
+             that camera b sees. Strongly co-visible: min(C[a, b], C[b, a]) >= 0.5 (each sees half the other's
+             ground); also reported for >= 0.3 and for max(C) >= 0.5;
+  matching   SIFT on the images of a random sample of each strategy's pairs, then COLMAP matching and geometric
+             verification of that sample: seconds per pair (so the estimated total for every pair of the strategy,
+             exhaustive included, which is too slow to run whole) and the share of sampled pairs that verify.
+Ratios (HSP / exhaustive pairs and matching time) come from the same run.
+
+Usage: .venv/bin/python bench/pairs.py [--site data/synthetic/default] [--sample 150]
+Prints the figures and writes them to bench/results/pairs.json (one entry per site folder given).
+"""
+
+import argparse
+import json
+import logging
+import platform
+import random
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cama_pipeline.data import load_dataset
+from cama_pipeline.evaluate.covisibility import ElevationSurface, covisibility_matrix
+from cama_pipeline.evaluate.inputs import load_true_poses
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
+from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
+from cama_pipeline.features.stage import image_features
+from cama_pipeline.keyframes import KeyframeConfig
+from cama_pipeline.keyframes import run as run_keyframes
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.sequential import Pair, sequential_pairs
+from cama_pipeline.pairs.stage import select_pairs
+from cama_pipeline.site.config import SiteConfig
+from cama_pipeline.site.stage import run as run_sites
+from cama_pipeline.site.workspace import read_site_manifest, read_sites_index
+from cama_pipeline.wigo import WigoConfig
+from cama_pipeline.wigo import run as run_wigo
+
+RESULTS = Path(__file__).parent / "results"
+STRONG = {"mutual>=0.5": ("min", 0.5), "mutual>=0.3": ("min", 0.3), "max>=0.5": ("max", 0.5)}
+logger = logging.getLogger("bench.pairs")
+
+
+def true_views(views: list[CameraView], site: Path) -> list[CameraView]:
+    """The same cameras posed by the ground truth."""
+    truth = load_true_poses(site / "ground_truth" / "poses.json")
+    return [replace(view, world_from_ego=truth[view.token].matrix()) for view in views]
+
+
+def surface(site: Path) -> ElevationSurface:
+    """The ground-truth elevation raster."""
+    bev = site / "ground_truth" / "bev"
+    geo = json.loads((bev / "georeference.json").read_text())
+    return ElevationSurface(np.load(bev / "elevation.npy"), tuple(geo["origin_xy"]), float(geo["resolution"]))
+
+
+def strong_sets(covisibility: np.ndarray) -> dict[str, set[Pair]]:
+    """Truly co-visible pairs under each definition."""
+    upper = np.triu(np.ones_like(covisibility, dtype=bool), 1)
+    sets = {}
+    for name, (how, threshold) in STRONG.items():
+        both = np.minimum if how == "min" else np.maximum
+        a, b = np.nonzero(upper & (both(covisibility, covisibility.T) >= threshold))
+        sets[name] = {(int(i), int(j)) for i, j in zip(a, b, strict=True)}
+    return sets
+
+
+def time_matching(
+    dataset: Any, views: list[CameraView], pairs: list[Pair], folder: Path, config: FeaturesConfig
+) -> dict[str, float]:
+    """Extract the sampled pairs' images and match the sample; seconds per image and per pair, verified share."""
+    used = sorted({i for pair in pairs for i in pair})
+    extractor, matcher = SiftExtractor(config), ColmapMatcher(config)
+    database = folder / "database.db"
+    started = time.perf_counter()
+    with open_database(database) as db:
+        store = FeatureStore(db)
+        for index in used:
+            store.add(views[index], image_features(dataset, views[index], extractor, config)[0])
+    extracted = time.perf_counter()
+    pairs_file = folder / "pairs.txt"
+    pairs_file.write_text("".join(f"{views[i].name} {views[j].name}\n" for i, j in pairs))
+    matcher.match(database, pairs_file)
+    matched = time.perf_counter()
+    with open_database(database) as db:
+        verified = verified_pairs(db)
+    return {
+        "sampled_pairs": len(pairs),
+        "seconds_per_image": (extracted - started) / max(len(used), 1),
+        "seconds_per_pair": (matched - extracted) / max(len(pairs), 1),
+        "verified_share": len(verified) / max(len(pairs), 1),
+    }
+
+
+def bench_site(site: Path, sample: int, seed: int) -> dict[str, Any]:
+    """All figures of one generated site."""
+    dataset_root = site / "nuscenes"
+    dataset = load_dataset(dataset_root)
+    out: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="cama-bench-pairs-") as tmp:
+        workspace = Path(tmp)
+        run_wigo(WigoConfig(), dataset_root, workspace, show_progress=False)
+        run_keyframes(KeyframeConfig(), dataset_root, workspace)
+        run_sites(SiteConfig(), dataset_root, workspace, dataset=dataset)
+        for entry in read_sites_index(workspace / "sites" / "index.json")["sites"]:
+            site_id = entry["site_id"]
+            views = site_views(dataset, read_site_manifest(workspace / "sites" / site_id / "manifest.json"))
+            out[site_id] = bench_views(dataset, site, views, workspace / site_id, sample, seed)
+    return out
+
+
+def bench_views(
+    dataset: Any, site: Path, views: list[CameraView], folder: Path, sample: int, seed: int
+) -> dict[str, Any]:
+    """Pairs, recall and matching cost of each strategy on one site's keyframe images."""
+    config = PairsConfig()
+    started = time.perf_counter()
+    chosen, funnel = select_pairs(views, config)
+    selection_s = time.perf_counter() - started
+    started = time.perf_counter()
+    strong = strong_sets(covisibility_matrix(true_views(views, site), surface(site), grid=(15, 60)))
+    truth_s = time.perf_counter() - started
+    n = len(views)
+    exhaustive_count = n * (n - 1) // 2
+    strategies: dict[str, set[Pair] | None] = {
+        "exhaustive": None,
+        "sequential": set(sequential_pairs(views, config)),
+        "sequential+hsp": set(chosen),
+    }
+    rng = random.Random(seed)
+    report: dict[str, Any] = {"images": n, "selection_seconds": selection_s, "truth_seconds": truth_s}
+    report["strong_pairs"] = {name: len(pairs) for name, pairs in strong.items()}
+    report["hsp_funnel"] = funnel
+    for name, pairs in strategies.items():
+        count = exhaustive_count if pairs is None else len(pairs)
+        recall = {k: 1.0 if pairs is None else len(s & pairs) / max(len(s), 1) for k, s in strong.items()}
+        if pairs is None:
+            drawn: set[Pair] = set()
+            while len(drawn) < min(sample, exhaustive_count):
+                i, j = sorted(rng.sample(range(n), 2))
+                drawn.add((i, j))
+            picked = sorted(drawn)
+        else:
+            picked = sorted(rng.sample(sorted(pairs), min(sample, len(pairs))))
+        (folder / name).mkdir(parents=True, exist_ok=True)
+        timing = time_matching(dataset, views, picked, folder / name, FeaturesConfig())
+        report[name] = {
+            "pairs": count,
+            "share_of_exhaustive": count / exhaustive_count,
+            "recall": recall,
+            "matching": timing,
+            "estimated_matching_seconds": timing["seconds_per_pair"] * count,
+        }
+        logger.info("%s: %d pairs, recall %s, %.3f s/pair", name, count, recall, timing["seconds_per_pair"])
+    hsp, full = report["sequential+hsp"], report["exhaustive"]
+    report["ratios"] = {
+        "pairs_hsp_over_exhaustive": hsp["pairs"] / full["pairs"],
+        "matching_time_hsp_over_exhaustive": hsp["estimated_matching_seconds"]
+        / full["estimated_matching_seconds"],
+    }
+    return report
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--site", type=Path, action="append", help="Generated site folder (repeatable).")
+    parser.add_argument(
+        "--sample", type=int, default=150, help="Pairs matched per strategy to time matching."
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--output", type=Path, default=RESULTS / "pairs.json")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    sites = args.site or [Path("data/synthetic/default")]
+    results: dict[str, Any] = {
+        "config": {"pairs": PairsConfig().__dict__, "sample": args.sample, "strong": STRONG},
+        "machine": {"python": platform.python_version(), "platform": platform.platform()},
+        "sites": {str(site): bench_site(site, args.sample, args.seed) for site in sites},
+    }
+    if not any("large" in str(site) for site in sites):
+        results["large"] = "not run: the large preset was not generated in this session"
+    print(json.dumps(results, indent=2, default=str))
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(results, indent=2, default=str) + "\n")
+
+
+if __name__ == "__main__":
+    main()
