@@ -121,3 +121,17 @@ def test_cli_reports_and_names_missing_pairs(dataset_root: Path, workspace: Path
     missing = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(tmp_path)])
     assert missing.exit_code == 2 and "cama pairs" in missing.output
     assert pycolmap is not None
+
+
+def test_night_images_yield_fewer_features_than_day_images(dataset_root: Path) -> None:
+    dataset = load_dataset(dataset_root)
+    night = next(s for s in dataset.scenes if "night" in s.description.lower())
+    day = next(s for s in dataset.scenes if "night" not in s.description.lower())
+    extractor = SiftExtractor(FeaturesConfig())
+
+    def count(scene: object) -> int:
+        image = scene.images["CAM_FRONT"][len(scene.images["CAM_FRONT"]) // 2]  # type: ignore[attr-defined]
+        gray = image.load_rgb().mean(axis=2).astype(np.uint8)
+        return len(extractor.extract(gray).keypoints)
+
+    assert count(night) < 0.75 * count(day)
