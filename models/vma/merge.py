@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 from shapely.geometry import LineString, Polygon
 
 from models.vma.vectors import Vector, clip_vectors
@@ -102,52 +103,80 @@ def _covered_share(vector: Vector, other: Vector, distance_m: float) -> float:
 def join_polylines(
     items: list[tuple[np.ndarray, float]], max_gap_m: float, max_angle_deg: float
 ) -> list[tuple[np.ndarray, float]]:
-    """Greedily join polylines whose ends face each other across a gap <= max_gap_m, nearest gap first.
+    """Join polylines whose ends face each other across a gap <= max_gap_m, nearest gaps first.
 
     Each item is (points, score); a joined polyline's score is the length-weighted mean of its parts.
+    Candidate end pairs are found once (k-d tree) and linked greedily by distance, each end at most once
+    and never closing a loop, so the cost grows with the number of nearby ends, not its cube.
     """
-    paths = [(np.asarray(p, dtype=np.float64), float(s)) for p, s in items]
-    cos_limit = float(np.cos(np.radians(max_angle_deg)))
-    while True:
-        best = _best_join([p for p, _ in paths], max_gap_m, cos_limit)
-        if best is None:
-            return paths
-        i, j, flip_i, flip_j = best
-        (a, sa), (b, sb) = paths[i], paths[j]
-        a, b = (a[::-1] if flip_i else a), (b[::-1] if flip_j else b)
-        la, lb = _length(a), _length(b)
-        paths[i] = (np.vstack([a, b]), (sa * la + sb * lb) / max(la + lb, 1e-9))
-        del paths[j]
+    paths = [np.asarray(p, dtype=np.float64) for p, _ in items]
+    scores = [float(s) for _, s in items]
+    links = _links(paths, max_gap_m, float(np.cos(np.radians(max_angle_deg))))
+    out: list[tuple[np.ndarray, float]] = []
+    seen: set[int] = set()
+    starts = [i for i in range(len(paths)) if 2 * i not in links or 2 * i + 1 not in links]
+    for first in starts:
+        if first in seen:
+            continue
+        parts, entry = [], 2 * first if 2 * first not in links else 2 * first + 1
+        while True:
+            path = entry // 2
+            seen.add(path)
+            forward = entry % 2 == 0
+            parts.append(path if forward else -path - 1)
+            exit_end = entry + 1 if forward else entry - 1
+            if exit_end not in links:
+                break
+            entry = links[exit_end]
+        pieces = [paths[k] if k >= 0 else paths[-k - 1][::-1] for k in parts]
+        weights = [_length(p) for p in pieces]
+        score = sum(scores[k if k >= 0 else -k - 1] * w for k, w in zip(parts, weights, strict=True))
+        out.append(
+            (np.vstack(pieces), score / max(sum(weights), 1e-9) if sum(weights) > 0 else scores[first])
+        )
+    return out
+
+
+def _links(paths: list[np.ndarray], max_gap_m: float, cos_limit: float) -> dict[int, int]:
+    """Greedy end-to-end links (end a <-> end b, both directions in the dict), nearest aligned pairs first.
+
+    Ends are numbered 2 * path + (0 for the start, 1 for the end).
+    """
+    if len(paths) < 2:
+        return {}
+    ends = [_end(p, tail=t) for p in paths for t in (False, True)]
+    pos = np.array([e[0] for e in ends])
+    out_dir = np.array([e[1] for e in ends])
+    candidates = []
+    for a, b in cKDTree(pos).query_pairs(max_gap_m):
+        if a // 2 == b // 2 or -(out_dir[a] @ out_dir[b]) < cos_limit:
+            continue
+        gap = pos[b] - pos[a]
+        dist = float(np.linalg.norm(gap))
+        if dist > _NEAR_M and (
+            (gap / dist) @ out_dir[a] < cos_limit or -((gap / dist) @ out_dir[b]) < cos_limit
+        ):
+            continue
+        candidates.append((dist, a, b))
+    parent = list(range(len(paths)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    links: dict[int, int] = {}
+    for _, a, b in sorted(candidates):
+        if a in links or b in links or root(a // 2) == root(b // 2):
+            continue
+        links[a], links[b] = b, a
+        parent[root(a // 2)] = root(b // 2)
+    return links
 
 
 def _length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-
-
-def _best_join(
-    paths: list[np.ndarray], max_gap_m: float, cos_limit: float
-) -> tuple[int, int, bool, bool] | None:
-    """(i, j, reverse i, reverse j) of the closest aligned end pair: i's end meets j's start.
-
-    Ends are numbered 2 * path + (0 for the start, 1 for the end); all pairs are tested at once.
-    """
-    if len(paths) < 2:
-        return None
-    ends = [_end(p, tail=t) for p in paths for t in (False, True)]
-    pos = np.array([e[0] for e in ends])
-    out = np.array([e[1] for e in ends])
-    gap = pos[None, :, :] - pos[:, None, :]  # from end a to end b
-    dist = np.linalg.norm(gap, axis=2)
-    unit = gap / np.maximum(dist, 1e-9)[..., None]
-    facing = -(out @ out.T) >= cos_limit
-    along = ((unit * out[:, None, :]).sum(2) >= cos_limit) & (-(unit * out[None, :, :]).sum(2) >= cos_limit)
-    owner = np.arange(len(ends)) // 2
-    ok = (dist <= max_gap_m) & facing & (along | (dist <= _NEAR_M)) & (owner[:, None] != owner[None, :])
-    if not ok.any():
-        return None
-    a, b = np.unravel_index(np.argmin(np.where(ok, dist, np.inf)), dist.shape)
-    # path of end a must finish at a (reverse it when a is its start); path of end b must begin at b
-    return int(owner[a]), int(owner[b]), bool(a % 2 == 0), bool(b % 2 == 1)
 
 
 def _end(path: np.ndarray, *, tail: bool) -> tuple[np.ndarray, np.ndarray]:

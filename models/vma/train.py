@@ -150,7 +150,7 @@ def train(
         "data": {
             "sites": [str(p) for p in sites],
             "procedural_share": train_config.procedural_share,
-            "samples_seen": train_config.steps * train_config.batch_size,
+            "samples_seen": len(losses) * train_config.batch_size,
             "seed": train_config.seed,
         },
     }
