@@ -11,9 +11,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import LineString, Polygon
 
+from cama_pipeline.evaluate.chamfer_ap import resample
 from models.vma.vectors import Vector, clip_vectors
 
 _NEAR_M = 0.5
@@ -74,10 +76,21 @@ def merge_windows(vectors: Sequence[Vector], config: MergeConfig | None = None) 
 
 
 def suppress_duplicates(vectors: Sequence[Vector], config: MergeConfig) -> list[Vector]:
-    """Keep vectors in descending score order unless a kept same-class vector already covers them."""
+    """Keep vectors in descending score order unless a kept same-class vector already covers them.
+
+    Only kept vectors whose bounding boxes come within `duplicate_m` are compared.
+    """
     kept: list[Vector] = []
+    boxes: list[np.ndarray] = []
     for vector in sorted(vectors, key=lambda v: -v.score):
-        rivals = [k for k in kept if k.cls == vector.cls]
+        box = np.concatenate([vector.points.min(axis=0), vector.points.max(axis=0)])
+        rivals = [
+            k
+            for k, b in zip(kept, boxes, strict=True)
+            if k.cls == vector.cls
+            and (b[:2] <= box[2:] + config.duplicate_m).all()
+            and (box[:2] <= b[2:] + config.duplicate_m).all()
+        ]
         if vector.closed:
             shape = Polygon(vector.points).buffer(0)
             duplicate = any(_iou(shape, Polygon(k.points).buffer(0)) > config.duplicate_iou for k in rivals)
@@ -85,6 +98,7 @@ def suppress_duplicates(vectors: Sequence[Vector], config: MergeConfig) -> list[
             duplicate = any(_covered_share(vector, k, config.duplicate_m) > 0.8 for k in rivals)
         if not duplicate:
             kept.append(vector)
+            boxes.append(box)
     return kept
 
 
@@ -94,10 +108,9 @@ def _iou(a: Polygon, b: Polygon) -> float:
 
 
 def _covered_share(vector: Vector, other: Vector, distance_m: float) -> float:
-    """Share of `vector`'s points (every 0.5 m) within `distance_m` of `other`."""
-    line, target = LineString(vector.points), LineString(other.points)
-    stations = np.linspace(0, line.length, max(2, int(line.length / 0.5)))
-    return float(np.mean([target.distance(line.interpolate(s)) <= distance_m for s in stations]))
+    """Share of `vector`'s points (about every 0.5 m) within `distance_m` of `other`."""
+    samples = resample(vector.points, max(2, int(vector.length_m() / 0.5)))
+    return float(np.mean(shapely.distance(LineString(other.points), shapely.points(samples)) <= distance_m))
 
 
 def join_polylines(
