@@ -4,6 +4,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_ROOT ?= data/synthetic/default
+DEMO_DATA := $(DEMO_ROOT)/nuscenes
+DEMO_PROPOSALS := $(DEMO_ROOT)/workspace/proposals.json
 
 .PHONY: demo test setup lint clean frontend chromium postgresql
 
@@ -46,8 +48,16 @@ ifeq ($(INITDB),)
 	apt-get update && apt-get install -y postgresql
 endif
 
+# The pipeline as far as it exists, then the editor. Until the road-surface stage lands (issue 10), VMA proposes
+# from the generator's ground-truth BEV rasters; features/SfM are left out until SfM exists (issue 9).
 demo: $(STAMP) frontend
 	$(BIN)/cama synth --preset default --out $(DEMO_ROOT)
+	$(BIN)/cama wigo $(DEMO_DATA)
+	$(BIN)/cama keyframes $(DEMO_DATA)
+	$(BIN)/cama sites $(DEMO_DATA)
+	$(BIN)/cama pairs $(DEMO_DATA)
+	$(BIN)/cama propose $(DEMO_ROOT) --proposer rule --out $(DEMO_PROPOSALS)
+	$(BIN)/cama demo $(DEMO_ROOT) --proposals $(DEMO_PROPOSALS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
