@@ -2,7 +2,7 @@
 
 import logging
 import threading
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import Callable, Iterator
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
@@ -19,17 +19,14 @@ logger = logging.getLogger(__name__)
 bearer = HTTPBearer(auto_error=False, description="Token from POST /api/auth/login.")
 
 
-async def get_settings(request: Request) -> Settings:
+def get_settings(request: Request) -> Settings:
     """The settings the app was created with."""
     settings: Settings = request.app.state.settings
     return settings
 
 
-async def get_session(request: Request) -> AsyncIterator[Session]:
-    """One database session per request, closed afterwards.
-
-    Async on purpose: making a session does no I/O (it connects on first use, in the worker thread of the
-    sync code that uses it), so it needs no thread hop of its own; under load each hop costs a GIL handoff."""
+def get_session(request: Request) -> Iterator[Session]:
+    """One database session per request, closed afterwards."""
     with request.app.state.sessionmaker() as session:
         yield session
 
@@ -63,10 +60,10 @@ def get_current_user(
 CurrentUser = Annotated[User, Depends(get_current_user)]
 
 
-def require_role(*roles: str) -> Callable[[User], Awaitable[User]]:
-    """A dependency that lets only users with one of `roles` through (403 otherwise); async: no thread hop."""
+def require_role(*roles: str) -> Callable[[User], User]:
+    """A dependency that lets only users with one of `roles` through (403 otherwise)."""
 
-    async def check(user: CurrentUser) -> User:
+    def check(user: CurrentUser) -> User:
         if user.role not in roles:
             raise HTTPException(
                 status_code=status.HTTP_403_FORBIDDEN,
@@ -85,7 +82,7 @@ AdminUser = Annotated[User, Depends(require_role("admin"))]
 _LINT_CACHE_LOCK = threading.Lock()
 
 
-async def get_lint_cache(request: Request) -> LintCache:
+def get_lint_cache(request: Request) -> LintCache:
     """The app's lint cache, made on first use (one per app, so tests and servers never share one)."""
     with _LINT_CACHE_LOCK:
         cache = getattr(request.app.state, "lint_cache", None)
