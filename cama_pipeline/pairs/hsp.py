@@ -48,22 +48,28 @@ def knn_candidates(views: list[CameraView], config: PairsConfig, exclude: set[Pa
     return sorted(found - exclude)
 
 
-def _passes_rules(a: CameraView, b: CameraView, config: PairsConfig) -> str | None:
-    """The name of the first geometric rule that rejects the pair, or None."""
-    if not height_compatible(a.center, b.center, config.max_dz_m):
-        return "height"
-    if not view_cones_overlap(a.center, a.axis, b.center, b.axis):
-        return "view_cone"
-    if face_to_face(
-        a.center,
-        a.axis,
-        b.center,
-        b.axis,
+def rule_verdicts(views: list[CameraView], candidates: list[Pair], config: PairsConfig) -> np.ndarray:
+    """(N,) the name of the first rule that rejects each candidate ("height", "view_cone", "face_to_face"),
+    or "" for the ones that pass; all candidates at once."""
+    verdicts = np.full(len(candidates), "", dtype=object)
+    if not candidates:
+        return verdicts
+    centers = np.array([view.center for view in views])
+    axes = np.array([view.axis for view in views])
+    first, second = np.array(candidates).T
+    ca, cb, aa, ab = centers[first], centers[second], axes[first], axes[second]
+    facing = face_to_face(
+        ca,
+        aa,
+        cb,
+        ab,
         min_angle_deg=config.face_to_face_angle_deg,
         max_distance_m=config.face_to_face_max_distance_m,
-    ):
-        return "face_to_face"
-    return None
+    )
+    verdicts[facing] = "face_to_face"
+    verdicts[~view_cones_overlap(ca, aa, cb, ab)] = "view_cone"
+    verdicts[~height_compatible(ca, cb, config.max_dz_m)] = "height"  # last write wins: the first rule
+    return verdicts
 
 
 def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: PairsConfig) -> np.ndarray:
@@ -88,14 +94,12 @@ def spatial_pairs(
 ) -> tuple[dict[Pair, str], HspStats]:
     """HSP pairs not already in `exclude`, with the funnel of what each rule removed."""
     stats = HspStats()
-    survivors: list[Pair] = []
-    for i, j in knn_candidates(views, config, exclude):
-        stats.candidates += 1
-        rejected = _passes_rules(views[i], views[j], config)
-        if rejected is None:
-            survivors.append((i, j))
-        else:
-            stats.dropped[rejected] += 1
+    candidates = knn_candidates(views, config, exclude)
+    verdicts = rule_verdicts(views, candidates, config)
+    stats.candidates = len(candidates)
+    for rule in ("height", "view_cone", "face_to_face"):
+        stats.dropped[rule] = int((verdicts == rule).sum())
+    survivors = [pair for pair, verdict in zip(candidates, verdicts, strict=True) if verdict == ""]
     overlaps = footprint_overlaps(views, survivors, config)
     pairs = {
         pair: "hsp"
