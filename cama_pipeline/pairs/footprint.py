@@ -6,6 +6,7 @@ fused ego pose then places it in the global frame.
 """
 
 import numpy as np
+import shapely
 from shapely import MultiPoint, Point, Polygon
 
 from cama_pipeline.pairs.cameras import CameraView
@@ -48,7 +49,9 @@ def ground_footprint(view: CameraView, grid: tuple[int, int], max_range_m: float
     return hull.intersection(Point(centre[0], centre[1]).buffer(max_range_m))
 
 
-def footprint_overlap(a: Polygon, b: Polygon) -> float:
-    """Shared area as a share of the smaller footprint (0 when either is empty)."""
-    smaller = min(a.area, b.area)
-    return 0.0 if smaller <= 0 else float(a.intersection(b).area / smaller)
+def footprint_overlap(a: Polygon | np.ndarray, b: Polygon | np.ndarray) -> np.ndarray:
+    """Mutual overlap of footprints: the shared area as a share of the larger one, so both cameras see that much
+    of each other's ground (0 when both are empty). Takes two polygons or two arrays of them (vectorised)."""
+    larger = np.maximum(shapely.area(a), shapely.area(b))
+    shared = shapely.area(shapely.intersection(a, b))
+    return np.asarray(np.where(larger > 0, shared / np.where(larger > 0, larger, 1.0), 0.0))

@@ -4,12 +4,11 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-import shapely
 from scipy.spatial import cKDTree
 
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
-from cama_pipeline.pairs.footprint import ground_footprint
+from cama_pipeline.pairs.footprint import footprint_overlap, ground_footprint
 from cama_pipeline.pairs.rules import face_to_face, height_compatible, view_cones_overlap
 from cama_pipeline.pairs.sequential import Pair, ordered
 
@@ -73,8 +72,7 @@ def rule_verdicts(views: list[CameraView], candidates: list[Pair], config: Pairs
 
 
 def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: PairsConfig) -> np.ndarray:
-    """(len(pairs),) mutual ground-footprint overlap of each pair: the shared area as a share of the larger
-    footprint, so both cameras see that much of each other's ground (vectorised with shapely)."""
+    """(len(pairs),) `footprint_overlap` of each pair, footprints traced once per camera."""
     if not pairs:
         return np.zeros(0)
     used = sorted({index for pair in pairs for index in pair})
@@ -84,9 +82,7 @@ def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: Pairs
     }
     first = np.array([polygons[i] for i, _ in pairs], dtype=object)
     second = np.array([polygons[j] for _, j in pairs], dtype=object)
-    shared = shapely.area(shapely.intersection(first, second))
-    larger = np.maximum(shapely.area(first), shapely.area(second))
-    return np.where(larger > 0, shared / np.where(larger > 0, larger, 1.0), 0.0)
+    return footprint_overlap(first, second)
 
 
 def spatial_pairs(
