@@ -34,7 +34,7 @@ from cama_pipeline.evaluate.inputs import load_true_poses
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
-from cama_pipeline.features.stage import image_features
+from cama_pipeline.features.stage import extract_missing
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
 from cama_pipeline.pairs.cameras import CameraView, site_views
@@ -80,14 +80,12 @@ def time_matching(
     dataset: Any, views: list[CameraView], pairs: list[Pair], folder: Path, config: FeaturesConfig
 ) -> dict[str, float]:
     """Extract the sampled pairs' images and match the sample; seconds per image and per pair, verified share."""
-    used = sorted({i for pair in pairs for i in pair})
-    extractor, matcher = SiftExtractor(config), ColmapMatcher(config)
+    used = [views[i] for i in sorted({i for pair in pairs for i in pair})]
+    matcher = ColmapMatcher(config)
     database = folder / "database.db"
     started = time.perf_counter()
     with open_database(database) as db:
-        store = FeatureStore(db)
-        for index in used:
-            store.add(views[index], image_features(dataset, views[index], extractor, config)[0])
+        extract_missing(dataset, used, FeatureStore(db), SiftExtractor(config), config)
     extracted = time.perf_counter()
     pairs_file = folder / "pairs.txt"
     pairs_file.write_text("".join(f"{views[i].name} {views[j].name}\n" for i, j in pairs))

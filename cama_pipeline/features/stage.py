@@ -9,7 +9,6 @@ Reruns reuse the database: images already in it are not extracted again and matc
 matched again. A change of extractor needs `--overwrite`.
 """
 
-import json
 import logging
 import statistics
 import time
@@ -32,6 +31,7 @@ from cama_pipeline.pairs.io import pairs_dir
 from cama_pipeline.site.workspace import (
     WorkspaceError,
     default_workspace,
+    read_json,
     read_site_manifest,
     read_sites_index,
     site_manifest_path,
@@ -71,14 +71,14 @@ def image_features(
     return features.subset(keep), int((~keep).sum())
 
 
-def _extract_all(
+def extract_missing(
     dataset: Dataset,
     views: list[CameraView],
     store: FeatureStore,
     extractor: FeatureExtractor,
     config: FeaturesConfig,
 ) -> dict[str, dict[str, int]]:
-    """Extract the views the database lacks, with a progress bar; counts per newly extracted image."""
+    """Extract the views the database lacks into it, with a progress bar; counts per newly extracted image."""
     counts: dict[str, dict[str, int]] = {}
     todo = [view for view in views if not store.has(view.name)]
     columns = (TextColumn("features"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
@@ -94,7 +94,7 @@ def _previous_report(path: Path, extractor: FeatureExtractor) -> dict[str, Any]:
     """The stored report (empty when none); WorkspaceError when it was made by another extractor."""
     if not path.is_file():
         return {}
-    report: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    report = read_json(path, FEATURES_SCHEMA, "cama features")
     if report.get("extractor") != extractor.name:
         raise WorkspaceError(
             f"{path}: database made with extractor {report.get('extractor')!r}, not {extractor.name!r}; "
@@ -128,7 +128,7 @@ def run_site(
     with open_database(database) as db:
         counts = {
             **previous.get("images", {}),
-            **_extract_all(dataset, views, FeatureStore(db), extractor, config),
+            **extract_missing(dataset, views, FeatureStore(db), extractor, config),
         }
     extracted = time.perf_counter()
     matcher.match(database, pairs_file)
