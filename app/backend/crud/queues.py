@@ -205,9 +205,7 @@ def read_lease(*, session: Session, lease_id: int, username: str, role: str) -> 
 
 def release_lease(*, session: Session, lease_id: int, username: str, role: str) -> Lease:
     """Give the element back; the holder, a lead or an admin may release. Releasing twice is a no-op."""
-    lease = get_lease(session=session, lease_id=lease_id)
-    if lease.username != username and role not in ("lead", "admin"):
-        raise ForbiddenError(f"lease {lease_id} belongs to {lease.username!r}")
+    lease = read_lease(session=session, lease_id=lease_id, username=username, role=role)
     if lease.released_at is None:
         lease.released_at = clock()
         lease.active_element_id = None
