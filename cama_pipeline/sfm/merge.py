@@ -1,0 +1,264 @@
+"""Merging independently reconstructed clips: similarity alignment of each clip to its neighbours through the
+3D points their cross-clip matches tie together, then one global re-triangulation and BA of the union.
+
+Every clip starts in the global odometry frame (odometry-guided initialisation), so a clip without enough
+shared points keeps its own poses ("poses" alignment, identity); clips linked by shared points are aligned
+in order of overlap to the clip with the most registered images (Prim's order over the overlap graph).
+"""
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pycolmap
+
+from cama_pipeline.pairs.cameras import CameraView
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MergeConfig:
+    """When two clips count as overlapping and which similarity between them is believed."""
+
+    min_correspondences: int = 20
+    """Shared 3D points (tied by cross-clip matches) needed to align one clip to another."""
+    max_error_m: float = 0.25
+    """RANSAC inlier threshold of the similarity, metres."""
+    max_shift_m: float = 5.0
+    """A similarity moving the clip's centre further than this is rejected (odometry is better than that)."""
+    max_rotation_deg: float = 5.0
+    """A similarity rotating the clip more than this is rejected."""
+    max_scale_change: float = 0.05
+    """A similarity whose scale differs from 1 by more than this is rejected (poses have metric scale)."""
+
+    def __post_init__(self) -> None:
+        if self.min_correspondences < 3:
+            raise ValueError(f"MergeConfig.min_correspondences must be >= 3, got {self.min_correspondences}")
+        for name in ("max_error_m", "max_shift_m", "max_rotation_deg", "max_scale_change"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"MergeConfig.{name} must be > 0, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True, eq=False)
+class ClipModel:
+    """One clip's reconstruction and its refined views (global frame)."""
+
+    scene: str
+    reconstruction: pycolmap.Reconstruction
+    views: tuple[CameraView, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class Alignment:
+    """How one clip was brought into the merged frame: `world_from_clip` is a 4x4 similarity [sR | t]."""
+
+    scene: str
+    reference: str | None
+    method: Literal["points", "poses"]
+    correspondences: int
+    world_from_clip: np.ndarray
+    shift_m: float = 0.0
+    """How far the alignment moved the centre of the clip's shared points."""
+
+    @property
+    def scale(self) -> float:
+        return float(np.cbrt(np.linalg.det(self.world_from_clip[:3, :3])))
+
+    def to_json(self) -> dict[str, Any]:
+        rotation = self.world_from_clip[:3, :3] / self.scale
+        angle = np.degrees(np.arccos(np.clip((np.trace(rotation) - 1) / 2, -1.0, 1.0)))
+        return {
+            "reference": self.reference,
+            "method": self.method,
+            "correspondences": self.correspondences,
+            "scale": self.scale,
+            "rotation_deg": float(angle),
+            "shift_m": self.shift_m,
+        }
+
+
+Correspondences = tuple[np.ndarray, np.ndarray]
+"""(M, 3) points of clip A and the (M, 3) points of clip B they are matched to, clip-local coordinates."""
+
+
+def cross_clip_matches(database_path: Path) -> list[tuple[str, str, np.ndarray]]:
+    """(nameA, nameB, (M, 2) keypoint index pairs) of every verified pair in the database."""
+    database = pycolmap.Database.open(str(database_path))
+    try:
+        names = {image.image_id: image.name for image in database.read_all_images()}
+        pair_ids, geometries = database.read_two_view_geometries()
+    finally:
+        database.close()
+    found = []
+    for pair_id, geometry in zip(pair_ids, geometries, strict=True):
+        first, second = pycolmap.pair_id_to_image_pair(pair_id)
+        inliers = np.asarray(geometry.inlier_matches)
+        if len(inliers):
+            found.append((names[first], names[second], inliers))
+    return found
+
+
+def _point_ids(reconstruction: pycolmap.Reconstruction, name: str) -> np.ndarray | None:
+    """Point3D id per keypoint of the named registered image (-1 where none), None when not registered."""
+    image = reconstruction.find_image_with_name(name)
+    if image is None or not image.has_pose:
+        return None
+    ids = np.full(image.num_points2D(), -1, dtype=np.int64)
+    for index, point in enumerate(image.points2D):
+        if point.has_point3D():
+            ids[index] = point.point3D_id
+    return ids
+
+
+def clip_correspondences(
+    first: ClipModel, second: ClipModel, matches: Sequence[tuple[str, str, np.ndarray]]
+) -> Correspondences:
+    """3D points of `first` and `second` tied by matches between an image of each (unique point pairs)."""
+    scene_images = {m.scene: {v.name for v in m.views} for m in (first, second)}
+    tied: set[tuple[int, int]] = set()
+    for name_a, name_b, inliers in matches:
+        if name_a in scene_images[second.scene] and name_b in scene_images[first.scene]:
+            name_a, name_b, inliers = name_b, name_a, inliers[:, ::-1]
+        if name_a not in scene_images[first.scene] or name_b not in scene_images[second.scene]:
+            continue
+        ids_a, ids_b = _point_ids(first.reconstruction, name_a), _point_ids(second.reconstruction, name_b)
+        if ids_a is None or ids_b is None:
+            continue
+        pa = ids_a[np.minimum(inliers[:, 0], len(ids_a) - 1)]
+        pb = ids_b[np.minimum(inliers[:, 1], len(ids_b) - 1)]
+        tied.update(zip(pa[(pa >= 0) & (pb >= 0)].tolist(), pb[(pa >= 0) & (pb >= 0)].tolist(), strict=True))
+    pairs = sorted(tied)
+    xyz_a = np.array([first.reconstruction.point3D(a).xyz for a, _ in pairs]).reshape(-1, 3)
+    xyz_b = np.array([second.reconstruction.point3D(b).xyz for _, b in pairs]).reshape(-1, 3)
+    return xyz_a, xyz_b
+
+
+def _apply(similarity: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return np.asarray(points @ similarity[:3, :3].T + similarity[:3, 3])
+
+
+def estimate_similarity(
+    source: np.ndarray, target: np.ndarray, config: MergeConfig
+) -> tuple[np.ndarray, int] | None:
+    """4x4 target_from_source similarity by LO-RANSAC and its inlier count; None when too few points or
+    the result is implausible for clips that already share the metric odometry frame."""
+    if len(source) < config.min_correspondences:
+        return None
+    options = pycolmap.RANSACOptions(max_error=config.max_error_m, random_seed=0)
+    found = pycolmap.estimate_sim3d_robust(source, target, options)
+    if found is None:
+        return None
+    estimate, inliers = found["tgt_from_src"], int(found["num_inliers"])
+    similarity = np.eye(4)
+    similarity[:3, :] = estimate.matrix()
+    scale = float(estimate.scale)
+    angle = np.degrees(estimate.rotation.angle())
+    shift = np.linalg.norm(_apply(similarity, source.mean(axis=0, keepdims=True)) - source.mean(axis=0))
+    plausible = (
+        abs(scale - 1) <= config.max_scale_change
+        and angle <= config.max_rotation_deg
+        and shift <= config.max_shift_m
+    )
+    if inliers < config.min_correspondences or not plausible:
+        logger.info(
+            "similarity rejected: %d inliers, scale %.3f, %.2f deg, %.2f m", inliers, scale, angle, shift
+        )
+        return None
+    return similarity, inliers
+
+
+def _pairwise(
+    clips: Sequence[ClipModel], matches: Sequence[tuple[str, str, np.ndarray]]
+) -> dict[tuple[int, int], Correspondences]:
+    """Correspondences of every ordered clip pair (both directions, from one computation per pair)."""
+    found: dict[tuple[int, int], Correspondences] = {}
+    for i, first in enumerate(clips):
+        for j in range(i + 1, len(clips)):
+            xyz_i, xyz_j = clip_correspondences(first, clips[j], matches)
+            found[(i, j)], found[(j, i)] = (xyz_i, xyz_j), (xyz_j, xyz_i)
+    return found
+
+
+def _to_aligned(
+    k: int, aligned: dict[int, Alignment], pairs: dict[tuple[int, int], Correspondences]
+) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """Clip k's points and the aligned clips' points (in the merged frame) they match; the main partner."""
+    sources, targets, best, best_n = [], [], None, 0
+    for j, alignment in aligned.items():
+        xyz_k, xyz_j = pairs[(k, j)]
+        sources.append(xyz_k)
+        targets.append(_apply(alignment.world_from_clip, xyz_j))
+        if len(xyz_k) > best_n:
+            best, best_n = j, len(xyz_k)
+    return np.concatenate(sources), np.concatenate(targets), best
+
+
+def _align_to(
+    scene: str, source: np.ndarray, target: np.ndarray, reference: str | None, config: MergeConfig
+) -> Alignment:
+    """The clip's alignment to the already aligned clips: by their shared points, else its own poses."""
+    estimate = estimate_similarity(source, target, config)
+    if estimate is None:
+        return Alignment(scene, reference, "poses", len(source), np.eye(4))
+    similarity, inliers = estimate
+    centre = source.mean(axis=0)
+    shift = float(np.linalg.norm(_apply(similarity, centre[None])[0] - centre))
+    return Alignment(scene, reference, "points", inliers, similarity, shift)
+
+
+def align_clips(
+    clips: Sequence[ClipModel], matches: Sequence[tuple[str, str, np.ndarray]], config: MergeConfig
+) -> list[Alignment]:
+    """One alignment per clip (clip order): clips tied by shared points are aligned, most overlap first, to
+    the clip with the most registered images; the others keep their odometry frame."""
+    pairs = _pairwise(clips, matches)
+    aligned: dict[int, Alignment] = {}
+    remaining = sorted(range(len(clips)), key=lambda i: -clips[i].reconstruction.num_reg_images())
+    while remaining:
+        gathered = {k: _to_aligned(k, aligned, pairs) for k in remaining} if aligned else {}
+        k = max(remaining, key=lambda i: len(gathered[i][0])) if gathered else remaining[0]
+        if not gathered or len(gathered[k][0]) == 0:
+            k = remaining[0]
+            aligned[k] = Alignment(clips[k].scene, None, "poses", 0, np.eye(4))
+        else:
+            source, target, partner = gathered[k]
+            reference = clips[partner].scene if partner is not None else None
+            aligned[k] = _align_to(clips[k].scene, source, target, reference, config)
+        remaining.remove(k)
+        logger.info("clip %s: aligned by %s to %s", clips[k].scene, aligned[k].method, aligned[k].reference)
+    return [aligned[i] for i in range(len(clips))]
+
+
+def merge_groups(alignments: Sequence[Alignment]) -> list[list[str]]:
+    """Clips joined by point alignments, as lists of scenes (singletons for clips aligned by poses only)."""
+    group_of = {a.scene: a.scene for a in alignments}
+
+    def root(scene: str) -> str:
+        while group_of[scene] != scene:
+            scene = group_of[scene]
+        return scene
+
+    for alignment in alignments:
+        if alignment.method == "points" and alignment.reference is not None:
+            group_of[root(alignment.scene)] = root(alignment.reference)
+    groups: dict[str, list[str]] = {}
+    for alignment in alignments:
+        groups.setdefault(root(alignment.scene), []).append(alignment.scene)
+    return list(groups.values())
+
+
+def aligned_views(views: Sequence[CameraView], world_from_clip: np.ndarray) -> list[CameraView]:
+    """The views moved by a similarity: rotation and position of each ego pose (extrinsics stay metric)."""
+    scale = float(np.cbrt(np.linalg.det(world_from_clip[:3, :3])))
+    rotation = world_from_clip[:3, :3] / scale
+    moved = []
+    for view in views:
+        world_from_ego = np.eye(4)
+        world_from_ego[:3, :3] = rotation @ view.world_from_ego[:3, :3]
+        world_from_ego[:3, 3] = _apply(world_from_clip, view.world_from_ego[:3, 3][None])[0]
+        moved.append(replace(view, world_from_ego=world_from_ego))
+    return moved
