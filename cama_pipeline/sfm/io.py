@@ -125,21 +125,30 @@ def write_poses(path: Path, *, site_id: str, digest: str, poses: dict[str, PoseE
     )
 
 
+def _vector(raw: dict[str, Any], name: str, size: int, path: Path, where: str) -> np.ndarray:
+    """raw[name] as `size` finite floats, else a WorkspaceError naming the file and field."""
+    try:
+        vector = np.asarray(_field(raw, name, list, path, where), dtype=np.float64)
+    except (TypeError, ValueError):
+        vector = np.zeros(0)
+    if vector.shape != (size,) or not np.all(np.isfinite(vector)):
+        raise WorkspaceError(f"{path}: field {where}{name!r} must be {size} finite numbers")
+    return vector
+
+
 def _pose_entry(raw: Any, path: Path, token: str) -> PoseEntry:
     where = f"images[{token!r}]."
     if not isinstance(raw, dict):
         raise WorkspaceError(f"{path}: images[{token!r}] must be an object")
-    translation = np.asarray(_field(raw, "translation", list, path, where), dtype=np.float64)
-    rotation = np.asarray(_field(raw, "rotation", list, path, where), dtype=np.float64)
-    if translation.shape != (3,) or rotation.shape != (4,) or not np.all(np.isfinite(translation)):
-        raise WorkspaceError(f"{path}: {where}translation/rotation must be 3 and 4 finite numbers")
-    if not np.isfinite(rotation).all() or np.linalg.norm(rotation) < 1e-9:
-        raise WorkspaceError(f"{path}: {where}rotation must be a non-zero quaternion")
+    translation = _vector(raw, "translation", 3, path, where)
+    rotation = _vector(raw, "rotation", 4, path, where)
+    if np.linalg.norm(rotation) < 1e-9:
+        raise WorkspaceError(f"{path}: field {where}'rotation' must be a non-zero quaternion")
     return PoseEntry(
         name=_field(raw, "name", str, path, where),
         scene=_field(raw, "scene", str, path, where),
         channel=_field(raw, "channel", str, path, where),
-        world_from_ego=Pose(translation, rotation / np.linalg.norm(rotation)).matrix(),
+        world_from_ego=Pose(translation, rotation).matrix(),
         flagged=_field(raw, "flagged", bool, path, where),
     )
 
