@@ -1,0 +1,102 @@
+"""The comparison point of the SfM benchmark: COLMAP's incremental mapping on the same database (no poses
+used), brought into the global frame by a similarity to reference camera centres, and camera pose errors of
+any model against reference poses."""
+
+import logging
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """Camera pose errors of a model's registered images against reference poses."""
+
+    images: int
+    """Images the reference has."""
+    registered: int
+    """Of those, registered in the model."""
+    position_cm: float
+    """Mean camera centre error, centimetres."""
+    rotation_deg: float
+    """Mean camera orientation error, degrees."""
+    position_cm_median: float
+    rotation_deg_median: float
+
+    @property
+    def registered_ratio(self) -> float:
+        return self.registered / self.images if self.images else 0.0
+
+
+def incremental_model(
+    database: Path, image_dir: Path, image_names: list[str], *, num_threads: int = 1
+) -> pycolmap.Reconstruction | None:
+    """The largest model of incremental mapping over `image_names` (a copy of the database is used)."""
+    with tempfile.TemporaryDirectory(prefix="cama-incremental-") as scratch:
+        copy = Path(scratch) / "database.db"
+        shutil.copyfile(database, copy)
+        options = pycolmap.IncrementalPipelineOptions()
+        options.image_names = list(image_names)
+        options.num_threads = num_threads
+        options.random_seed = 0
+        models = pycolmap.incremental_mapping(copy, image_dir, Path(scratch) / "out", options=options)
+    if not models:
+        logger.warning("incremental mapping registered no model")
+        return None
+    return max(models.values(), key=lambda model: model.num_reg_images())
+
+
+def camera_centres(model: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
+    """Registered image name -> (3,) camera centre in the model's frame."""
+    return {image.name: image.projection_center() for image in model.images.values() if image.has_pose}
+
+
+def align_to_reference(model: pycolmap.Reconstruction, reference_centres: dict[str, np.ndarray]) -> bool:
+    """Move `model` (in place) by the similarity that best maps its camera centres onto the reference ones
+    (LO-RANSAC, 0.5 m inliers); False when fewer than 3 images are shared or no similarity is found."""
+    centres = camera_centres(model)
+    names = sorted(set(centres) & set(reference_centres))
+    if len(names) < 3:
+        return False
+    source = np.array([centres[n] for n in names])
+    target = np.array([reference_centres[n] for n in names])
+    found = pycolmap.estimate_sim3d_robust(
+        source, target, pycolmap.RANSACOptions(max_error=0.5, random_seed=0)
+    )
+    if found is None:
+        return False
+    model.transform(found["tgt_from_src"])
+    return True
+
+
+def pose_errors(
+    model: pycolmap.Reconstruction, reference_world_from_cam: dict[str, np.ndarray]
+) -> PoseErrors:
+    """Centre and orientation errors of the model's cameras against (4, 4) reference world_from_cam by name."""
+    positions, rotations = [], []
+    for image in model.images.values():
+        reference = reference_world_from_cam.get(image.name)
+        if reference is None or not image.has_pose:
+            continue
+        world_from_cam = image.cam_from_world().inverse().matrix()
+        positions.append(np.linalg.norm(world_from_cam[:3, 3] - reference[:3, 3]) * 100)
+        relative = world_from_cam[:3, :3].T @ reference[:3, :3]
+        rotations.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
+    if not positions:
+        return PoseErrors(
+            len(reference_world_from_cam), 0, float("nan"), float("nan"), float("nan"), float("nan")
+        )
+    return PoseErrors(
+        images=len(reference_world_from_cam),
+        registered=len(positions),
+        position_cm=float(np.mean(positions)),
+        rotation_deg=float(np.mean(rotations)),
+        position_cm_median=float(np.median(positions)),
+        rotation_deg_median=float(np.median(rotations)),
+    )
