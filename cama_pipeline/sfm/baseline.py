@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
+from cama_pipeline.sfm.merge import robust_similarity
+
 logger = logging.getLogger(__name__)
 
 
@@ -66,12 +68,10 @@ def align_to_reference(model: pycolmap.Reconstruction, reference_centres: dict[s
         return False
     source = np.array([centres[n] for n in names])
     target = np.array([reference_centres[n] for n in names])
-    found = pycolmap.estimate_sim3d_robust(
-        source, target, pycolmap.RANSACOptions(max_error=0.5, random_seed=0)
-    )
+    found = robust_similarity(source, target, max_error_m=0.5)
     if found is None:
         return False
-    model.transform(found["tgt_from_src"])
+    model.transform(found[0])
     return True
 
 

@@ -141,6 +141,17 @@ def _apply(similarity: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.asarray(points @ similarity[:3, :3].T + similarity[:3, 3])
 
 
+def robust_similarity(
+    source: np.ndarray, target: np.ndarray, max_error_m: float
+) -> tuple[pycolmap.Sim3d, int] | None:
+    """target_from_source by LO-RANSAC (seeded: reproducible) and its inlier count; None when none found."""
+    options = pycolmap.RANSACOptions(max_error=max_error_m, random_seed=0)
+    found: Any = pycolmap.estimate_sim3d_robust(source, target, options)  # a dict, whatever the stub says
+    if found is None:
+        return None
+    return found["tgt_from_src"], int(found["num_inliers"])
+
+
 def estimate_similarity(
     source: np.ndarray, target: np.ndarray, config: MergeConfig
 ) -> tuple[np.ndarray, int] | None:
@@ -148,11 +159,10 @@ def estimate_similarity(
     the result is implausible for clips that already share the metric odometry frame."""
     if len(source) < config.min_correspondences:
         return None
-    options = pycolmap.RANSACOptions(max_error=config.max_error_m, random_seed=0)
-    found = pycolmap.estimate_sim3d_robust(source, target, options)
+    found = robust_similarity(source, target, config.max_error_m)
     if found is None:
         return None
-    estimate, inliers = found["tgt_from_src"], int(found["num_inliers"])
+    estimate, inliers = found
     similarity = np.eye(4)
     similarity[:3, :] = estimate.matrix()
     scale = float(estimate.scale)
