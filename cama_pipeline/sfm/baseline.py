@@ -75,28 +75,35 @@ def align_to_reference(model: pycolmap.Reconstruction, reference_centres: dict[s
     return True
 
 
+def model_poses(model: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
+    """Registered image name -> (4, 4) world_from_cam of the model."""
+    return {
+        image.name: image.cam_from_world().inverse().matrix()
+        for image in model.images.values()
+        if image.has_pose
+    }
+
+
 def pose_errors(
-    model: pycolmap.Reconstruction, reference_world_from_cam: dict[str, np.ndarray]
+    estimated_world_from_cam: dict[str, np.ndarray], reference_world_from_cam: dict[str, np.ndarray]
 ) -> PoseErrors:
-    """Centre and orientation errors of the model's cameras against (4, 4) reference world_from_cam by name."""
-    positions, rotations = [], []
-    for image in model.images.values():
-        reference = reference_world_from_cam.get(image.name)
-        if reference is None or not image.has_pose:
-            continue
-        world_from_cam = image.cam_from_world().inverse().matrix()
-        positions.append(np.linalg.norm(world_from_cam[:3, 3] - reference[:3, 3]) * 100)
-        relative = world_from_cam[:3, :3].T @ reference[:3, :3]
-        rotations.append(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1, 1))))
-    if not positions:
-        return PoseErrors(
-            len(reference_world_from_cam), 0, float("nan"), float("nan"), float("nan"), float("nan")
-        )
+    """Centre and orientation errors of estimated camera poses against reference ones, both (4, 4)
+    world_from_cam (3x4 accepted) by image name; images the reference lacks are ignored."""
+    names = [name for name in estimated_world_from_cam if name in reference_world_from_cam]
+    if not names:
+        nan = float("nan")
+        return PoseErrors(len(reference_world_from_cam), 0, nan, nan, nan, nan)
+    estimated = np.array([estimated_world_from_cam[n][:3, :4] for n in names])
+    reference = np.array([reference_world_from_cam[n][:3, :4] for n in names])
+    positions = np.linalg.norm(estimated[:, :, 3] - reference[:, :, 3], axis=1) * 100
+    relative = np.einsum("nji,njk->nik", estimated[:, :, :3], reference[:, :, :3])
+    cosines = np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1, 1)
+    rotations = np.degrees(np.arccos(cosines))
     return PoseErrors(
         images=len(reference_world_from_cam),
-        registered=len(positions),
-        position_cm=float(np.mean(positions)),
-        rotation_deg=float(np.mean(rotations)),
+        registered=len(names),
+        position_cm=float(positions.mean()),
+        rotation_deg=float(rotations.mean()),
         position_cm_median=float(np.median(positions)),
         rotation_deg_median=float(np.median(rotations)),
     )
