@@ -240,7 +240,33 @@ def align_clips(
             aligned[k] = _align_to(clips[k].scene, source, target, reference, config)
         remaining.remove(k)
         logger.info("clip %s: aligned by %s to %s", clips[k].scene, aligned[k].method, aligned[k].reference)
-    return [aligned[i] for i in range(len(clips))]
+    return recentre_groups(clips, [aligned[i] for i in range(len(clips))])
+
+
+def recentre_groups(clips: Sequence[ClipModel], alignments: list[Alignment]) -> list[Alignment]:
+    """Each merged group shifted as a whole so that its cameras' mean position is where their clips put
+    them: the group averages its clips' odometry instead of inheriting the reference clip's offset. A shift
+    only: a rotation fitted to camera centres is ill-posed on straight roads."""
+    by_scene = {clip.scene: (clip, alignment) for clip, alignment in zip(clips, alignments, strict=True)}
+    recentred = {a.scene: a for a in alignments}
+    for group in merge_groups(alignments):
+        if len(group) < 2:
+            continue
+        own = np.concatenate([own_of(by_scene[s][0]) for s in group])
+        moved = np.concatenate(
+            [_apply(by_scene[s][1].world_from_clip, own_of(by_scene[s][0])) for s in group]
+        )
+        correction = np.eye(4)
+        correction[:3, 3] = (own - moved).mean(axis=0)
+        for scene in group:
+            alignment = recentred[scene]
+            recentred[scene] = replace(alignment, world_from_clip=correction @ alignment.world_from_clip)
+    return [recentred[a.scene] for a in alignments]
+
+
+def own_of(clip: ClipModel) -> np.ndarray:
+    """(N, 3) camera centres of the clip's views in its own frame."""
+    return np.array([v.center for v in clip.views]).reshape(-1, 3)
 
 
 def merge_groups(alignments: Sequence[Alignment]) -> list[list[str]]:

@@ -35,9 +35,9 @@ def apply(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ transform[:3, :3].T + transform[:3, 3]
 
 
-def view(name: str, scene: str, x: float = 0.0) -> CameraView:
+def view(name: str, scene: str, centre: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> CameraView:
     pose = np.eye(4)
-    pose[:3, 3] = (x, 0.0, 0.0)
+    pose[:3, 3] = centre
     return CameraView(name, name, scene, "CAM_FRONT", 0, 0, pose, np.eye(4), np.eye(3), 40, 30)
 
 
@@ -55,7 +55,7 @@ def clip(scene: str, name: str, xyz: np.ndarray) -> ClipModel:
         track = pycolmap.Track()
         track.add_element(1, k)
         model.add_point3D(point, track)
-    return ClipModel(scene, model, (view(name, scene),))
+    return ClipModel(scene, model, (view(name, scene, tuple(xyz.mean(axis=0) - [0.0, 0.0, 5.0])),))
 
 
 def test_similarity_recovered_despite_outliers() -> None:
@@ -91,10 +91,15 @@ def test_two_clips_sharing_points_are_aligned_and_grouped() -> None:
     (moved,) = [a for a in alignments if a.method == "points"]
     assert {moved.scene, moved.reference} == {"scene-a", "scene-b"}
     reference = by_scene[moved.reference]  # type: ignore[index]
-    assert reference.method == "poses" and np.allclose(reference.world_from_clip, np.eye(4))
+    assert reference.method == "poses"
+    relative = np.linalg.inv(reference.world_from_clip) @ moved.world_from_clip
     expected = truth if moved.scene == "scene-b" else np.linalg.inv(truth)
-    np.testing.assert_allclose(moved.world_from_clip, expected, atol=1e-6)
+    np.testing.assert_allclose(relative, expected, atol=1e-6)
     assert moved.correspondences == 60
+    clips = {"scene-a": first, "scene-b": second}
+    own = np.array([clips[a.scene].views[0].center for a in (moved, reference)])
+    placed = np.array([apply(a.world_from_clip, own[i][None])[0] for i, a in enumerate((moved, reference))])
+    np.testing.assert_allclose(placed.mean(axis=0), own.mean(axis=0), atol=1e-6)  # the pair is re-centred
     assert by_scene["scene-c"].method == "poses" and np.allclose(
         by_scene["scene-c"].world_from_clip, np.eye(4)
     )
@@ -104,7 +109,7 @@ def test_two_clips_sharing_points_are_aligned_and_grouped() -> None:
 
 def test_aligned_views_move_the_ego_poses_rigidly() -> None:
     transform = similarity(1.02, 10.0, (1.0, 2.0, 3.0))
-    (moved,) = aligned_views([view("a.jpg", "s", x=5.0)], transform)
+    (moved,) = aligned_views([view("a.jpg", "s", (5.0, 0.0, 0.0))], transform)
     np.testing.assert_allclose(moved.world_from_ego[:3, 3], apply(transform, np.array([[5.0, 0, 0]]))[0])
     rotation = moved.world_from_ego[:3, :3]
     np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
