@@ -1,0 +1,111 @@
+"""Parameters of odometry-guided SfM in one frozen, validated config, with the benchmark's named presets."""
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal
+
+PresetName = Literal["plain", "rigid", "iterative"]
+LossName = Literal["cauchy", "huber", "trivial"]
+
+
+@dataclass(frozen=True)
+class SfmConfig:
+    """How views posed by odometry are triangulated and bundle-adjusted (paper: OGI, rigid prior, Alg. 1)."""
+
+    rigid: bool = True
+    """Hold the camera rig rigid in BA: one pose per keyframe, cameras fixed relative to CAM_FRONT.
+    False = every image's pose free (plain BA)."""
+    refine_extrinsics: bool = False
+    """With `rigid`: jointly refine the camera-to-rig transforms (shared by all keyframes)."""
+    iterative: bool = True
+    """Iterative BA (Algorithm 1) instead of one BA after triangulation."""
+    max_iterations: int = 5
+    """Algorithm 1: iterations at most."""
+    max_refinement_change: float = 0.0005
+    """Algorithm 1: stop once changed observations / observations falls to this ratio or below."""
+    max_reprojection_error_px: float = 4.0
+    """Points with a larger reprojection error (in any image) are filtered."""
+    min_track_length: int = 2
+    """Points seen in fewer images are filtered."""
+    min_triangulation_angle_deg: float = 1.0
+    """Points whose rays meet at a smaller angle are filtered (depth not determined)."""
+    max_image_reprojection_error_px: float = 2.0
+    """Algorithm 1: keyframes (images in plain BA) whose mean reprojection error exceeds this are dropped."""
+    odometry_priors: bool = False
+    """Keep odometry in BA: relative-pose priors between consecutive keyframes, position priors, and an
+    orientation anchor; otherwise the gauge is fixed by holding the first keyframe (plain BA: two cameras)."""
+    relative_rotation_sigma_deg: float = 0.2
+    """Odometry prior: sigma of the rotation between consecutive keyframes."""
+    relative_translation_sigma_m: float = 0.05
+    """Odometry prior: sigma of the translation between consecutive keyframes."""
+    position_sigma_m: float = 1.0
+    """Odometry prior: sigma of each keyframe's absolute position (GNSS-like)."""
+    anchor_rotation_sigma_deg: float = 2.0
+    """Odometry prior: sigma of each keyframe's absolute orientation (the anchor against free roll)."""
+    max_camera_shift_m: float = 2.0
+    """Keyframes (images) moved further than this from their initial pose by BA are flagged and dropped."""
+    max_camera_rotation_deg: float = 5.0
+    """Keyframes (images) rotated more than this from their initial pose by BA are flagged and dropped."""
+    loss: LossName = "cauchy"
+    """Robust loss on reprojection residuals."""
+    loss_scale_px: float = 1.0
+    """Scale of the robust loss."""
+    ba_max_iterations: int = 100
+    """Solver iterations per BA at most."""
+    min_points: int = 20
+    """Fewer triangulated points than this raises SfmError (clip cannot be reconstructed)."""
+    min_registered_frames: int = 2
+    """Fewer keyframes left after filtering than this raises SfmError."""
+    num_threads: int = 1
+    """Solver threads."""
+
+    def __post_init__(self) -> None:
+        positive = (
+            "max_reprojection_error_px",
+            "max_image_reprojection_error_px",
+            "relative_rotation_sigma_deg",
+            "relative_translation_sigma_m",
+            "anchor_rotation_sigma_deg",
+            "position_sigma_m",
+            "max_camera_shift_m",
+            "max_camera_rotation_deg",
+            "loss_scale_px",
+        )
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"SfmConfig.{name} must be > 0, got {getattr(self, name)}")
+        at_least_one = ("max_iterations", "ba_max_iterations", "min_points", "num_threads")
+        for name in at_least_one:
+            if getattr(self, name) < 1:
+                raise ValueError(f"SfmConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.min_track_length < 2:
+            raise ValueError(f"SfmConfig.min_track_length must be >= 2, got {self.min_track_length}")
+        if self.min_registered_frames < 1:
+            raise ValueError(
+                f"SfmConfig.min_registered_frames must be >= 1, got {self.min_registered_frames}"
+            )
+        if not 0 <= self.max_refinement_change < 1:
+            raise ValueError(
+                f"SfmConfig.max_refinement_change must be in [0, 1), got {self.max_refinement_change}"
+            )
+        if not 0 <= self.min_triangulation_angle_deg < 90:
+            raise ValueError(
+                f"SfmConfig.min_triangulation_angle_deg must be in [0, 90), got {self.min_triangulation_angle_deg}"
+            )
+        if self.loss not in ("cauchy", "huber", "trivial"):
+            raise ValueError(f"SfmConfig.loss must be cauchy, huber or trivial, got {self.loss!r}")
+        if self.refine_extrinsics and not self.rigid:
+            raise ValueError("SfmConfig.refine_extrinsics needs rigid=True (plain BA has no rig)")
+
+    @classmethod
+    def preset(cls, name: str, **overrides: object) -> "SfmConfig":
+        """The benchmark's variants: `plain` (guided triangulation + plain BA), `rigid` (+ rigid BA),
+        `iterative` (+ iterative BA, the default)."""
+        variants: dict[str, dict[str, bool]] = {
+            "plain": {"rigid": False, "iterative": False},
+            "rigid": {"rigid": True, "iterative": False},
+            "iterative": {"rigid": True, "iterative": True},
+        }
+        if name not in variants:
+            raise ValueError(f"unknown SfM preset {name!r}; choose one of {', '.join(variants)}")
+        return dataclasses.replace(cls(), **{**variants[name], **overrides})  # type: ignore[arg-type]

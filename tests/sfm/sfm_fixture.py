@@ -1,0 +1,78 @@
+"""Shared SfM test inputs: the tiny site run through wigo -> keyframes -> sites -> pairs -> features.
+
+`build_sfm_inputs` is a plain function (so other test folders and scripts can call it); the session
+fixture `sfm_inputs` in `tests/sfm/conftest.py` builds it once per test session.
+"""
+
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
+from site_workspace import build_site_workspace  # noqa: E402
+
+from cama_pipeline.data import Pose, load_dataset  # noqa: E402
+from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
+from cama_pipeline.features.stage import run as run_features  # noqa: E402
+from cama_pipeline.pairs.cameras import CameraView, site_views  # noqa: E402
+from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
+from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path  # noqa: E402
+
+SITE_ID = "site-001"
+
+
+@dataclass(frozen=True, eq=False)
+class SfmInputs:
+    """Everything SfM needs for the tiny site, built by the real upstream stages."""
+
+    dataset_root: Path
+    """The data set root: also the image folder (image names are relative to it)."""
+    workspace: Path
+    site_id: str
+    database: Path
+    """The site's COLMAP database (features and verified matches)."""
+    views: tuple[CameraView, ...]
+    """Every keyframe image of the site, posed by WIGO (the manifest's poses)."""
+    true_world_from_ego: dict[str, np.ndarray]
+    """True (4, 4) ego pose by image name, from the generator's ground truth."""
+
+    @property
+    def image_dir(self) -> Path:
+        """Folder the image names are relative to."""
+        return self.dataset_root
+
+    def scene_views(self, scene: str) -> list[CameraView]:
+        """The views of one scene (clip), in frame and channel order."""
+        return [view for view in self.views if view.scene == scene]
+
+    @property
+    def scenes(self) -> list[str]:
+        """Scenes of the site with images, in manifest order."""
+        return list(dict.fromkeys(view.scene for view in self.views))
+
+
+def _true_poses(truth_file: Path, views: list[CameraView]) -> dict[str, np.ndarray]:
+    """True world_from_ego by image name."""
+    truth = json.loads(truth_file.read_text())
+    return {
+        view.name: Pose(
+            np.asarray(truth[view.token]["translation"], float),
+            np.asarray(truth[view.token]["rotation"], float),
+        ).matrix()
+        for view in views
+    }
+
+
+def build_sfm_inputs(tiny_site_root: Path, tmp_dir: Path) -> SfmInputs:
+    """Run the upstream stages on the generated site at `tiny_site_root` into a workspace under `tmp_dir`."""
+    dataset_root = Path(tiny_site_root) / "nuscenes"
+    workspace = build_site_workspace(dataset_root, Path(tmp_dir) / "workspace")
+    run_pairs(PairsConfig(), dataset_root, workspace)
+    (site,) = run_features(FeaturesConfig(num_threads=1), dataset_root, workspace)
+    views = site_views(load_dataset(dataset_root), read_site_manifest(site_manifest_path(workspace, SITE_ID)))
+    truth = _true_poses(Path(tiny_site_root) / "ground_truth" / "poses.json", views)
+    return SfmInputs(dataset_root, workspace, SITE_ID, site.database, tuple(views), truth)
