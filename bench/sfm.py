@@ -1,0 +1,226 @@
+"""SfM benchmark: incremental mapping vs odometry-guided SfM (plain BA, rigid BA, iterative BA) vs parallel
+per-clip reconstruction + merge, on one synthetic site, in one run.
+
+For each method: wall time, camera position error (cm) and rotation error (deg) against the generator's true
+poses (`ground_truth/poses.json`), mean reprojection error, registered-image ratio, points. Guided methods are
+measured in the global frame as they come out; incremental mapping has no global frame, so it is first moved
+by the similarity that best maps its camera centres onto the true ones (this favours it). The WIGO poses the
+guided methods start from are measured too, giving the accuracy gain; the speed ratio compares (e) with (a).
+
+    (a) incremental   pycolmap.incremental_mapping on the same database and images
+    (b) plain         guided triangulation from WIGO poses + BA of every image pose
+    (c) rigid         + rigid (rig) BA: one pose per keyframe, extrinsics held
+    (d) iterative     + iterative BA (Algorithm 1)
+    (e) parallel      (d) per clip on a process pool, clips merged (similarity from shared points), then
+                      re-triangulation and global BA of the merged model
+
+Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
+       [--workers 2] [--skip-incremental]
+The site's workspace must hold `cama sites` / `cama pairs` output; missing features are computed first.
+Writes bench/results/sfm.json (with the command line and the site / scenes measured).
+"""
+
+import argparse
+import json
+import logging
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pycolmap
+
+from cama_pipeline.data import Pose, load_dataset
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.stage import features_dir
+from cama_pipeline.features.stage import run as run_features
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.sfm.baseline import (
+    PoseErrors,
+    align_to_reference,
+    incremental_model,
+    model_poses,
+    pose_errors,
+)
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.executor import LocalExecutor
+from cama_pipeline.sfm.guided import reconstruct_views
+from cama_pipeline.sfm.stage import copy_database, reconstruct_site, site_clips
+from cama_pipeline.site.workspace import (
+    read_site_manifest,
+    read_sites_index,
+    site_manifest_path,
+    sites_index_path,
+)
+
+RESULTS = Path(__file__).parent / "results"
+logger = logging.getLogger("bench.sfm")
+
+
+def true_world_from_cam(site: Path, views: list[CameraView]) -> dict[str, np.ndarray]:
+    """True camera poses by image name."""
+    truth = json.loads((site / "ground_truth" / "poses.json").read_text())
+    return {
+        v.name: Pose(
+            np.asarray(truth[v.token]["translation"]), np.asarray(truth[v.token]["rotation"])
+        ).matrix()
+        @ v.ego_from_cam
+        for v in views
+    }
+
+
+def figures(
+    errors: PoseErrors, model: pycolmap.Reconstruction | None, seconds: float, **extra: Any
+) -> dict[str, Any]:
+    """One method's row."""
+    return {
+        "seconds": round(seconds, 2),
+        "position_cm": round(errors.position_cm, 2),
+        "rotation_deg": round(errors.rotation_deg, 4),
+        "position_cm_median": round(errors.position_cm_median, 2),
+        "rotation_deg_median": round(errors.rotation_deg_median, 4),
+        "registered_ratio": round(errors.registered_ratio, 4),
+        "reprojection_error_px": round(model.compute_mean_reprojection_error(), 3) if model else None,
+        "points": model.num_points3D() if model else 0,
+        **extra,
+    }
+
+
+def run_incremental(database: Path, image_dir: Path, views: list[CameraView], truth: dict[str, Any]) -> dict:
+    started = time.perf_counter()
+    model = incremental_model(database, image_dir, [v.name for v in views])
+    seconds = time.perf_counter() - started
+    if model is None:
+        return figures(pose_errors({}, truth), None, seconds)
+    aligned = align_to_reference(model, {name: pose[:3, 3] for name, pose in truth.items()})
+    return figures(pose_errors(model_poses(model), truth), model, seconds, aligned_to_truth=aligned)
+
+
+def run_guided(preset: str, database: Path, image_dir: Path, views: list[CameraView], truth: dict) -> dict:
+    started = time.perf_counter()
+    result = reconstruct_views(views, database, image_dir, SfmConfig.preset(preset))
+    seconds = time.perf_counter() - started
+    model = result.reconstruction
+    extra = {"iterations": result.report.get("iterations"), "flagged": len(result.flagged)}
+    return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
+
+
+def run_parallel(
+    clips: dict[str, list[CameraView]],
+    database: Path,
+    image_dir: Path,
+    truth: dict,
+    workers: int,
+    scratch: Path,
+) -> dict:
+    started = time.perf_counter()
+    site = reconstruct_site(
+        clips, database, image_dir, SfmConfig.preset("iterative"), scratch, executor=LocalExecutor(workers)
+    )
+    seconds = time.perf_counter() - started
+    model = site.reconstruction
+    extra = {
+        "workers": workers,
+        "clips": {
+            scene: {k: clip.get(k) for k in ("status", "registered_images", "seconds")}
+            for scene, clip in site.report["clips"].items()
+        },
+        "merge": site.report["merge"],
+        "seconds_split": site.report["seconds"],
+    }
+    return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
+
+
+def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, Any], list[CameraView]]:
+    """The first site's database (features computed when missing), manifest and keyframe views (only the
+    clips of `scenes` when given)."""
+    dataset_root, workspace = site / "nuscenes", site / "workspace"
+    site_id = read_sites_index(sites_index_path(workspace))["sites"][0]["site_id"]
+    if not (features_dir(workspace, site_id) / "features.json").is_file():
+        logger.info("no features yet: running `cama features` on %s", workspace)
+        run_features(FeaturesConfig(), dataset_root, workspace)
+    manifest = read_site_manifest(site_manifest_path(workspace, site_id))
+    views = site_views(load_dataset(dataset_root), manifest)
+    if scenes:
+        clips = site_clips(views, manifest)
+        unknown = sorted(set(scenes) - set(clips))
+        if unknown:
+            raise SystemExit(f"--scenes: {unknown} are not clips of {site_id} (clips: {sorted(clips)})")
+        views = [v for scene in scenes for v in clips[scene]]
+    return features_dir(workspace, site_id) / "database.db", manifest, views
+
+
+def print_table(rows: dict[str, dict[str, Any]]) -> None:
+    print(
+        f"{'method':<12}{'seconds':>9}{'pos cm':>9}{'rot deg':>9}{'reproj px':>10}{'registered':>11}{'points':>8}"
+    )
+    for name, row in rows.items():
+        reprojection = row.get("reprojection_error_px")
+        print(
+            f"{name:<12}{row.get('seconds', 0):>9.1f}{row['position_cm']:>9.2f}{row['rotation_deg']:>9.4f}"
+            f"{reprojection if reprojection is not None else float('nan'):>10.3f}"
+            f"{row['registered_ratio']:>11.3f}{row.get('points', 0):>8}"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--scenes", nargs="*", help="Only these clips (moving scenes) of the first site.")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--skip-incremental", action="store_true", help="Leave out (a) (slow on big sites).")
+    parser.add_argument("--out", type=Path, default=RESULTS / "sfm.json")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    pycolmap.logging.minloglevel = 2
+    site_database, manifest, views = site_inputs(args.site, args.scenes)
+    truth = true_world_from_cam(args.site, views)
+    image_dir = args.site / "nuscenes"
+    rows: dict[str, dict[str, Any]] = {}
+    with tempfile.TemporaryDirectory(prefix="bench-sfm-") as scratch_dir:
+        scratch = Path(scratch_dir)
+        database = copy_database(site_database, scratch / "database.db")
+        rows["wigo"] = figures(pose_errors({v.name: v.world_from_cam for v in views}, truth), None, 0.0)
+        if not args.skip_incremental:
+            rows["a_incremental"] = run_incremental(database, image_dir, views, truth)
+        for key, preset in (("b_plain", "plain"), ("c_rigid", "rigid"), ("d_iterative", "iterative")):
+            logger.info("guided SfM, preset %s", preset)
+            fresh = shutil.copyfile(database, scratch / f"{preset}.db")
+            rows[key] = run_guided(preset, Path(fresh), image_dir, views, truth)
+        clips = site_clips(views, manifest)
+        rows["e_parallel"] = run_parallel(
+            clips, database, image_dir, truth, args.workers, scratch / "parallel"
+        )
+    print_table(rows)
+    wigo, parallel = rows["wigo"], rows["e_parallel"]
+    summary = {
+        "speedup_e_over_a": round(rows["a_incremental"]["seconds"] / parallel["seconds"], 2)
+        if "a_incremental" in rows
+        else None,
+        "position_gain_over_wigo": round(wigo["position_cm"] / parallel["position_cm"], 2),
+        "rotation_gain_over_wigo": round(wigo["rotation_deg"] / parallel["rotation_deg"], 2),
+        "goal_met": parallel["position_cm"] <= 5 and parallel["rotation_deg"] <= 0.1,
+    }
+    print(json.dumps(summary))
+    result = {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "machine": f"{platform.processor() or platform.machine()}, {platform.system()}",
+        "site": str(args.site),
+        "scenes": args.scenes or sorted(site_clips(views, manifest)),
+        "images": len(views),
+        "methods": rows,
+        "summary": summary,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

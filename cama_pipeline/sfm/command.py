@@ -1,0 +1,47 @@
+"""`cama sfm`: odometry-guided SfM of every site, clip by clip in parallel, merged into one model per site."""
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.errors import SfmError
+from cama_pipeline.sfm.executor import EXECUTORS
+from cama_pipeline.sfm.stage import run
+from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
+
+console = Console()
+
+
+def sfm_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    preset: Annotated[
+        str, typer.Option(help="plain (guided + BA), rigid (+ rigid BA) or iterative (+ iterative BA).")
+    ] = "iterative",
+    executor: Annotated[
+        str, typer.Option(help="Where clips run: local (process pool) or ray (local Ray instance).")
+    ] = "local",
+    workers: Annotated[int, typer.Option(min=1, help="Clips reconstructed at once.")] = 2,
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """Reconstruct each site: every clip on its own from the WIGO poses, then merged and adjusted as one."""
+    if executor not in EXECUTORS:
+        raise fail(ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}"))
+    try:
+        config = SfmConfig.preset(preset)
+        result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
+    except (*INPUT_ERRORS, SfmError) as err:
+        raise fail(err) from err
+    for site in result.sites:
+        merged, clips = site.report["merged"], site.report["clips"]
+        failed = [scene for scene, clip in clips.items() if clip["status"] != "ok"]
+        state = "up to date" if site.skipped else f"{site.report['seconds']['total']:.1f} s"
+        console.print(
+            f"[green]{site.site_id}[/green]: {merged['registered_images']} of {merged['images']} images, "
+            f"{merged['points']} points, {merged['reprojection_error_px']:.2f} px, "
+            f"{len(clips) - len(failed)} of {len(clips)} clips ({state}) -> {site.folder}"
+        )
+        if failed:
+            console.print(f"  [yellow]clips left out (SfM failed): {', '.join(failed)}[/yellow]")

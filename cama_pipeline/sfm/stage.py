@@ -1,0 +1,433 @@
+"""The SfM stage: every site of the workspace reconstructed clip by clip in parallel (odometry-guided SfM on
+each clip's images, in its own process), the clips merged where they share points, then re-triangulated
+and bundle-adjusted as one model. Outputs and their schema: `cama_pipeline.sfm.io`.
+
+A clip is a moving scene of the site with the stationary scenes merged into it. A clip whose SfM fails
+(night, too few matches) is reported and left out; the rest of the site still reconstructs.
+"""
+
+import logging
+import sqlite3
+import tempfile
+import time
+from collections.abc import Callable
+from contextlib import closing
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pycolmap
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.features.stage import features_dir
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.errors import SfmError
+from cama_pipeline.sfm.executor import Executor, make_executor
+from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views, refined_views
+from cama_pipeline.sfm.io import (
+    PoseEntry,
+    SparsePoints,
+    read_model,
+    read_report,
+    sfm_dir,
+    write_model,
+    write_points,
+    write_poses,
+    write_report,
+)
+from cama_pipeline.sfm.labels import MaskReader, point_labels
+from cama_pipeline.sfm.merge import (
+    ClipModel,
+    MergeConfig,
+    align_clips,
+    aligned_views,
+    cross_clip_matches,
+    merge_groups,
+)
+from cama_pipeline.site.workspace import (
+    default_workspace,
+    file_stats,
+    fingerprint,
+    read_site_manifest,
+    read_sites_index,
+    site_manifest_path,
+    sites_index_path,
+    stored_fingerprint,
+)
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class ClipTask:
+    """One clip's reconstruction, as sent to a worker process (picklable)."""
+
+    scene: str
+    views: tuple[CameraView, ...]
+    database: Path
+    """The site's features database (read only: guided SfM works on its own copy)."""
+    image_dir: Path
+    config: SfmConfig
+    model_dir: Path
+    """Where the worker writes the clip's model."""
+
+
+@dataclass(frozen=True, eq=False)
+class ClipOutcome:
+    """What a worker sends back: the clip's refined views and report, or why it failed."""
+
+    scene: str
+    ok: bool
+    error: str | None
+    views: tuple[CameraView, ...]
+    flagged: tuple[str, ...]
+    report: dict[str, Any]
+    seconds: float
+
+
+def model_summary(reconstruction: pycolmap.Reconstruction, images: int) -> dict[str, Any]:
+    """Registered images, points and mean reprojection error of a model."""
+    return {
+        "images": images,
+        "registered_images": reconstruction.num_reg_images(),
+        "points": reconstruction.num_points3D(),
+        "reprojection_error_px": float(reconstruction.compute_mean_reprojection_error()),
+    }
+
+
+def _summary(result: GuidedResult, images: int) -> dict[str, Any]:
+    """Summary of a guided result: the model's figures, its BA passes and flagged images."""
+    iterations = result.report.get("iterations")
+    return {
+        **model_summary(result.reconstruction, images),
+        "iterations": len(iterations) if isinstance(iterations, list) else iterations,
+        "stop": result.report.get("stop"),
+        "flagged": len(result.flagged),
+    }
+
+
+def copy_database(source: Path, target: Path) -> Path:
+    """A consistent standalone copy of a SQLite database (its write-ahead log included)."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with (
+        closing(sqlite3.connect(f"file:{source}?mode=ro", uri=True)) as src,
+        closing(sqlite3.connect(target)) as dst,
+    ):
+        src.backup(dst)
+    return target
+
+
+def reconstruct_clip(task: ClipTask) -> ClipOutcome:
+    """Guided SfM of one clip (runs in a worker); SfM failures become a failed outcome, not an exception."""
+    pycolmap.logging.minloglevel = 2
+    started = time.perf_counter()
+    try:
+        result = reconstruct_views(task.views, task.database, task.image_dir, task.config)
+    except SfmError as err:
+        return ClipOutcome(task.scene, False, str(err), (), (), {}, time.perf_counter() - started)
+    write_model(task.model_dir, result.reconstruction)
+    return ClipOutcome(
+        task.scene,
+        True,
+        None,
+        tuple(refined_views(result, task.views)),
+        result.flagged,
+        _summary(result, len(task.views)),
+        time.perf_counter() - started,
+    )
+
+
+def site_clips(views: list[CameraView], manifest: dict[str, Any]) -> dict[str, list[CameraView]]:
+    """The site's views by clip: each moving scene with the stationary scenes merged into it."""
+    clip_of = {s["scene"]: s.get("merged_into") or s["scene"] for s in manifest["scenes"]}
+    clips: dict[str, list[CameraView]] = {}
+    for view in views:
+        clips.setdefault(clip_of.get(view.scene, view.scene), []).append(view)
+    return clips
+
+
+@dataclass(frozen=True, eq=False)
+class SiteReconstruction:
+    """A site's merged model and how it was made."""
+
+    reconstruction: pycolmap.Reconstruction
+    views: tuple[CameraView, ...]
+    """Registered views with their refined poses."""
+    flagged: tuple[CameraView, ...]
+    """Views dropped by a clip's or the merged BA, with the pose they had going in."""
+    report: dict[str, Any]
+    clips: tuple[ClipOutcome, ...] = field(default=())
+
+
+def _clip_tasks(
+    clips: dict[str, list[CameraView]], database: Path, image_dir: Path, config: SfmConfig, workdir: Path
+) -> list[ClipTask]:
+    return [
+        ClipTask(scene, tuple(views), database, Path(image_dir), config, workdir / "clips" / scene)
+        for scene, views in clips.items()
+    ]
+
+
+def run_clips(
+    tasks: list[ClipTask], executor: Executor, progress: Progress | None = None
+) -> list[ClipOutcome]:
+    """Every clip on the executor, the progress bar advancing as each finishes; failures logged."""
+    bar = progress.add_task("clips", total=len(tasks)) if progress is not None else None
+
+    def done(index: int) -> None:
+        if progress is not None and bar is not None:
+            progress.advance(bar)
+        logger.info("clip %s done", tasks[index].scene)
+
+    outcomes = executor.map(reconstruct_clip, tasks, on_done=done)
+    for outcome in outcomes:
+        if not outcome.ok:
+            logger.warning("clip %s failed and is left out: %s", outcome.scene, outcome.error)
+    return outcomes
+
+
+def _phase_reporter(progress: Progress | None, label: str) -> Callable[[str, int, int], None] | None:
+    """A guided-SfM progress callback that shows the phase and iteration on a bar of `progress`."""
+    if progress is None:
+        return None
+    bar = progress.add_task(label, total=None)
+
+    def report(phase: str, done: int, total: int) -> None:
+        progress.update(bar, description=f"{label}: {phase}", completed=done, total=total or None)
+
+    return report
+
+
+def merge_site(
+    outcomes: list[ClipOutcome],
+    tasks: list[ClipTask],
+    config: SfmConfig,
+    merge_config: MergeConfig,
+    progress: Progress | None = None,
+) -> tuple[GuidedResult, list[CameraView], dict[str, Any]]:
+    """Align the successful clips, then re-triangulate and adjust their union as one model: (its result,
+    the aligned views that went in, the merge report). SfmError when every clip failed."""
+    task_of = {task.scene: task for task in tasks}
+    models = [ClipModel(o.scene, read_model(task_of[o.scene].model_dir), o.views) for o in outcomes if o.ok]
+    if not models:
+        reasons = "; ".join(f"{o.scene}: {o.error}" for o in outcomes)
+        raise SfmError(f"every clip failed ({reasons})")
+    database, image_dir = tasks[0].database, tasks[0].image_dir
+    alignments = align_clips(models, cross_clip_matches(database), merge_config)
+    union = [
+        v for m, a in zip(models, alignments, strict=True) for v in aligned_views(m.views, a.world_from_clip)
+    ]
+    result = reconstruct_views(
+        union, database, image_dir, config, progress=_phase_reporter(progress, "merge")
+    )
+    merge = {"groups": merge_groups(alignments), "alignments": {a.scene: a.to_json() for a in alignments}}
+    return result, union, merge
+
+
+def _flagged_views(
+    outcomes: list[ClipOutcome], tasks: list[ClipTask], merged: GuidedResult, union: list[CameraView]
+) -> tuple[CameraView, ...]:
+    """Views dropped by their clip's BA (clip input pose) or by the merged BA (aligned pose)."""
+    flagged = [
+        v for o, t in zip(outcomes, tasks, strict=True) if o.ok for v in t.views if v.name in set(o.flagged)
+    ]
+    dropped = set(merged.flagged)
+    return tuple(flagged + [v for v in union if v.name in dropped])
+
+
+def reconstruct_site(
+    clips: dict[str, list[CameraView]],
+    database: Path,
+    image_dir: Path,
+    config: SfmConfig,
+    workdir: Path,
+    *,
+    executor: Executor,
+    merge_config: MergeConfig | None = None,
+    progress: Progress | None = None,
+) -> SiteReconstruction:
+    """Parallel per-clip reconstruction, then the merge (clip models are kept under `workdir/clips/`)."""
+    started = time.perf_counter()
+    tasks = _clip_tasks(clips, database, image_dir, config, workdir)
+    outcomes = run_clips(tasks, executor, progress)
+    clipped = time.perf_counter()
+    result, union, merge = merge_site(outcomes, tasks, config, merge_config or MergeConfig(), progress)
+    ended = time.perf_counter()
+    report = {
+        "executor": executor.name,
+        "workers": executor.workers,
+        "clips": {
+            o.scene: {
+                "status": "ok" if o.ok else "failed",
+                "error": o.error,
+                **o.report,
+                "seconds": o.seconds,
+            }
+            for o in outcomes
+        },
+        "merge": merge,
+        "merged": {**_summary(result, len(union)), "seconds": ended - clipped},
+        "seconds": {"clips": clipped - started, "merge": ended - clipped, "total": ended - started},
+    }
+    views = tuple(refined_views(result, union))
+    return SiteReconstruction(
+        result.reconstruction, views, _flagged_views(outcomes, tasks, result, union), report, tuple(outcomes)
+    )
+
+
+@dataclass(frozen=True)
+class SiteSfm:
+    """One site's SfM outputs and report."""
+
+    site_id: str
+    folder: Path
+    report: dict[str, Any]
+    skipped: bool
+
+
+@dataclass(frozen=True)
+class SfmResult:
+    """What a run did, per site."""
+
+    workspace: Path
+    sites: tuple[SiteSfm, ...]
+    seconds: float
+
+
+def _mask_reader(dataset: Dataset, views: list[CameraView]) -> MaskReader:
+    """Semantic mask by image name (None when the image has none)."""
+    token_of = {view.name: view.token for view in views}
+
+    def read(name: str) -> np.ndarray | None:
+        image = dataset.image(token_of[name])
+        return image.load_semantic() if image.semantic_mask_path is not None else None
+
+    return read
+
+
+def sparse_points(reconstruction: pycolmap.Reconstruction, read_mask: MaskReader) -> SparsePoints:
+    """The model's points with their labels, errors and track lengths (point id order)."""
+    ids = sorted(reconstruction.point3D_ids())
+    points = [reconstruction.point3D(pid) for pid in ids]
+    return SparsePoints(
+        xyz=np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3),
+        label=point_labels(reconstruction, ids, read_mask),
+        error_px=np.array([p.error for p in points], dtype=np.float64),
+        track_length=np.array([p.track.length() for p in points], dtype=np.int32),
+    )
+
+
+def _pose_entries(site: SiteReconstruction) -> dict[str, PoseEntry]:
+    """poses.json entries: refined registered views, then the flagged ones with their incoming pose."""
+    entries = {}
+    for flagged, views in ((False, site.views), (True, site.flagged)):
+        for v in views:
+            entries[v.token] = PoseEntry(v.name, v.scene, v.channel, v.world_from_ego, flagged)
+    return entries
+
+
+def write_site(
+    folder: Path,
+    site_id: str,
+    digest: str,
+    site: SiteReconstruction,
+    read_mask: MaskReader,
+    extra: dict[str, Any],
+) -> dict[str, Any]:
+    """Write the site's model, poses, points and (last) report; returns the report."""
+    write_model(folder / "model", site.reconstruction)
+    write_poses(folder / "poses.json", site_id=site_id, digest=digest, poses=_pose_entries(site))
+    write_points(folder / "points.npz", sparse_points(site.reconstruction, read_mask))
+    report = {"site_id": site_id, "fingerprint": digest, **extra, **site.report}
+    write_report(folder / "report.json", report)
+    return report
+
+
+def _progress(show: bool) -> Progress:
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    return Progress(*columns, transient=True, disable=not show)
+
+
+def run_site(
+    dataset: Dataset,
+    workspace: Path,
+    site_id: str,
+    config: SfmConfig,
+    *,
+    executor: Executor,
+    merge_config: MergeConfig,
+    overwrite: bool = False,
+    show_progress: bool = True,
+) -> SiteSfm:
+    """Reconstruct one site into `sfm/<site_id>/` unless its outputs are up to date."""
+    manifest_path = site_manifest_path(workspace, site_id)
+    database = features_dir(workspace, site_id) / "database.db"
+    if not database.is_file():
+        raise FileNotFoundError(f"{database}: not found; run `cama features` first")
+    folder = sfm_dir(workspace, site_id)
+    inputs = file_stats([manifest_path, database, database.with_name("features.json")])
+    digest = fingerprint(asdict(config), asdict(merge_config), inputs)
+    if not overwrite and stored_fingerprint(folder / "report.json") == digest:
+        return SiteSfm(site_id, folder, read_report(workspace, site_id), skipped=True)
+    manifest = read_site_manifest(manifest_path)
+    views = site_views(dataset, manifest)
+    with tempfile.TemporaryDirectory(prefix="cama-sfm-") as scratch, _progress(show_progress) as progress:
+        copy = copy_database(database, Path(scratch) / "database.db")
+        site = reconstruct_site(
+            site_clips(views, manifest),
+            copy,
+            dataset.root,
+            config,
+            folder,
+            executor=executor,
+            merge_config=merge_config,
+            progress=progress,
+        )
+    extra = {"config": asdict(config), "merge_config": asdict(merge_config)}
+    report = write_site(folder, site_id, digest, site, _mask_reader(dataset, views), extra)
+    merged = report["merged"]
+    logger.info(
+        "site %s: %d of %d images registered, %d points, %.2f px",
+        site_id,
+        merged["registered_images"],
+        merged["images"],
+        merged["points"],
+        merged["reprojection_error_px"],
+    )
+    return SiteSfm(site_id, folder, report, skipped=False)
+
+
+def run(
+    config: SfmConfig,
+    dataset_root: Path,
+    workspace: Path | None = None,
+    *,
+    executor: str = "local",
+    workers: int = 2,
+    merge_config: MergeConfig | None = None,
+    overwrite: bool = False,
+    show_progress: bool = True,
+) -> SfmResult:
+    """Reconstruct every site of the workspace (after `cama features`) on the named executor."""
+    started = time.perf_counter()
+    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
+    index = read_sites_index(sites_index_path(workspace))
+    runner = make_executor(executor, workers)
+    dataset = load_dataset(Path(dataset_root))
+    sites = tuple(
+        run_site(
+            dataset,
+            workspace,
+            site["site_id"],
+            config,
+            executor=runner,
+            merge_config=merge_config or MergeConfig(),
+            overwrite=overwrite,
+            show_progress=show_progress,
+        )
+        for site in index["sites"]
+    )
+    return SfmResult(workspace, sites, time.perf_counter() - started)
