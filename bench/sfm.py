@@ -28,6 +28,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -155,16 +156,66 @@ def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, A
 
 
 def print_table(rows: dict[str, dict[str, Any]]) -> None:
+    """The figures as a table (a failed method prints its error)."""
     print(
         f"{'method':<12}{'seconds':>9}{'pos cm':>9}{'rot deg':>9}{'reproj px':>10}{'registered':>11}{'points':>8}"
     )
     for name, row in rows.items():
+        if "error" in row:
+            print(f"{name:<12}failed: {row['error']}")
+            continue
         reprojection = row.get("reprojection_error_px")
         print(
             f"{name:<12}{row.get('seconds', 0):>9.1f}{row['position_cm']:>9.2f}{row['rotation_deg']:>9.4f}"
             f"{reprojection if reprojection is not None else float('nan'):>10.3f}"
             f"{row['registered_ratio']:>11.3f}{row.get('points', 0):>8}"
         )
+
+
+def guarded(name: str, measure: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """One method's row, or its error (a method that breaks must not lose the others' figures)."""
+    logger.info("method %s", name)
+    try:
+        return measure()
+    except Exception as err:  # noqa: BLE001 - recorded in the results, the run goes on
+        logger.exception("method %s failed", name)
+        return {"error": f"{type(err).__name__}: {err}"}
+
+
+def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], list[CameraView], dict]:
+    """Every method's row on the site (see the module docstring)."""
+    site_database, manifest, views = site_inputs(args.site, args.scenes)
+    truth = true_world_from_cam(args.site, views)
+    image_dir = args.site / "nuscenes"
+    rows = {"wigo": figures(pose_errors({v.name: v.world_from_cam for v in views}, truth), None, 0.0)}
+    with tempfile.TemporaryDirectory(prefix="bench-sfm-") as scratch_dir:
+        scratch = Path(scratch_dir)
+        database = copy_database(site_database, scratch / "database.db")
+        if not args.skip_incremental:
+            rows["a_incremental"] = guarded("a", lambda: run_incremental(database, image_dir, views, truth))
+        for key, preset in (("b_plain", "plain"), ("c_rigid", "rigid"), ("d_iterative", "iterative")):
+            fresh = Path(shutil.copyfile(database, scratch / f"{preset}.db"))
+            rows[key] = guarded(key, lambda p=preset, f=fresh: run_guided(p, f, image_dir, views, truth))  # type: ignore[misc]
+        clips = site_clips(views, manifest)
+        rows["e_parallel"] = guarded(
+            "e", lambda: run_parallel(clips, database, image_dir, truth, args.workers, scratch / "parallel")
+        )
+    return rows, views, manifest
+
+
+def summarize(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Speed ratio (e) over (a), accuracy gain of (e) over WIGO, and whether the paper's goal is met."""
+    wigo, parallel, incremental = rows["wigo"], rows["e_parallel"], rows.get("a_incremental", {})
+    if "error" in parallel:
+        return {"error": "parallel reconstruction failed"}
+    return {
+        "speedup_e_over_a": round(incremental["seconds"] / parallel["seconds"], 2)
+        if "seconds" in incremental
+        else None,
+        "position_gain_over_wigo": round(wigo["position_cm"] / parallel["position_cm"], 2),
+        "rotation_gain_over_wigo": round(wigo["rotation_deg"] / parallel["rotation_deg"], 2),
+        "goal_met": parallel["position_cm"] <= 5 and parallel["rotation_deg"] <= 0.1,
+    }
 
 
 def main() -> None:
@@ -179,38 +230,13 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     pycolmap.logging.minloglevel = 2
-    site_database, manifest, views = site_inputs(args.site, args.scenes)
-    truth = true_world_from_cam(args.site, views)
-    image_dir = args.site / "nuscenes"
-    rows: dict[str, dict[str, Any]] = {}
-    with tempfile.TemporaryDirectory(prefix="bench-sfm-") as scratch_dir:
-        scratch = Path(scratch_dir)
-        database = copy_database(site_database, scratch / "database.db")
-        rows["wigo"] = figures(pose_errors({v.name: v.world_from_cam for v in views}, truth), None, 0.0)
-        if not args.skip_incremental:
-            rows["a_incremental"] = run_incremental(database, image_dir, views, truth)
-        for key, preset in (("b_plain", "plain"), ("c_rigid", "rigid"), ("d_iterative", "iterative")):
-            logger.info("guided SfM, preset %s", preset)
-            fresh = shutil.copyfile(database, scratch / f"{preset}.db")
-            rows[key] = run_guided(preset, Path(fresh), image_dir, views, truth)
-        clips = site_clips(views, manifest)
-        rows["e_parallel"] = run_parallel(
-            clips, database, image_dir, truth, args.workers, scratch / "parallel"
-        )
+    rows, views, manifest = measure_all(args)
     print_table(rows)
-    wigo, parallel = rows["wigo"], rows["e_parallel"]
-    summary = {
-        "speedup_e_over_a": round(rows["a_incremental"]["seconds"] / parallel["seconds"], 2)
-        if "a_incremental" in rows
-        else None,
-        "position_gain_over_wigo": round(wigo["position_cm"] / parallel["position_cm"], 2),
-        "rotation_gain_over_wigo": round(wigo["rotation_deg"] / parallel["rotation_deg"], 2),
-        "goal_met": parallel["position_cm"] <= 5 and parallel["rotation_deg"] <= 0.1,
-    }
+    summary = summarize(rows)
     print(json.dumps(summary))
     result = {
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
-        "machine": f"{platform.processor() or platform.machine()}, {platform.system()}",
+        "machine": f"{platform.processor() or platform.machine()}, {platform.system()}, shared by other jobs",
         "site": str(args.site),
         "scenes": args.scenes or sorted(site_clips(views, manifest)),
         "images": len(views),

@@ -7,6 +7,7 @@ A clip is a moving scene of the site with the stationary scenes merged into it. 
 """
 
 import logging
+import shutil
 import sqlite3
 import tempfile
 import time
@@ -68,7 +69,7 @@ class ClipTask:
     scene: str
     views: tuple[CameraView, ...]
     database: Path
-    """The site's features database (read only: guided SfM works on its own copy)."""
+    """A consistent copy of the site's features database (see `copy_database`), copied again per task."""
     image_dir: Path
     config: SfmConfig
     model_dir: Path
@@ -121,13 +122,16 @@ def copy_database(source: Path, target: Path) -> Path:
 
 
 def reconstruct_clip(task: ClipTask) -> ClipOutcome:
-    """Guided SfM of one clip (runs in a worker); SfM failures become a failed outcome, not an exception."""
+    """Guided SfM of one clip (runs in a worker, on its own copy of the database: pycolmap locks the file
+    it opens); SfM failures become a failed outcome, not an exception."""
     pycolmap.logging.minloglevel = 2
     started = time.perf_counter()
-    try:
-        result = reconstruct_views(task.views, task.database, task.image_dir, task.config)
-    except SfmError as err:
-        return ClipOutcome(task.scene, False, str(err), (), (), {}, time.perf_counter() - started)
+    with tempfile.TemporaryDirectory(prefix=f"cama-sfm-{task.scene}-") as scratch:
+        database = Path(shutil.copyfile(task.database, Path(scratch) / "database.db"))
+        try:
+            result = reconstruct_views(task.views, database, task.image_dir, task.config)
+        except SfmError as err:
+            return ClipOutcome(task.scene, False, str(err), (), (), {}, time.perf_counter() - started)
     write_model(task.model_dir, result.reconstruction)
     return ClipOutcome(
         task.scene,
