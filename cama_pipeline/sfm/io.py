@@ -8,21 +8,26 @@
     {"schema", "site_id", "fingerprint",
      "images": {sample_data token: {"name": image path relative to the data set root, "scene", "channel",
                                     "translation": [x, y, z] global m, "rotation": [w, x, y, z],
-                                    "flagged": bool (pose moved implausibly in rigid BA: do not trust)}}}
-    translation/rotation are the refined world_from_ego (global_from_ego) at the image's time.
+                                    "flagged": bool}}}
+    translation/rotation: the refined world_from_ego (global_from_ego) at the image's time. Flagged images
+    were dropped by BA (moved implausibly, or high reprojection error): their pose is the one they had going
+    in, not to be trusted. Images of clips whose SfM failed are absent.
 <workspace>/sfm/<site_id>/points.npz      the sparse points of the merged model, one row per point:
     xyz (N, 3) float64 global m; label (N,) uint8 BEV raster class (0 bg, 1 road, 2 curb, 3 lane marking,
     4 crosswalk; majority of the semantic masks at the point's observations); error_px (N,) float64 mean
     reprojection error; track_length (N,) int32 observations
 <workspace>/sfm/<site_id>/report.json     schema "cama.sfm-report/1", written last (marks completion)
-    {"schema", "site_id", "fingerprint", "executor", "workers", "config": {...},
+    {"schema", "site_id", "fingerprint", "config": {...}, "merge_config": {...}, "executor", "workers",
      "clips": {scene: {"status": "ok" | "failed", "error": str | null, "images", "registered_images",
-                       "points", "reprojection_error_px", "iterations", "flagged", "seconds"}},
-     "merge": {"groups": [[scene]], "alignments": {scene: {"reference", "method": "points" | "poses",
-               "correspondences", "scale", "rotation_deg", "translation_m"}}},
-     "merged": {"images", "registered_images", "points", "reprojection_error_px", "iterations",
+                       "points", "reprojection_error_px", "iterations" (BA passes), "stop" (why the BA
+                       loop ended), "flagged", "seconds"}},
+     "merge": {"groups": [[scene]] (clips joined by shared points),
+               "alignments": {scene: {"reference": scene | null, "method": "points" | "poses",
+                                      "correspondences", "scale", "rotation_deg", "shift_m"}}},
+     "merged": {"images", "registered_images", "points", "reprojection_error_px", "iterations", "stop",
                 "flagged", "seconds"},
      "seconds": {"clips", "merge", "total"}}
+    A clip is a moving scene of the site with the stationary scenes merged into it.
 """
 
 import io
