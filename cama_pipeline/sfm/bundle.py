@@ -68,8 +68,11 @@ def bundle_adjust(model: GuidedModel, config: SfmConfig) -> dict[str, Any]:
     adjuster = pycolmap.create_default_ceres_bundle_adjuster(
         ba_options(config), ba_config(model, config), model.reconstruction
     )
-    priors = add_odometry_priors(adjuster.problem, model, config) if config.odometry_priors else {}
+    priors, costs = (
+        add_odometry_priors(adjuster.problem, model, config) if config.odometry_priors else ({}, [])
+    )
     summary = adjuster.solve()
+    del costs  # alive until here: the problem refers to them
     moved = [
         _pose_change(pose, matrix_from_rigid(frame_pose(model.reconstruction, i)))
         for i, pose in before.items()

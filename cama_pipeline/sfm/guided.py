@@ -102,7 +102,7 @@ def reconstruct_views(
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="cama-sfm-") as work_dir:
         report("model", 0, 1)
-        model = build_model(views, Path(database_path), Path(work_dir), rigid=config.rigid)
+        model = build_model(views, Path(database_path), Path(work_dir), config)
         seconds["model"] = time.perf_counter() - started
         report("triangulate", 0, 1)
         triangulate_all(model, config)

@@ -17,6 +17,7 @@ import numpy as np
 import pycolmap
 
 from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 
 logger = logging.getLogger(__name__)
@@ -120,15 +121,21 @@ def _reference(views: Sequence[CameraView]) -> CameraView:
 class _Builder:
     """Writes cameras, rigs, frames and images into the working database, consistent ids throughout."""
 
-    def __init__(self, source: pycolmap.Database, target: pycolmap.Database) -> None:
+    def __init__(
+        self, source: pycolmap.Database, target: pycolmap.Database, *, motion_compensated: bool
+    ) -> None:
         self.source, self.target = source, target
+        self.motion_compensated = motion_compensated
         self.cameras: dict[tuple[object, ...], pycolmap.Camera] = {}
         self.rigs: dict[tuple[object, ...], int] = {}
         self.image_ids: dict[str, int] = {}
         self.frames: dict[int, FrameInfo] = {}
 
     def camera(self, view: CameraView) -> pycolmap.Camera:
-        key = (view.channel, _calibration_key(view))
+        """The camera of the view's channel and calibration (and keyframe, with motion-compensated rigs: a
+        COLMAP camera belongs to one rig). COLMAP puts the top-left pixel's centre at (0.5, 0.5) (its SIFT
+        keypoints too), OpenCV at (0, 0): the principal point moves by half a pixel."""
+        key = (view.channel, _calibration_key(view), self._rig_scope(view))
         if key not in self.cameras:
             fx, fy, cx, cy, width, height = _calibration_key(view)
             camera = pycolmap.Camera(
@@ -136,15 +143,23 @@ class _Builder:
                 model="PINHOLE",
                 width=int(width),
                 height=int(height),
-                params=[fx, fy, cx, cy],
+                params=[fx, fy, cx + 0.5, cy + 0.5],
             )
             self.target.write_camera(camera, use_camera_id=True)
             self.cameras[key] = camera
         return self.cameras[key]
 
+    def _rig_scope(self, view: CameraView) -> tuple[str, int] | None:
+        """The keyframe a rig (and its cameras) is private to, when rigs are motion-compensated."""
+        return (view.scene, view.frame_index) if self.motion_compensated else None
+
     def rig(self, views: Sequence[CameraView]) -> int:
-        """The rig of these images (one frame's), reference camera first; created when new."""
-        key = _rig_key(views)
+        """The rig of these images (one frame's), reference camera first; created when new.
+
+        Motion-compensated (the default for rigid BA): each keyframe gets its own rig whose camera-to-rig
+        transforms add the ego motion between the cameras' capture times (from the odometry; tens of ms
+        apart, i.e. decimetres at speed). Static: one rig per calibration, shared by all keyframes."""
+        key = (self._rig_scope(views[0]), _rig_key(views))
         if key not in self.rigs:
             reference = _reference(views)
             rig = pycolmap.Rig(rig_id=len(self.rigs) + 1)
@@ -152,6 +167,8 @@ class _Builder:
             for view in views:
                 if view is not reference:
                     cam_from_ref = np.linalg.inv(view.ego_from_cam) @ reference.ego_from_cam
+                    if self.motion_compensated:
+                        cam_from_ref = np.linalg.inv(view.world_from_cam) @ reference.world_from_cam
                     rig.add_sensor(self.camera(view).sensor_id, rigid_from_matrix(cam_from_ref))
             self.target.write_rig(rig, use_rig_id=True)
             self.rigs[key] = rig.rig_id
@@ -218,7 +235,12 @@ def clip_label(views: Sequence[CameraView]) -> str:
 
 
 def write_working_database(
-    views: Sequence[CameraView], source_path: Path, target_path: Path, *, rigid: bool
+    views: Sequence[CameraView],
+    source_path: Path,
+    target_path: Path,
+    *,
+    rigid: bool,
+    motion_compensated: bool,
 ) -> tuple[dict[int, FrameInfo], dict[str, int], int]:
     """Write the working database of `views` (see the module docstring); frames, image ids, matched pairs."""
     if not Path(source_path).is_file():
@@ -227,7 +249,7 @@ def write_working_database(
     source = pycolmap.Database.open(str(source_path))
     target = pycolmap.Database.open(str(target_path))
     try:
-        builder = _Builder(source, target)
+        builder = _Builder(source, target, motion_compensated=motion_compensated)
         for group in _group(views, rigid):
             builder.frame(group)
         pairs = builder.matches()
@@ -238,15 +260,22 @@ def write_working_database(
 
 
 def build_model(
-    views: Sequence[CameraView], source_path: Path, work_dir: Path, *, rigid: bool
+    views: Sequence[CameraView], source_path: Path, work_dir: Path, config: SfmConfig
 ) -> GuidedModel:
-    """The known-pose model of `views` with a mapper on it, every frame registered at its odometry pose."""
+    """The known-pose model of `views` with a mapper on it, every frame registered at its odometry pose
+    (rigs motion-compensated in rigid BA unless the extrinsics are refined)."""
     names = [view.name for view in views]
     if len(set(names)) != len(names):
         raise ValueError("reconstruct_views: the views contain duplicate image names")
     work_dir.mkdir(parents=True, exist_ok=True)
     database = work_dir / "working.db"
-    frames, image_ids, pairs = write_working_database(views, source_path, database, rigid=rigid)
+    frames, image_ids, pairs = write_working_database(
+        views,
+        source_path,
+        database,
+        rigid=config.rigid,
+        motion_compensated=config.rigid and not config.refine_extrinsics,
+    )
     if pairs == 0:
         raise SfmError(f"clip {clip_label(views)}: no verified matches among its {len(views)} images")
     db = pycolmap.Database.open(str(database))
@@ -258,6 +287,9 @@ def build_model(
     mapper = pycolmap.IncrementalMapper(cache)
     mapper.begin_reconstruction(reconstruction)
     for frame in frames.values():
-        reconstruction.frame(frame.frame_id).rig_from_world = rigid_from_matrix(frame.initial_rig_from_world)
-        mapper.observation_manager.register_frame(frame.frame_id)
+        if reconstruction.exists_frame(frame.frame_id):  # frames without any match are not loaded
+            reconstruction.frame(frame.frame_id).rig_from_world = rigid_from_matrix(
+                frame.initial_rig_from_world
+            )
+            mapper.observation_manager.register_frame(frame.frame_id)
     return GuidedModel(database, reconstruction, frames, image_ids, mapper, cache)

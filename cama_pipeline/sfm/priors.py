@@ -33,17 +33,22 @@ def odometry_neighbours(model: GuidedModel, frame_ids: list[int]) -> list[tuple[
     ]
 
 
-def add_odometry_priors(problem: pyceres.Problem, model: GuidedModel, config: SfmConfig) -> dict[str, int]:
-    """Add the prior residuals of the registered frames to `problem`; counts of each kind."""
+def add_odometry_priors(
+    problem: pyceres.Problem, model: GuidedModel, config: SfmConfig
+) -> tuple[dict[str, int], list[pyceres.CostFunction]]:
+    """Add the prior residuals of the registered frames to `problem`; counts of each kind, and the cost
+    functions, which the caller keeps alive until the problem is solved (the problem does not own them)."""
     frame_ids = model.registered_frame_ids()
     relative = _covariance(
         math.radians(config.relative_rotation_sigma_deg), config.relative_translation_sigma_m
     )
     absolute = _covariance(math.radians(config.anchor_rotation_sigma_deg), config.position_sigma_m)
     counts = {"relative": 0, "absolute": 0}
+    costs: list[pyceres.CostFunction] = []
     for first, second in odometry_neighbours(model, frame_ids):
         first_from_second = first.initial_rig_from_world @ np.linalg.inv(second.initial_rig_from_world)
         cost = pycolmap.cost_functions.RelativePosePriorCost(relative, rigid_from_matrix(first_from_second))
+        costs.append(cost)
         problem.add_residual_block(
             cost,
             None,
@@ -56,6 +61,7 @@ def add_odometry_priors(problem: pyceres.Problem, model: GuidedModel, config: Sf
     for frame_id in frame_ids:
         prior = rigid_from_matrix(model.frames[frame_id].initial_rig_from_world)
         cost = pycolmap.cost_functions.AbsolutePosePriorCost(absolute, prior)
+        costs.append(cost)
         problem.add_residual_block(cost, None, [frame_pose(model.reconstruction, frame_id).params])
         counts["absolute"] += 1
-    return counts
+    return counts, costs

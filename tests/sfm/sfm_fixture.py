@@ -76,3 +76,13 @@ def build_sfm_inputs(tiny_site_root: Path, tmp_dir: Path) -> SfmInputs:
     views = site_views(load_dataset(dataset_root), read_site_manifest(site_manifest_path(workspace, SITE_ID)))
     truth = _true_poses(Path(tiny_site_root) / "ground_truth" / "poses.json", views)
     return SfmInputs(dataset_root, workspace, SITE_ID, site.database, tuple(views), truth)
+
+
+def pose_errors(world_from_ego: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> tuple[float, float]:
+    """Mean position error (m) and mean rotation error (deg) of ego poses by image name against the truth."""
+    positions, angles = [], []
+    for name, pose in world_from_ego.items():
+        positions.append(float(np.linalg.norm(pose[:3, 3] - truth[name][:3, 3])))
+        relative = pose[:3, :3].T @ truth[name][:3, :3]
+        angles.append(float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1.0, 1.0)))))
+    return float(np.mean(positions)), float(np.mean(angles))
