@@ -13,6 +13,9 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
     (d) iterative     + iterative BA (Algorithm 1)
     (e) parallel      (d) per clip on a process pool, clips merged (similarity from shared points), then
                       re-triangulation and global BA of the merged model
+    (f) + priors      (e) with WIGO's odometry and position priors kept in BA (does odometry help?)
+Every guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
+measured, i.e. the model's shape without the global placement it inherits from odometry.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
        [--workers 2] [--skip-incremental]
@@ -91,6 +94,16 @@ def figures(
     }
 
 
+def gauge_free(model: pycolmap.Reconstruction, truth: dict[str, np.ndarray]) -> dict[str, float]:
+    """Errors of a copy of the model after the similarity that best fits its cameras to the true ones: the
+    shape of the reconstruction without its global placement (how incremental mapping is measured)."""
+    copy = pycolmap.Reconstruction(model)
+    if not align_to_reference(copy, {name: pose[:3, 3] for name, pose in truth.items()}):
+        return {}
+    errors = pose_errors(model_poses(copy), truth)
+    return {"position_cm": round(errors.position_cm, 2), "rotation_deg": round(errors.rotation_deg, 4)}
+
+
 def run_incremental(database: Path, image_dir: Path, views: list[CameraView], truth: dict[str, Any]) -> dict:
     started = time.perf_counter()
     model = incremental_model(database, image_dir, [v.name for v in views])
@@ -106,7 +119,12 @@ def run_guided(preset: str, database: Path, image_dir: Path, views: list[CameraV
     result = reconstruct_views(views, database, image_dir, SfmConfig.preset(preset))
     seconds = time.perf_counter() - started
     model = result.reconstruction
-    extra = {"iterations": result.report.get("iterations"), "flagged": len(result.flagged)}
+    iterations = result.report.get("iterations")
+    extra = {
+        "iterations": len(iterations) if isinstance(iterations, list) else iterations,
+        "flagged": len(result.flagged),
+        "gauge_free": gauge_free(model, truth),
+    }
     return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
 
 
@@ -117,11 +135,10 @@ def run_parallel(
     truth: dict,
     workers: int,
     scratch: Path,
+    config: SfmConfig,
 ) -> dict:
     started = time.perf_counter()
-    site = reconstruct_site(
-        clips, database, image_dir, SfmConfig.preset("iterative"), scratch, executor=LocalExecutor(workers)
-    )
+    site = reconstruct_site(clips, database, image_dir, config, scratch, executor=LocalExecutor(workers))
     seconds = time.perf_counter() - started
     model = site.reconstruction
     extra = {
@@ -132,6 +149,7 @@ def run_parallel(
         },
         "merge": site.report["merge"],
         "seconds_split": site.report["seconds"],
+        "gauge_free": gauge_free(model, truth),
     }
     return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
 
@@ -197,9 +215,16 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
             fresh = Path(shutil.copyfile(database, scratch / f"{preset}.db"))
             rows[key] = guarded(key, lambda p=preset, f=fresh: run_guided(p, f, image_dir, views, truth))  # type: ignore[misc]
         clips = site_clips(views, manifest)
-        rows["e_parallel"] = guarded(
-            "e", lambda: run_parallel(clips, database, image_dir, truth, args.workers, scratch / "parallel")
-        )
+        for key, config in (
+            ("e_parallel", SfmConfig.preset("iterative")),
+            ("f_parallel_priors", SfmConfig.preset("iterative", odometry_priors=True)),
+        ):
+            rows[key] = guarded(
+                key,
+                lambda c=config, k=key: run_parallel(  # type: ignore[misc]
+                    clips, database, image_dir, truth, args.workers, scratch / k, c
+                ),
+            )
     return rows, views, manifest
 
 

@@ -378,6 +378,7 @@ def run_site(
         return SiteSfm(site_id, folder, read_report(workspace, site_id), skipped=True)
     manifest = read_site_manifest(manifest_path)
     views = site_views(dataset, manifest)
+    shutil.rmtree(folder / "clips", ignore_errors=True)  # no stale model of a clip that fails this time
     with tempfile.TemporaryDirectory(prefix="cama-sfm-") as scratch, _progress(show_progress) as progress:
         copy = copy_database(database, Path(scratch) / "database.db")
         site = reconstruct_site(
