@@ -73,6 +73,7 @@ def _register_stage_commands() -> None:
     from annotations.export_command import export_command, import_command
     from app.backend.demo import demo_command
     from app.backend.serve import serve_command
+    from app.viewer.command import view_command
     from cama_pipeline.evaluate.command import eval_command
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
@@ -93,6 +94,7 @@ def _register_stage_commands() -> None:
     app.command("import")(import_command)
     app.command("serve")(serve_command)
     app.command("demo")(demo_command)
+    app.command("view")(view_command)
     app.command("wigo")(wigo_command)
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)

@@ -1,0 +1,63 @@
+"""`cama view`: serve the 3D review of a site in viser until Ctrl+C."""
+
+import threading
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+console = Console()
+
+
+def view_command(
+    site_dir: Annotated[Path, typer.Argument(help="A site folder written by `cama synth`.")] = Path(
+        "data/synthetic/default"
+    ),
+    workspace: Annotated[Path | None, typer.Option(help="Workspace; default <site>/workspace.")] = None,
+    site_id: Annotated[str, typer.Option(help="Site of the workspace to show.")] = "site-001",
+    annotations: Annotated[
+        Path | None,
+        typer.Option(help="Vectors from an annotation JSON file (default <workspace>/proposals.json)."),
+    ] = None,
+    api: Annotated[
+        str | None, typer.Option(help="Vectors from a running backend instead, e.g. http://127.0.0.1:8000.")
+    ] = None,
+    api_site: Annotated[int, typer.Option(help="The backend's site id.")] = 1,
+    user: Annotated[str, typer.Option(help="Backend user.")] = "lead",
+    password: Annotated[
+        str, typer.Option(envvar="CAMA_VIEW_PASSWORD", help="Backend password.")
+    ] = "cama-demo",
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port.")] = 8080,
+    poll_s: Annotated[float, typer.Option(min=0.2, help="Seconds between vector refreshes.")] = 2.0,
+) -> None:
+    """Show the road mesh, lifted vectors by class and state, keyframe cameras and sparse points in 3D."""
+    import viser
+
+    from app.viewer.content import ViewInputError
+    from app.viewer.review import ViewInputs, follow, open_review
+    from app.viewer.sources import ApiVectorSource, FileVectorSource, VectorSource, VectorSourceError
+    from cama_pipeline.site.workspace import WorkspaceError
+
+    workspace = workspace or site_dir / "workspace"
+    source: VectorSource = (
+        ApiVectorSource(api, api_site, user, password)
+        if api
+        else FileVectorSource(annotations or workspace / "proposals.json")
+    )
+    server = viser.ViserServer(host=host, port=port, label="CAMA Studio 3D review", verbose=False)
+    try:
+        scene = open_review(server, ViewInputs(site_dir, workspace, site_id), source)
+    except (ViewInputError, VectorSourceError, WorkspaceError, FileNotFoundError, ValueError) as err:
+        server.stop()
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(1) from None
+    console.print(f"3D review of {site_id}: http://{host}:{port}  (Ctrl+C stops)")
+    stop = threading.Event()
+    try:
+        follow(scene, source, stop, interval_s=poll_s)
+    except KeyboardInterrupt:
+        stop.set()
+    finally:
+        server.stop()

@@ -1,0 +1,184 @@
+"""What the 3D view shows, read from a site's files: the road surface, the keyframe cameras, the sparse SfM
+points and the BEV elevation that lifts 2D vectors. Everything is returned in the view's local frame.
+
+A site folder written by `cama synth` and its workspace are the inputs. The reconstructed rasters
+(`workspace/surface/<site>/bev/`, `cama surface`) are preferred; the generator's ground truth is used when the
+surface stage has not run, and the view says so.
+"""
+
+import logging
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import trimesh
+
+from annotations.lift import lift_points
+from annotations.schema import Georeference
+from app.viewer.geometry import LocalFrame, frustum_segments
+from app.viewer.style import semantic_rgb
+from cama_pipeline.data import load_dataset
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+
+logger = logging.getLogger(__name__)
+
+
+class ViewInputError(ValueError):
+    """A file the 3D view needs is missing or unreadable; the message names it."""
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """The BEV elevation used to lift vectors, with its raster georeference (site origin 0: global xy)."""
+
+    elevation: np.ndarray
+    unobserved: np.ndarray
+    georeference: Georeference
+    folder: Path
+    reconstructed: bool
+    """False when these are the generator's ground-truth rasters (the surface stage has not run)."""
+
+
+@dataclass(frozen=True, eq=False)
+class SparsePointsView:
+    """Sparse SfM points in the view frame with colours by semantic label."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+
+
+def surface_folder(site_dir: Path, workspace: Path, site_id: str) -> tuple[Path, bool]:
+    """The raster folder to show: the reconstructed one when present, else the ground truth; (folder, reconstructed)."""
+    reconstructed = Path(workspace) / "surface" / site_id / "bev"
+    if (reconstructed / "georeference.json").is_file():
+        return reconstructed, True
+    ground_truth = Path(site_dir) / "ground_truth" / "bev"
+    if (ground_truth / "georeference.json").is_file():
+        logger.warning(
+            "no reconstructed surface in %s: showing the ground-truth rasters", reconstructed.parent
+        )
+        return ground_truth, False
+    raise ViewInputError(
+        f"{reconstructed}: no BEV rasters (run `cama surface`), and no ground truth in {site_dir}"
+    )
+
+
+def load_surface(folder: Path, *, reconstructed: bool) -> Surface:
+    """Read `elevation.npy` + `semantic.png` + `georeference.json` of a raster folder; ViewInputError naming the file."""
+    georeference = Georeference.from_raster_file(folder / "georeference.json", site_origin_xy=(0.0, 0.0))
+    path = folder / "elevation.npy"
+    try:
+        elevation = np.load(path, allow_pickle=False).astype(np.float64)
+    except (OSError, ValueError) as err:
+        raise ViewInputError(f"{path}: cannot read the elevation raster: {err}") from None
+    semantic = cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED)
+    if semantic is None or elevation.shape != (georeference.height, georeference.width):
+        raise ViewInputError(
+            f"{folder}: semantic.png / elevation.npy missing or not {georeference.height} rows x "
+            f"{georeference.width} columns as georeference.json says"
+        )
+    unobserved = (semantic == int(Semantic.UNOBSERVED)) | ~np.isfinite(elevation)
+    return Surface(elevation, unobserved, georeference, folder, reconstructed)
+
+
+def local_frame_of(surface: Surface) -> LocalFrame:
+    """A view origin at the raster's centre, at the median observed elevation."""
+    geo = surface.georeference
+    centre_x = geo.origin_xy[0] + geo.resolution * (geo.width - 1) / 2
+    centre_y = geo.origin_xy[1] - geo.resolution * (geo.height - 1) / 2
+    observed = surface.elevation[~surface.unobserved]
+    z = float(np.median(observed)) if observed.size else 0.0
+    return LocalFrame(np.array([centre_x, centre_y, z]))
+
+
+def raster_mesh(
+    surface: Surface, photometric: np.ndarray, frame: LocalFrame, *, max_faces: int
+) -> trimesh.Trimesh:
+    """A coloured grid mesh of the observed cells, subsampled so it has at most `max_faces` triangles."""
+    valid = ~surface.unobserved
+    stride = max(1, int(np.ceil(np.sqrt(2 * valid.sum() / max(max_faces, 1)))))
+    rows, cols = np.arange(0, valid.shape[0], stride), np.arange(0, valid.shape[1], stride)
+    grid_valid = valid[np.ix_(rows, cols)]
+    index = np.full(grid_valid.shape, -1, dtype=np.int64)
+    index[grid_valid] = np.arange(int(grid_valid.sum()))
+    rr, cc = np.nonzero(grid_valid)
+    geo = surface.georeference
+    x = geo.origin_xy[0] + cols[cc] * geo.resolution
+    y = geo.origin_xy[1] - rows[rr] * geo.resolution
+    vertices = frame.from_global(np.column_stack([x, y, surface.elevation[rows[rr], cols[cc]]]))
+    a, b, c, d = index[:-1, :-1], index[:-1, 1:], index[1:, :-1], index[1:, 1:]
+    quad = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+    faces = np.concatenate(
+        [np.column_stack([a[quad], c[quad], b[quad]]), np.column_stack([b[quad], c[quad], d[quad]])]
+    )
+    colors = photometric[rows[rr], cols[cc]]
+    return trimesh.Trimesh(vertices=vertices, faces=faces, vertex_colors=colors, process=False)
+
+
+def road_mesh(
+    workspace: Path, site_id: str, surface: Surface, frame: LocalFrame, *, max_faces: int
+) -> trimesh.Trimesh:
+    """The surface stage's `mesh.ply` when it fits the face budget, else a grid mesh made from the rasters."""
+    path = Path(workspace) / "surface" / site_id / "mesh.ply"
+    if path.is_file():
+        mesh = trimesh.load(path, process=False)
+        if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) <= max_faces:
+            mesh.vertices = frame.from_global(mesh.vertices)
+            return mesh
+        logger.info("%s has more than %d faces: showing a grid mesh made from the rasters", path, max_faces)
+    photometric = cv2.imread(str(surface.folder / "photometric.png"), cv2.IMREAD_COLOR)
+    if photometric is None:
+        raise ViewInputError(f"{surface.folder / 'photometric.png'}: missing or unreadable")
+    return raster_mesh(surface, cv2.cvtColor(photometric, cv2.COLOR_BGR2RGB), frame, max_faces=max_faces)
+
+
+def keyframe_cameras(dataset_root: Path, workspace: Path, site_id: str) -> list[CameraView]:
+    """The site's keyframe cameras, posed by SfM when `cama sfm` has run, else by the site manifest (WIGO)."""
+    manifest = read_site_manifest(site_manifest_path(workspace, site_id))
+    views = site_views(load_dataset(dataset_root), manifest)
+    poses_path = Path(workspace) / "sfm" / site_id / "poses.json"
+    if not poses_path.is_file():
+        return views
+    from cama_pipeline.sfm.io import read_refined_poses
+
+    refined = read_refined_poses(workspace, site_id)
+    return [replace(v, world_from_ego=refined[v.token]) for v in views if v.token in refined]
+
+
+def camera_segments(views: list[CameraView], frame: LocalFrame, *, depth_m: float) -> np.ndarray:
+    """(8 x cameras, 2, 3) frustum wireframes of the views in the view frame."""
+    if not views:
+        return np.zeros((0, 2, 3))
+    parts = []
+    for view in views:
+        view_from_cam = view.world_from_cam.copy()
+        view_from_cam[:3, 3] = frame.from_global(view_from_cam[:3, 3])
+        parts.append(frustum_segments(view_from_cam, view.intrinsic, view.width, view.height, depth_m))
+    return np.concatenate(parts)
+
+
+def sparse_points(workspace: Path, site_id: str, frame: LocalFrame) -> SparsePointsView | None:
+    """The SfM points coloured by label, or None before `cama sfm` has run."""
+    if not (Path(workspace) / "sfm" / site_id / "points.npz").is_file():
+        return None
+    from cama_pipeline.sfm.io import read_points
+
+    points = read_points(workspace, site_id)
+    return SparsePointsView(frame.from_global(points.xyz), semantic_rgb(points.label))
+
+
+def lift_polyline(points_xy: np.ndarray, surface: Surface, frame: LocalFrame) -> np.ndarray | None:
+    """(N, 3) view-frame polyline lifted through the elevation; vertices with no elevation nearby take the
+    element's median; None when no vertex has any."""
+    result = lift_points(
+        points_xy, surface.elevation, surface.georeference, unobserved=surface.unobserved, search_radius_m=2.0
+    )
+    points = result.points_3d.copy()
+    known = np.isfinite(points[:, 2])
+    if not known.any():
+        return None
+    points[~known, 2] = np.median(points[known, 2])
+    return frame.from_global(points)

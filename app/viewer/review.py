@@ -1,0 +1,70 @@
+"""Open a site in the 3D review: read its files, fill a `ReviewScene`, keep the vectors in step with a source."""
+
+import logging
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import viser
+
+from app.viewer.content import (
+    camera_segments,
+    keyframe_cameras,
+    load_surface,
+    local_frame_of,
+    road_mesh,
+    sparse_points,
+    surface_folder,
+)
+from app.viewer.scene import ReviewScene
+from app.viewer.sources import VectorSource, VectorSourceError
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ViewInputs:
+    """Which site to show and from where."""
+
+    site_dir: Path
+    """A site folder written by `cama synth` (its data set is `nuscenes/` inside)."""
+    workspace: Path
+    site_id: str
+    max_mesh_faces: int = 300_000
+    frustum_depth_m: float = 1.0
+
+
+def open_review(server: viser.ViserServer, inputs: ViewInputs, source: VectorSource) -> ReviewScene:
+    """Build every layer of the site's 3D review on `server` and draw the source's current vectors."""
+    folder, reconstructed = surface_folder(inputs.site_dir, inputs.workspace, inputs.site_id)
+    surface = load_surface(folder, reconstructed=reconstructed)
+    frame = local_frame_of(surface)
+    scene = ReviewScene(server, frame, surface)
+    scene.add_mesh(
+        road_mesh(inputs.workspace, inputs.site_id, surface, frame, max_faces=inputs.max_mesh_faces)
+    )
+    views = keyframe_cameras(inputs.site_dir / "nuscenes", inputs.workspace, inputs.site_id)
+    scene.add_cameras(camera_segments(views, frame, depth_m=inputs.frustum_depth_m))
+    points = sparse_points(inputs.workspace, inputs.site_id, frame)
+    if points is None:
+        logger.info("no sparse points yet (run `cama sfm`)")
+    else:
+        scene.add_points(points)
+    scene.add_vector_toggle()
+    counts = scene.sync_vectors(source.load())
+    logger.info("%d vectors drawn, %d without elevation", counts.added, counts.not_lifted)
+    return scene
+
+
+def follow(scene: ReviewScene, source: VectorSource, stop: threading.Event, *, interval_s: float) -> None:
+    """Re-read the source every `interval_s` until `stop` is set; a failed read keeps the last state and warns."""
+    while not stop.wait(interval_s):
+        try:
+            counts = scene.sync_vectors(source.load())
+        except VectorSourceError as err:
+            logger.warning("vectors not refreshed: %s", err)
+            continue
+        if counts.added or counts.updated or counts.removed:
+            logger.info(
+                "vectors: %d added, %d updated, %d removed", counts.added, counts.updated, counts.removed
+            )
