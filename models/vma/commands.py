@@ -12,12 +12,12 @@ from cama_pipeline.data import DatasetError
 from cama_pipeline.evaluate.inputs import EvaluationInputError
 from cama_pipeline.io import atomic_write_json
 from models.vma.bev_sites import ensure_bev_sites
-from models.vma.checkpoint import CheckpointError, load_checkpoint
-from models.vma.config import ModelConfig, TrainConfig
+from models.vma.checkpoint import CheckpointError, load_checkpoint, promote
+from models.vma.config import ANCHORED_MODEL, ModelConfig, TrainConfig
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.propose import propose
-from models.vma.retrain import Corrections, RetrainConfig, retrain_from_corrections
+from models.vma.retrain import Corrections, RetrainConfig, gate_checkpoint, retrain_from_corrections
 from models.vma.rule_based import propose_rule_based
 from models.vma.split import SplitConfig, split_dataset
 from models.vma.train import train
@@ -101,20 +101,47 @@ def train_command(
     ] = 40.0,
     batch_size: Annotated[int, typer.Option(help="Patches per batch.")] = 8,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    anchored: Annotated[
+        bool, typer.Option(help="Anchored model (queries from rule-based candidates) or free MapTR queries.")
+    ] = True,
+    procedural_share: Annotated[float, typer.Option(help="Share of procedural patches per batch.")] = 0.0,
+    val: Annotated[
+        list[Path] | None,
+        typer.Option(help="Validation site (repeatable): promote only if mAP beats the promoted version."),
+    ] = None,
 ) -> None:
-    """Train the learned VMA model and save it as a new, promoted checkpoint version."""
+    """Train the learned VMA model and save it as a new checkpoint version (promoted, or gated with --val)."""
     try:
         sites = list(site or []) + ensure_bev_sites(seed_range(bev_seeds), bev_root)
         folder = train(
-            ModelConfig(),
-            TrainConfig(steps=steps, batch_size=batch_size, seed=seed, max_seconds=max_minutes * 60),
+            ANCHORED_MODEL if anchored else ModelConfig(),
+            TrainConfig(
+                steps=steps,
+                batch_size=batch_size,
+                seed=seed,
+                max_seconds=max_minutes * 60,
+                procedural_share=procedural_share,
+            ),
             sites,
             registry,
             init=init,
+            promote_result=not val,
+            validation_sites=list(val or []),
         )
+        promoted = not val or _gate_new(registry, folder, list(val or []))
     except _ERRORS as err:
         raise _fail(err) from err
-    console.print(f"[green]checkpoint[/green] {folder} (promoted)")
+    console.print(f"[green]checkpoint[/green] {folder} ({'promoted' if promoted else 'not promoted: gate'})")
+
+
+def _gate_new(registry: Path, folder: Path, val: list[Path]) -> bool:
+    """Promote a newly trained version if it beats the promoted one (any config) on `val`; True when promoted."""
+    if not (registry / "current.json").is_file():
+        promote(registry, folder.name)
+        return True
+    promoted, current, candidate = gate_checkpoint(registry, folder, val, allow_new_config=True)
+    console.print(f"validation mAP {candidate['mean_ap']} vs promoted {current['mean_ap']}")
+    return promoted
 
 
 def retrain_command(

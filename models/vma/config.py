@@ -25,6 +25,9 @@ class ModelConfig:
     """Feature width of the backbone output and the decoder."""
     decoder_layers: int = 2
     heads: int = 4
+    anchored: bool = False
+    """Instance queries initialised from the rule-based proposer's candidates (see `models.vma.anchors`);
+    free learned queries fill the slots no candidate takes."""
 
     def __post_init__(self) -> None:
         if not self.resolution_m > 0:
@@ -45,6 +48,10 @@ class ModelConfig:
     def patch_m(self) -> float:
         """Side of a patch in metres."""
         return self.patch_px * self.resolution_m
+
+
+ANCHORED_MODEL = ModelConfig(resolution_m=0.4, patch_px=80, num_queries=24, dim=48, anchored=True)
+"""The shipped anchored model: 32 m patches at 0.4 m/px, small enough to train on 2 CPU cores in minutes."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +88,12 @@ def config_dict(config: Any) -> dict:
     return dataclasses.asdict(config)
 
 
+_ADDED_FIELDS: dict[str, Any] = {"anchored": False}
+"""Fields added after checkpoints were shipped, with their defaults: hashed only when set otherwise, so older
+checkpoints keep their fingerprint."""
+
+
 def config_fingerprint(config: ModelConfig) -> str:
     """Hash of a model config: checkpoints record it and refuse to load into another."""
-    return hashlib.sha256(json.dumps(config_dict(config), sort_keys=True).encode()).hexdigest()[:16]
+    fields = {k: v for k, v in config_dict(config).items() if k not in _ADDED_FIELDS or v != _ADDED_FIELDS[k]}
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]

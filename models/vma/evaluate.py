@@ -4,7 +4,8 @@ The site is cut into square evaluation tiles; predictions and ground truth are b
 (pieces shorter than `min_length_m` dropped) and each tile is one sample of `cama_pipeline.evaluate.chamfer_ap`.
 The confidence report bins predictions by score and gives the precision per bin (a prediction is correct
 when a same-class ground truth of its tile lies within the threshold), so one can see whether confidence
-ranks errors.
+ranks errors; from the same outcomes the pre-accept threshold of the loop is calibrated
+(`models.vma.loop.calibrate_preaccept_threshold`).
 """
 
 import logging
@@ -23,6 +24,7 @@ from cama_pipeline.evaluate.chamfer_ap import (
     chamfer_distance,
     resample,
 )
+from models.vma.loop import LoopConfig, calibrate_preaccept_threshold
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
 from models.vma.vectors import Vector, clip_vectors, read_vectors
 
@@ -40,7 +42,9 @@ class SiteEvalConfig:
     confidence_bins: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0001)
     """Edges of the confidence bins of the precision report."""
     bin_threshold_m: float = 1.0
-    """Chamfer threshold of the per-bin precision."""
+    """Chamfer threshold of the per-bin precision (and of the pre-accept calibration)."""
+    loop: LoopConfig = LoopConfig()
+    """Target precision of the calibrated pre-accept threshold."""
 
     def __post_init__(self) -> None:
         if self.tile_m <= 0 or self.min_length_m < 0 or self.bin_threshold_m <= 0:
@@ -81,7 +85,12 @@ def evaluate_sites(
         predictions.update(tile_samples(pred, bounds, config, prefix=f"s{k}-"))
         truth.update(tile_samples(gt, bounds, config, prefix=f"s{k}-"))
     result = chamfer_ap(predictions, truth)
-    return {**ap_json(result), "confidence_bins": confidence_bins(predictions, truth, config)}
+    scores, correct = prediction_outcomes(predictions, truth, config)
+    return {
+        **ap_json(result),
+        "confidence_bins": confidence_bins(scores, correct, config),
+        "preaccept_threshold": calibrate_preaccept_threshold(scores, correct, config.loop),
+    }
 
 
 def ap_json(result: ChamferApResult) -> dict:
@@ -93,10 +102,10 @@ def ap_json(result: ChamferApResult) -> dict:
     }
 
 
-def confidence_bins(
+def prediction_outcomes(
     predictions: dict[str, list[MapVector]], truth: dict[str, list[MapVector]], config: SiteEvalConfig
-) -> list[dict]:
-    """Per confidence bin: how many predictions, how many correct at `bin_threshold_m`, and precision."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Score of every prediction and whether a same-class truth of its tile lies within `bin_threshold_m`."""
     num_points = ChamferApConfig().num_points
     scores, correct = [], []
     for sample, preds in predictions.items():
@@ -107,7 +116,11 @@ def confidence_bins(
             best = min((chamfer_distance(p, g) for g in same), default=np.inf)
             scores.append(pred.score)
             correct.append(best <= config.bin_threshold_m)
-    scores_a, correct_a = np.asarray(scores), np.asarray(correct, bool)
+    return np.asarray(scores, np.float64), np.asarray(correct, bool)
+
+
+def confidence_bins(scores_a: np.ndarray, correct_a: np.ndarray, config: SiteEvalConfig) -> list[dict]:
+    """Per confidence bin: how many predictions, how many correct, and precision."""
     out = []
     edges = config.confidence_bins
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):

@@ -3,7 +3,8 @@
 Windows of the model's patch size step by `patch - overlap` over the site's model-resolution grid (the last
 row/column of windows is flush with the far edge; a site smaller than one patch is zero-padded). Each window's
 predictions above `min_score` become global vectors (score: the best class probability), clipped to the
-window's core and merged (`models.vma.merge`).
+window's core and merged (`models.vma.merge`). An anchored model first runs the rule-based proposer on the
+site; each window's anchors are those candidates clipped to the window.
 """
 
 import logging
@@ -13,11 +14,13 @@ import numpy as np
 import torch
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from models.vma.anchors import Anchors, patch_anchors, stack_anchors
 from models.vma.config import ModelConfig
 from models.vma.merge import MergeConfig, clip_to_core, core_bounds, merge_windows
 from models.vma.model import VmaNet
-from models.vma.patches import SiteGrid, site_grid
+from models.vma.patches import MIN_TARGET_LENGTH_PX, SiteGrid, site_grid
 from models.vma.rasters import SiteRasters
+from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import CLASSES, Vector
 
 logger = logging.getLogger(__name__)
@@ -59,6 +62,11 @@ def predict_site(
     grid = site_grid(rasters, model.config)
     windows = _windows(grid, model.config, config.overlap_px)
     device = next(model.parameters()).device
+    candidates = (
+        [Vector(v.cls, grid.pixel_from_global(v.points), v.score) for v in propose_rule_based(rasters)]
+        if model.config.anchored
+        else None
+    )
     pieces: list[Vector] = []
     columns = (TextColumn("proposing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, disable=not show_progress) as progress, torch.no_grad():
@@ -68,7 +76,14 @@ def predict_site(
             images = torch.as_tensor(
                 np.stack([_crop(grid, model.config, w[0], w[1]) for w in chunk]), device=device
             )
-            logits, points = model(images)
+            anchors = (
+                stack_anchors(
+                    [_window_anchors(candidates, model.config, col, row) for col, row, _ in chunk], device
+                )
+                if candidates is not None
+                else None
+            )
+            logits, points = model(images, anchors)
             scores = torch.sigmoid(logits).cpu().numpy()
             final = points[-1].cpu().numpy()
             for (col, row, core), s, p in zip(chunk, scores, final, strict=True):
@@ -101,6 +116,14 @@ def _windows(
             x_lo, x_hi = core_bounds(centre_x, i)
             out.append((col, row, (x_lo, x_hi, y_lo, y_hi)))
     return out
+
+
+def _window_anchors(candidates: list[Vector], model_config: ModelConfig, col: int, row: int) -> Anchors:
+    """Anchors of the window at (col, row) from site candidates in grid pixels."""
+    offset = np.array([col - 0.5, row - 0.5])
+    return patch_anchors(
+        [Vector(v.cls, v.points - offset, v.score) for v in candidates], model_config, MIN_TARGET_LENGTH_PX
+    )
 
 
 def _crop(grid: SiteGrid, model_config: ModelConfig, col: int, row: int) -> np.ndarray:

@@ -3,7 +3,9 @@
 A CNN backbone turns the (one-hot semantic + RGB) BEV patch into a stride-8 feature map; a transformer
 decoder runs hierarchical queries (instance query + point query, as MapTR) over it, each layer refining the
 points; an instance's class scores come from its pooled point features. Outputs are logits per class
-(sigmoid scores, no background class) and normalised patch points in [0, 1].
+(sigmoid scores, no background class) and normalised patch points in [0, 1]. The anchored variant
+(`ModelConfig.anchored`, `models.vma.anchors`) initialises instance queries and reference points from
+rule-based candidates; its point heads start at zero, so an untrained model returns the candidates' points.
 """
 
 import math
@@ -11,6 +13,7 @@ import math
 import torch
 from torch import nn
 
+from models.vma.anchors import ANCHOR_FEATURES
 from models.vma.config import ModelConfig
 from models.vma.vectors import CLASSES
 
@@ -60,18 +63,37 @@ class VmaNet(nn.Module):
         nn.init.constant_(class_out.bias, -4.0)  # rare positives: start with low scores
         self.class_head = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, d), nn.ReLU(), class_out)
         self.reference = nn.Linear(d, 2)
+        if config.anchored:
+            self.anchor_embed = nn.Sequential(
+                nn.Linear(ANCHOR_FEATURES + 2 * config.num_points, d), nn.ReLU(), nn.Linear(d, d)
+            )
+            for parameter in self.point_heads.parameters():
+                nn.init.zeros_(parameter)
 
-    def forward(self, images: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
-        """(B, C, S, S) -> class logits (B, Q, K) and per-layer points [(B, Q, P, 2) in [0, 1]]."""
+    def forward(
+        self, images: torch.Tensor, anchors: tuple[torch.Tensor, torch.Tensor] | None = None
+    ) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        """(B, C, S, S) [+ anchor points (B, Q, P, 2) and features (B, Q, F)] -> class logits (B, Q, K) and
+        per-layer points [(B, Q, P, 2) in [0, 1]]. Anchors are required by, and only accepted by, anchored models."""
+        if (anchors is not None) != self.config.anchored:
+            raise ValueError(
+                f"VmaNet: anchored={self.config.anchored} model given anchors={anchors is not None}"
+            )
         batch = images.shape[0]
         q, p, d = self.config.num_queries, self.config.num_points, self.config.dim
         features = self.backbone(images).flatten(2).transpose(1, 2)
         memory = features + self.memory_pos
-        queries = (self.instance_queries.weight[:, None, :] + self.point_queries.weight[None, :, :]).reshape(
-            q * p, d
-        )
-        queries = queries.unsqueeze(0).expand(batch, -1, -1)
+        instance = self.instance_queries.weight.unsqueeze(0).expand(batch, -1, -1)
+        if anchors is not None:
+            anchor_points, anchor_features = anchors
+            filled = anchor_features[..., -1:]
+            embedded = self.anchor_embed(torch.cat([anchor_features, anchor_points.flatten(2)], dim=2))
+            instance = instance + filled * embedded
+        queries = (instance[:, :, None, :] + self.point_queries.weight[None, None]).reshape(batch, q * p, d)
         logit_points = self.reference(queries)
+        if anchors is not None:
+            anchored = torch.logit(anchor_points.clamp(1e-3, 1 - 1e-3)).reshape(batch, q * p, 2)
+            logit_points = torch.where(filled.repeat_interleave(p, dim=1) > 0, anchored, logit_points)
         all_points = []
         for layer, head in zip(self.layers, self.point_heads, strict=True):
             hidden = layer(queries + self.point_in(torch.sigmoid(logit_points)), memory)

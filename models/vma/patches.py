@@ -2,7 +2,10 @@
 
 Targets are the patch's vectors resampled to the model's fixed point count, with x = col / S and
 y = row / S in [0, 1]; rings keep first == last. Site patches are cut at random centres and rotations from a
-site's model-resolution input, with the site's vectors mapped through the same transform.
+site's model-resolution input, with the site's vectors mapped through the same transform. Samples for an
+anchored model also carry the rule-based candidates of the patch as anchors (`models.vma.anchors`): a site's
+candidates (computed once on its rasters) mapped like its vectors, or for procedural patches the rule-based
+proposer run on the drawn patch itself.
 """
 
 from collections.abc import Sequence
@@ -12,9 +15,11 @@ import cv2
 import numpy as np
 
 from cama_pipeline.evaluate.chamfer_ap import resample
+from models.vma.anchors import Anchors, patch_anchors
 from models.vma.config import ModelConfig
 from models.vma.procedural import procedural_patch
 from models.vma.rasters import NUM_SEMANTIC, SiteRasters, model_input
+from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import CLASSES, Vector, clip_vectors
 
 MIN_TARGET_LENGTH_PX = 4.0
@@ -31,6 +36,8 @@ class Sample:
     """(G,) int64 class indices into CLASSES."""
     points: np.ndarray
     """(G, P, 2) float32 normalised patch coordinates."""
+    anchors: Anchors | None = None
+    """Rule-based candidates as anchor queries (anchored models only)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,7 +84,14 @@ def procedural_sample(config: ModelConfig, rng: np.random.Generator) -> Sample:
     semantic, photometric, vectors = procedural_patch(config.patch_px, config.resolution_m, rng)
     image = _input_from(semantic, photometric)
     labels, points = targets(vectors, config.patch_px, config.num_points)
-    return Sample(image, labels, points)
+    anchors = None
+    if config.anchored:
+        drawn = SiteRasters(semantic, photometric, (0.0, 0.0), config.resolution_m, "procedural")
+        candidates = [
+            Vector(v.cls, drawn.pixel_from_global(v.points) + 0.5, v.score) for v in propose_rule_based(drawn)
+        ]
+        anchors = patch_anchors(candidates, config, MIN_TARGET_LENGTH_PX)
+    return Sample(image, labels, points, anchors)
 
 
 def _input_from(semantic: np.ndarray, photometric: np.ndarray) -> np.ndarray:
@@ -87,9 +101,15 @@ def _input_from(semantic: np.ndarray, photometric: np.ndarray) -> np.ndarray:
 
 
 def site_sample(
-    grid: SiteGrid, vectors: Sequence[Vector], config: ModelConfig, centre_px: np.ndarray, angle_rad: float
+    grid: SiteGrid,
+    vectors: Sequence[Vector],
+    config: ModelConfig,
+    centre_px: np.ndarray,
+    angle_rad: float,
+    candidates: Sequence[Vector] | None = None,
 ) -> Sample:
-    """The patch centred at grid pixel `centre_px`, rotated by `angle_rad`, with its vectors."""
+    """The patch centred at grid pixel `centre_px`, rotated by `angle_rad`, with its vectors (and the site's
+    rule-based `candidates` as anchors when given)."""
     size = config.patch_px
     c, s = np.cos(angle_rad), np.sin(angle_rad)
     rotation = np.array([[c, -s], [s, c]])
@@ -100,24 +120,32 @@ def site_sample(
         cv2.warpAffine(ch, site_from_patch, (size, size), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
         for ch in grid.image
     ]
-    patch_vectors = []
-    for v in vectors:
+
+    def to_patch(v: Vector) -> Vector:
         site_px = grid.pixel_from_global(v.points)
-        patch_px = (site_px - site_from_patch[:, 2]) @ rotation + 0.5  # pixel centres at +0.5 in patch coords
-        patch_vectors.append(Vector(v.cls, patch_px))
-    labels, points = targets(patch_vectors, size, config.num_points)
-    return Sample(np.stack(channels).astype(np.float32), labels, points)
+        # pixel centres at +0.5 in patch coordinates
+        return Vector(v.cls, (site_px - site_from_patch[:, 2]) @ rotation + 0.5, v.score)
+
+    labels, points = targets([to_patch(v) for v in vectors], size, config.num_points)
+    anchors = None
+    if candidates is not None:
+        anchors = patch_anchors([to_patch(v) for v in candidates], config, MIN_TARGET_LENGTH_PX)
+    return Sample(np.stack(channels).astype(np.float32), labels, points, anchors)
 
 
 def random_site_sample(
-    grid: SiteGrid, vectors: Sequence[Vector], config: ModelConfig, rng: np.random.Generator
+    grid: SiteGrid,
+    vectors: Sequence[Vector],
+    config: ModelConfig,
+    rng: np.random.Generator,
+    candidates: Sequence[Vector] | None = None,
 ) -> Sample:
-    """A site patch at a random road cell (any rotation)."""
+    """A site patch at a random road cell (any rotation), with anchors when `candidates` are given."""
     road = grid.image[1:NUM_SEMANTIC].sum(axis=0) > 0.5
     rows, cols = np.nonzero(road[::4, ::4])
     k = int(rng.integers(len(rows)))
     centre = np.array([cols[k] * 4, rows[k] * 4], np.float64) + rng.uniform(-2, 2, 2)
-    return site_sample(grid, vectors, config, centre, float(rng.uniform(0, 2 * np.pi)))
+    return site_sample(grid, vectors, config, centre, float(rng.uniform(0, 2 * np.pi)), candidates)
 
 
 def degrade(sample: Sample, rng: np.random.Generator) -> Sample:
@@ -134,4 +162,4 @@ def degrade(sample: Sample, rng: np.random.Generator) -> Sample:
         marking = image[3][block[1:]] > 0
         image[1][block[1:]][marking] = 1.0
         image[3][block[1:]][marking] = 0.0
-    return Sample(image, sample.labels, sample.points)
+    return Sample(image, sample.labels, sample.points, sample.anchors)

@@ -8,6 +8,8 @@ its metrics and data either way, and promoted only if its mAP does not drop (by 
 
 Patches are cut wherever corrections are; unreviewed elements inside such a patch count as background,
 so correction batches should cover whole regions (the lead view retrains after regions are reviewed).
+An anchored model's patches carry the rule-based candidates of the corrected site as anchors. Each saved
+candidate records the pre-accept threshold calibrated on its validation proposals (`models.vma.loop`).
 """
 
 import logging
@@ -24,9 +26,11 @@ from models.vma.checkpoint import load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig, config_dict
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
+from models.vma.loop import THRESHOLD_KEY
 from models.vma.model import VmaNet
 from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, site_grid, site_sample
 from models.vma.rasters import load_site_rasters
+from models.vma.rule_based import propose_rule_based
 from models.vma.train import Sampler, fit
 from models.vma.vectors import Vector, vectors_from_annotations
 
@@ -85,22 +89,34 @@ def passes_gate(current_map: float | None, candidate_map: float | None, toleranc
     return current_map is None or candidate_map >= current_map - tolerance
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedCorrections:
+    """One corrected site ready for patch sampling."""
+
+    grid: SiteGrid
+    labels: list[Vector]
+    negatives: list[Vector]
+    candidates: list[Vector] | None
+    """The site's rule-based candidates (anchored models only)."""
+
+
 def correction_sampler(
-    corrections: Sequence[tuple[SiteGrid, list[Vector], list[Vector]]],
-    config: ModelConfig,
-    replay_share: float,
+    corrections: Sequence[PreparedCorrections], config: ModelConfig, replay_share: float
 ) -> Sampler:
     """Patches centred on a random labelled or rejected element (random point along it, any rotation)."""
 
     def draw(rng: np.random.Generator) -> Sample:
         if rng.random() < replay_share:
             return procedural_sample(config, rng)
-        grid, labels, negatives = corrections[int(rng.integers(len(corrections)))]
-        anchors = labels + negatives
-        anchor = anchors[int(rng.integers(len(anchors)))]
-        point = anchor.points[int(rng.integers(len(anchor.points)))] + rng.normal(0, 4.0, 2)
-        centre = grid.pixel_from_global(point)[0]
-        sample = site_sample(grid, labels, config, centre, float(rng.uniform(0, 2 * np.pi)))
+        item = corrections[int(rng.integers(len(corrections)))]
+        elements = item.labels + item.negatives
+        element = elements[int(rng.integers(len(elements)))]
+        point = element.points[int(rng.integers(len(element.points)))] + rng.normal(0, 4.0, 2)
+        centre = item.grid.pixel_from_global(point)[0]
+        angle = float(rng.uniform(0, 2 * np.pi))
+        sample = site_sample(item.grid, item.labels, config, centre, angle, item.candidates)
+        if sample.anchors is not None:
+            return sample
         return degrade(sample, rng) if rng.random() < 0.5 else sample
 
     return draw
@@ -130,9 +146,13 @@ def retrain_from_corrections(
         labels = vectors_from_annotations(item.annotations, LABEL_STATES)
         negatives = [v for v in vectors_from_annotations(item.annotations, NEGATIVE_STATES)]
         if labels or negatives:
-            prepared.append((site_grid(load_site_rasters(item.site), current.config), labels, negatives))
-    num_labels = sum(len(p[1]) for p in prepared)
-    num_negatives = sum(len(p[2]) for p in prepared)
+            rasters = load_site_rasters(item.site)
+            candidates = propose_rule_based(rasters) if current.config.anchored else None
+            prepared.append(
+                PreparedCorrections(site_grid(rasters, current.config), labels, negatives, candidates)
+            )
+    num_labels = sum(len(p.labels) for p in prepared)
+    num_negatives = sum(len(p.negatives) for p in prepared)
     if num_labels < config.min_labels:
         raise ValueError(
             f"retrain: {num_labels} accepted/fixed annotations, need at least {config.min_labels}"
@@ -170,6 +190,7 @@ def retrain_from_corrections(
             "validation_sites": [str(s) for s in validation_sites],
         },
         "promoted": promoted,
+        THRESHOLD_KEY: candidate_metrics.get(THRESHOLD_KEY),
     }
     folder = save_version(Path(registry), candidate, meta)
     if promoted:
@@ -185,16 +206,22 @@ def retrain_from_corrections(
 
 
 def gate_checkpoint(
-    registry: Path, candidate: Path, validation_sites: Sequence[Path], config: RetrainConfig | None = None
+    registry: Path,
+    candidate: Path,
+    validation_sites: Sequence[Path],
+    config: RetrainConfig | None = None,
+    *,
+    allow_new_config: bool = False,
 ) -> tuple[bool, dict[str, Any], dict[str, Any]]:
     """Evaluate a candidate version of `registry` against the promoted one; promote it if the gate passes.
 
     Returns (promoted, current metrics, candidate metrics). A candidate for another model config is refused
-    with a CheckpointError before any evaluation.
+    with a CheckpointError before any evaluation, unless `allow_new_config` (a newly trained architecture
+    competing with the promoted one on the same validation sites).
     """
     config = config or RetrainConfig()
     current = load_checkpoint(Path(registry))
-    challenger = load_checkpoint(Path(candidate), current.config)
+    challenger = load_checkpoint(Path(candidate), None if allow_new_config else current.config)
     current_metrics = evaluate_model(current.model, validation_sites, config.inference)
     candidate_metrics = evaluate_model(challenger.model, validation_sites, config.inference)
     promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)

@@ -2,7 +2,10 @@
 
 `train` is the `cama train` stage: it builds a fresh model (or continues from a checkpoint of the same
 config), trains it for `TrainConfig.steps` batches mixing procedural patches with patches of the training
-sites, and saves the result as a new version of a checkpoint registry with the data it saw.
+sites, and saves the result as a new version of a checkpoint registry with the data it saw. An anchored
+model also trains on damaged copies of each site (`models.vma.degrade`, seeds disjoint from the benchmark's)
+with the rule-based candidates of each copy as anchors, so it learns to correct the candidates that damaged
+rasters produce.
 """
 
 import logging
@@ -10,17 +13,24 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from models.vma.anchors import stack_anchors
 from models.vma.checkpoint import load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig, config_dict
+from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.evaluate import evaluate_proposer
+from models.vma.infer import predict_site
+from models.vma.loop import THRESHOLD_KEY
 from models.vma.matching import batch_targets, match_and_loss
 from models.vma.model import VmaNet
 from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, random_site_sample, site_grid
-from models.vma.rasters import load_site_rasters, vector_map_of
+from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
+from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import Vector, read_vectors
 
 logger = logging.getLogger(__name__)
@@ -30,17 +40,37 @@ Sampler = Callable[[np.random.Generator], Sample]
 
 @dataclass(frozen=True, eq=False)
 class TrainingSite:
-    """A site ready for patch sampling: its model-resolution grid and vectors."""
+    """A site ready for patch sampling: its model-resolution grid and vectors (and anchored: candidates)."""
 
     name: str
     grid: SiteGrid
     vectors: list[Vector]
+    candidates: list[Vector] | None = None
+    """Rule-based candidates on these rasters (global metres), for anchored models."""
 
 
-def load_training_site(path: Path, config: ModelConfig) -> TrainingSite:
-    """Rasters and ground-truth vectors of a site folder (errors name the file)."""
+DAMAGE_SEED_BASE = 7_000_000
+"""Damage seeds of training copies start here, far from the benchmark's (sum of a site name's bytes)."""
+
+
+def load_training_sites(path: Path, config: ModelConfig, damaged_copies: int = 0) -> list[TrainingSite]:
+    """A site folder's rasters and ground truth, plus `damaged_copies` damaged versions for anchored models
+    (each with its rule-based candidates); errors name the file."""
     rasters = load_site_rasters(path)
-    return TrainingSite(str(path), site_grid(rasters, config), read_vectors(vector_map_of(path)))
+    vectors = read_vectors(vector_map_of(path))
+    if not config.anchored:
+        return [TrainingSite(str(path), site_grid(rasters, config), vectors)]
+    versions = [rasters] + [
+        degrade_rasters(rasters, DegradeConfig(seed=DAMAGE_SEED_BASE + 1000 * k + sum(str(path).encode())))
+        for k in range(damaged_copies)
+    ]
+    return [_anchored_site(str(path), r, vectors, config) for r in versions]
+
+
+def _anchored_site(
+    name: str, rasters: SiteRasters, vectors: list[Vector], config: ModelConfig
+) -> TrainingSite:
+    return TrainingSite(name, site_grid(rasters, config), vectors, propose_rule_based(rasters))
 
 
 def device_for() -> torch.device:
@@ -56,7 +86,9 @@ def mixed_sampler(sites: Sequence[TrainingSite], config: ModelConfig, procedural
             sample = procedural_sample(config, rng)
         else:
             site = sites[int(rng.integers(len(sites)))]
-            sample = random_site_sample(site.grid, site.vectors, config, rng)
+            sample = random_site_sample(site.grid, site.vectors, config, rng, site.candidates)
+        if sample.anchors is not None:  # anchored samples are damaged before the candidates are found
+            return sample
         return degrade(sample, rng) if rng.random() < 0.5 else sample
 
     return draw
@@ -99,7 +131,7 @@ def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: 
             batch = [sampler(rng) for _ in range(config.batch_size)]
             images = torch.as_tensor(np.stack([s.image for s in batch]), device=device)
             labels, points = batch_targets([s.labels for s in batch], [s.points for s in batch], device)
-            logits, layer_points = model(images)
+            logits, layer_points = model(images, stack_anchors([s.anchors for s in batch], device))
             loss, parts = match_and_loss(
                 logits, layer_points, labels, points, config.class_weight, config.point_weight
             )
@@ -127,11 +159,18 @@ def train(
     registry: Path,
     *,
     init: Path | None = None,
+    damaged_copies: int = 3,
+    promote_result: bool = True,
+    validation_sites: Sequence[Path] = (),
     show_progress: bool = True,
 ) -> Path:
-    """Train a model on `sites` (+ procedural patches), save it as a new promoted version of `registry`."""
+    """Train a model on `sites` (+ procedural patches), save it as a new promoted version of `registry`.
+
+    An anchored model also sees `damaged_copies` damaged versions of each site. With `promote_result` False
+    the version is only saved (to be promoted by the evaluation gate, `models.vma.retrain.gate_checkpoint`).
+    With `validation_sites` its validation Chamfer-AP and calibrated pre-accept threshold are recorded."""
     started = time.perf_counter()
-    training_sites = [load_training_site(Path(p), model_config) for p in sites]
+    training_sites = [t for p in sites for t in load_training_sites(Path(p), model_config, damaged_copies)]
     model = load_checkpoint(init, model_config).model if init is not None else VmaNet(model_config)
     losses = fit(
         model,
@@ -139,21 +178,30 @@ def train(
         train_config,
         show_progress=show_progress,
     )
+    model.cpu()
+    metrics: dict[str, Any] = {
+        "final_loss": float(np.mean(losses[-50:])),
+        "steps_done": len(losses),
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    if validation_sites:
+        metrics["validation"] = evaluate_proposer(
+            lambda rasters: predict_site(model, rasters, show_progress=False), validation_sites
+        )
     meta = {
         "parent": str(init) if init is not None else None,
         "train_config": config_dict(train_config),
-        "metrics": {
-            "final_loss": float(np.mean(losses[-50:])),
-            "steps_done": len(losses),
-            "seconds": round(time.perf_counter() - started, 1),
-        },
+        "metrics": metrics,
+        THRESHOLD_KEY: metrics.get("validation", {}).get(THRESHOLD_KEY),
         "data": {
             "sites": [str(p) for p in sites],
             "procedural_share": train_config.procedural_share,
+            "damaged_copies": damaged_copies if model_config.anchored else 0,
             "samples_seen": len(losses) * train_config.batch_size,
             "seed": train_config.seed,
         },
     }
-    folder = save_version(registry, model.cpu(), meta)
-    promote(registry, folder.name)
+    folder = save_version(registry, model, meta)
+    if promote_result:
+        promote(registry, folder.name)
     return folder
