@@ -2,7 +2,7 @@
 
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,6 +12,12 @@ DEFAULT_TOKEN_TTL_S = 12 * 3600
 DEFAULT_MAX_PAYLOAD_BYTES = 8 * 1024 * 1024
 DEFAULT_EXTENT_MARGIN_M = 50.0
 DEFAULT_SCRYPT_N = 2**14
+DEFAULT_QA_SHARE = 0.1
+
+
+def _paths(value: str) -> tuple[Path, ...]:
+    """A list of folders separated by the OS path separator (`:` on Linux)."""
+    return tuple(Path(part) for part in value.split(os.pathsep) if part)
 
 
 @dataclass(frozen=True)
@@ -33,6 +39,17 @@ class Settings:
     admin_username: str = ""
     """When set with `admin_password` and the database has no users, this admin is created on start."""
     admin_password: str = ""
+    vma_registry: Path | None = None
+    """VMA checkpoint registry (`models.vma.checkpoint`); retrain needs it, proposal refresh uses it (else the
+    rule-based proposer), and its promoted version's calibration gives the pre-accept threshold."""
+    vma_validation_sites: tuple[Path, ...] = ()
+    """Held-out site folders (rasters + ground-truth vector map) the retrain gate evaluates on."""
+    retrain_after: int = 0
+    """Start a retrain job by itself after this many new accepted/fixed corrections of a site (0: never)."""
+    qa_share: float = DEFAULT_QA_SHARE
+    """Share of pre-accepted proposals sampled for the lead's QA queue."""
+    preaccept_threshold: float | None = None
+    """Confidence at or above which proposals enter pre-accepted; None: the registry's calibrated value."""
 
     def __post_init__(self) -> None:
         """Validate the fields so that a bad environment fails at start, naming the variable."""
@@ -46,6 +63,12 @@ class Settings:
             raise ValueError(f"scrypt_n: must be a power of 2 >= 2, got {self.scrypt_n}")
         if bool(self.admin_username) != bool(self.admin_password):
             raise ValueError("CAMA_ADMIN_USERNAME and CAMA_ADMIN_PASSWORD: set both or neither")
+        if self.retrain_after < 0:
+            raise ValueError(f"CAMA_RETRAIN_AFTER: must be >= 0, got {self.retrain_after}")
+        if not 0.0 <= self.qa_share <= 1.0:
+            raise ValueError(f"CAMA_QA_SHARE: must be in [0, 1], got {self.qa_share}")
+        if self.preaccept_threshold is not None and not 0.0 <= self.preaccept_threshold <= 1.0:
+            raise ValueError(f"CAMA_PREACCEPT_THRESHOLD: must be in [0, 1], got {self.preaccept_threshold}")
 
     @property
     def resolved_database_url(self) -> str:
@@ -68,7 +91,7 @@ class Settings:
         return cls(**values)  # type: ignore[arg-type]
 
 
-_ENV_FIELDS: dict[str, type] = {
+_ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "data_dir": Path,
     "database_url": str,
     "token_ttl_s": int,
@@ -76,4 +99,9 @@ _ENV_FIELDS: dict[str, type] = {
     "extent_margin_m": float,
     "admin_username": str,
     "admin_password": str,
+    "vma_registry": Path,
+    "vma_validation_sites": _paths,
+    "retrain_after": int,
+    "qa_share": float,
+    "preaccept_threshold": float,
 }

@@ -14,6 +14,7 @@ from app.backend.db import make_engine, make_sessionmaker, upgrade
 from app.backend.errors import install_error_handlers
 from app.backend.jobs.kinds import JOB_KINDS
 from app.backend.jobs.runner import JobRunner
+from app.backend.jobs.vma import unavailable_kinds, vma_job_kinds
 from app.backend.middleware import BodySizeLimit
 
 logger = logging.getLogger(__name__)
@@ -52,7 +53,12 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.settings = settings
     app.state.engine = engine
     app.state.sessionmaker = sessions
-    app.state.jobs = JobRunner(sessions=sessions, data_dir=settings.data_dir, kinds=JOB_KINDS)
+    app.state.jobs = JobRunner(
+        sessions=sessions,
+        data_dir=settings.data_dir,
+        kinds={**JOB_KINDS, **vma_job_kinds(settings)},
+        unavailable=unavailable_kinds(settings),
+    )
     app.state.jobs.recover_interrupted()
     install_error_handlers(app)
     app.include_router(api_router)

@@ -98,6 +98,10 @@ class Element(Base):
     updated_at: Mapped[datetime] = mapped_column(UtcDateTime())
     proposal: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
     """Snapshot of the element as first proposed (class, points, confidence), for proposal-to-final diffs."""
+    preaccepted: Mapped[bool] = mapped_column(Boolean, default=False)
+    """Entered as `accepted` because the model's confidence passed the calibrated threshold (no person yet)."""
+    qa_sample: Mapped[bool] = mapped_column(Boolean, default=False)
+    """A pre-accepted element sampled for the lead's QA queue."""
 
     __mapper_args__ = {"version_id_col": version}  # the ORM's optimistic lock: UPDATE ... WHERE version = old
 

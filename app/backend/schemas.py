@@ -184,6 +184,13 @@ class ElementPublic(BaseModel):
     author: str | None
     created_at: datetime
     updated_at: datetime
+    preaccepted: bool = Field(
+        default=False,
+        description="Entered as accepted by the model (confidence above the calibrated threshold).",
+    )
+    qa_sample: bool = Field(
+        default=False, description="A pre-accepted element sampled for the lead's QA queue."
+    )
 
 
 class ReviewRequest(BaseModel):

@@ -134,10 +134,13 @@ def test_submission_rules(client: TestClient, headers: Headers, site_id: int) ->
     body = {"kind": "lift", "params": {}}
     annotator = client.post(f"/api/sites/{site_id}/jobs", json=body, headers=headers["annotator"])
     assert annotator.status_code == 403
-    for kind in ("retrain", "refresh_proposals"):
-        response = client.post(f"/api/sites/{site_id}/jobs", json={"kind": kind}, headers=headers["lead"])
-        assert response.status_code == 422
-        assert "not available yet: needs the VMA model (issue 6)" in response.text
+    response = client.post(f"/api/sites/{site_id}/jobs", json={"kind": "retrain"}, headers=headers["lead"])
+    assert response.status_code == 422  # no registry configured in these settings
+    assert "no VMA checkpoint registry configured (set CAMA_VMA_REGISTRY)" in response.text
+    learned = wait_done(
+        client, headers, submit(client, headers, site_id, "refresh_proposals", proposer="learned")["id"]
+    )
+    assert learned["state"] == "failed" and "needs a VMA registry (CAMA_VMA_REGISTRY)" in learned["message"]
     unknown = client.post(f"/api/sites/{site_id}/jobs", json={"kind": "nope"}, headers=headers["lead"])
     assert unknown.status_code == 422 and "unknown job kind" in unknown.text
     bad = {"kind": "export", "params": {"format": "maptr"}}

@@ -36,3 +36,28 @@ def test_old_bbox_column_names_are_renamed_with_the_data_kept(tmp_path: Path) ->
     assert {"bbox_xmin", "bbox_ymin", "bbox_xmax", "bbox_ymax"} <= columns and "xmin" not in columns
     assert tuple(row) == (1.0, 4.0)
     assert "ix_elements_site_bbox" in indexes
+
+
+def test_preaccept_flags_are_added_false_for_existing_elements(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'before.db'}"
+    upgrade(url, "0004")
+    engine = make_engine(url)
+    with engine.begin() as connection:
+        connection.execute(
+            sa.text(
+                "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
+                "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
+            )
+        )
+        connection.execute(
+            sa.text(
+                "INSERT INTO elements (id, site_id, class, points, bbox_xmin, bbox_ymin, bbox_xmax, bbox_ymax, "
+                "source, state, deleted, version, created_at, updated_at) VALUES (3, 1, 'divider', "
+                "'[[1, 2], [3, 4]]', 1, 2, 3, 4, 'proposal', 'proposed', 0, 1, '2026-11-23', '2026-11-23')"
+            )
+        )
+    upgrade(url)
+    with engine.connect() as connection:
+        row = connection.execute(sa.text("SELECT preaccepted, qa_sample FROM elements WHERE id = 3")).one()
+    engine.dispose()
+    assert tuple(row) == (0, 0)

@@ -4,7 +4,11 @@ import pytest
 from editor_browser_helpers import SeededServer, log_in, screenshot
 from playwright.sync_api import Page, expect
 
-from app.backend.jobs.kinds import UNAVAILABLE_KINDS
+from app.backend.config import Settings
+from app.backend.jobs.vma import unavailable_kinds
+
+UNAVAILABLE_KINDS = unavailable_kinds(Settings.from_env())
+"""What the served backend (same environment) refuses: retrain without a configured VMA registry."""
 
 pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
@@ -67,7 +71,7 @@ def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
     expect(chart.locator("text.chart-label", has_text="bob")).to_have_count(1)
     expect(page.locator("#figures .figures-table td.author", has_text="bob").first).to_be_visible()
     page.click("#launch-retrain")
-    if "retrain" in UNAVAILABLE_KINDS:  # the backend refuses with 422 until the VMA model is wired in
+    if "retrain" in UNAVAILABLE_KINDS:  # the backend refuses with 422 without a VMA registry
         expect(page.locator("#job-message")).to_have_class("job-message error")
         expect(page.locator("#job-message")).to_contain_text(UNAVAILABLE_KINDS["retrain"])
         expect(page.locator("#job-message")).not_to_contain_text("kind: kind:")
@@ -78,4 +82,7 @@ def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
     expect(job).to_have_attribute("data-state", "succeeded", timeout=30_000)
     expect(job.locator(".job-text")).to_contain_text("100%")
     expect(job.locator(".download")).to_be_visible()
+    expect(
+        page.locator("#launch-refresh")
+    ).to_be_visible()  # not clicked: the session's shared site stays as seeded
     screenshot(page, "lead")

@@ -36,6 +36,8 @@ def public(element: Element) -> ElementPublic:
         author=element.author,
         created_at=element.created_at,
         updated_at=element.updated_at,
+        preaccepted=element.preaccepted,
+        qa_sample=element.qa_sample,
     )
 
 
@@ -75,7 +77,7 @@ def _set_points(element: Element, points: Sequence[Point]) -> None:
     element.ymax = max(p[1] for p in element.points)
 
 
-def _log(
+def log_change(
     session: Session, element: Element, *, username: str, action: str, before: dict[str, Any] | None
 ) -> None:
     """Append the log row for the element's new version (call after flush so the version is final)."""
@@ -92,7 +94,7 @@ def _log(
     )
 
 
-def _new_element(site: Site, element_in: ElementCreate, *, username: str) -> Element:
+def new_element(site: Site, element_in: ElementCreate, *, username: str) -> Element:
     """An unsaved element from validated input; proposals keep a snapshot for proposal-to-final diffs."""
     now = utc_now()
     element = Element(
@@ -102,6 +104,8 @@ def _new_element(site: Site, element_in: ElementCreate, *, username: str) -> Ele
         source=element_in.source,
         state="proposed",
         deleted=False,
+        preaccepted=False,
+        qa_sample=False,
         author=username,
         created_at=now,
         updated_at=now,
@@ -123,11 +127,11 @@ def create_elements(
         except InvalidInputError as error:
             field = "points" if len(elements_in) == 1 else f"elements.{index}.points"
             raise InvalidInputError(field, error.message) from None
-    elements = [_new_element(site, element_in, username=username) for element_in in elements_in]
+    elements = [new_element(site, element_in, username=username) for element_in in elements_in]
     session.add_all(elements)
     session.flush()
     for element in elements:
-        _log(session, element, username=username, action="create", before=None)
+        log_change(session, element, username=username, action="create", before=None)
     session.commit()
     return elements
 
@@ -192,7 +196,7 @@ def commit_change(
             f"version: element {element.id} was changed by someone else; reload it",
             current=None if current is None else public(current).model_dump(mode="json", by_alias=True),
         ) from None
-    _log(session, element, username=username, action=action, before=before)
+    log_change(session, element, username=username, action=action, before=before)
     session.commit()
     return element
 

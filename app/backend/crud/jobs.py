@@ -11,7 +11,6 @@ from sqlalchemy.orm import Session
 from app.backend.crud.sites import get_site
 from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
-from app.backend.jobs.kinds import UNAVAILABLE_KINDS
 from app.backend.jobs.runner import JobRunner
 from app.backend.models_jobs import FINISHED_STATES, Job
 from app.backend.schemas_jobs import JobCreate, JobPublic
@@ -33,34 +32,17 @@ _COLUMNS = tuple(name for name in JobPublic.model_fields if name != "download_ur
 def create_job(*, session: Session, runner: JobRunner, site_id: int, job_in: JobCreate, username: str) -> Job:
     """Validate the kind and its params, store the job as queued and hand it to the runner."""
     get_site(session=session, site_id=site_id)
-    if job_in.kind in UNAVAILABLE_KINDS:
-        raise InvalidInputError("kind", f"{job_in.kind!r} is {UNAVAILABLE_KINDS[job_in.kind]}")
+    if job_in.kind in runner.unavailable:
+        raise InvalidInputError("kind", f"{job_in.kind!r} is {runner.unavailable[job_in.kind]}")
     kind = runner.kinds.get(job_in.kind)
     if kind is None:
-        known = sorted([*runner.kinds, *UNAVAILABLE_KINDS])
+        known = sorted([*runner.kinds, *runner.unavailable])
         raise InvalidInputError("kind", f"unknown job kind {job_in.kind!r}; expected one of {known}")
     try:
         params = kind.params.model_validate(job_in.params).model_dump(mode="json")
     except ValidationError as error:
         raise InvalidInputError("params", str(error)) from None
-    now = utc_now()
-    job = Job(
-        site_id=site_id,
-        kind=job_in.kind,
-        params=params,
-        state="queued",
-        progress=0.0,
-        message="queued",
-        cancel_requested=False,
-        created_by=username,
-        created_at=now,
-        updated_at=now,
-    )
-    session.add(job)
-    session.commit()
-    runner.submit(job.id)
-    logger.info("job %d (%s) of site %d submitted by %s", job.id, job.kind, site_id, username)
-    return job
+    return runner.enqueue(session, site_id=site_id, kind=job_in.kind, params=params, username=username)
 
 
 def get_job(*, session: Session, job_id: int) -> Job:

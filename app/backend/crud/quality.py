@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 from app.backend.crud.elements import get_element
 from app.backend.crud.sites import get_site, site_extent
 from app.backend.errors import NotFoundError
-from app.backend.models import EditLog, Element
+from app.backend.models import EditLog, Element, Site
 from app.backend.quality import (
     AnnotatorFigures,
     ElementView,
@@ -40,25 +40,37 @@ FIGURE_STATES = frozenset({"accepted", "fixed", "rejected"})
 
 LintKey = tuple[int, int]
 """(elements ever stored, sum of their versions): every create, edit or delete changes it."""
+Box = tuple[float, float, float, float]
+"""xmin, ymin, xmax, ymax in site metres."""
+INCREMENTAL_MAX_CHANGES = 64
+"""Up to this many changed elements, a cached report is patched around them instead of linting the site."""
+
+
+@dataclass(frozen=True)
+class CachedLint:
+    """A full-site report and the live elements (id -> version, bounding box) it was made from."""
+
+    key: LintKey
+    elements: dict[int, tuple[int, Box]]
+    report: LintReport
 
 
 @dataclass
 class LintCache:
-    """The last full-site lint report per site, valid while the site's elements are unchanged."""
+    """The last full-site lint report per site; after edits it is patched around the changed elements."""
 
-    reports: dict[int, tuple[LintKey, LintReport]] = field(default_factory=dict)
+    entries: dict[int, CachedLint] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def get(self, site_id: int, key: LintKey) -> LintReport | None:
-        """The cached report when it was made for exactly this state of the site."""
+    def get(self, site_id: int) -> CachedLint | None:
+        """The site's last full-site report, whatever state it was made for."""
         with self.lock:
-            cached = self.reports.get(site_id)
-        return cached[1] if cached is not None and cached[0] == key else None
+            return self.entries.get(site_id)
 
-    def put(self, site_id: int, key: LintKey, report: LintReport) -> None:
+    def put(self, site_id: int, entry: CachedLint) -> None:
         """Remember a full-site report."""
         with self.lock:
-            self.reports[site_id] = (key, report)
+            self.entries[site_id] = entry
 
 
 def _lint_key(session: Session, site_id: int) -> LintKey:
@@ -67,6 +79,24 @@ def _lint_key(session: Session, site_id: int) -> LintKey:
         select(func.count(), func.coalesce(func.sum(Element.version), 0)).where(Element.site_id == site_id)
     ).one()
     return int(count), int(total)
+
+
+def _live_elements(session: Session, site_id: int) -> dict[int, tuple[int, Box]]:
+    """Version and bounding box of every live element of the site (no geometry loaded)."""
+    query = select(Element.id, Element.version, Element.xmin, Element.ymin, Element.xmax, Element.ymax).where(
+        Element.site_id == site_id, Element.deleted.is_(False)
+    )
+    return {row[0]: (row[1], (row[2], row[3], row[4], row[5])) for row in session.execute(query)}
+
+
+def _changed_box(before: dict[int, tuple[int, Box]], after: dict[int, tuple[int, Box]]) -> Box | None:
+    """The box around the old and new extent of every element added, changed or removed; None if none."""
+    boxes = [entry[1] for k, entry in before.items() if after.get(k) != entry]
+    boxes += [entry[1] for k, entry in after.items() if before.get(k) != entry]
+    if not boxes:
+        return None
+    corners = np.asarray(boxes)
+    return (corners[:, 0].min(), corners[:, 1].min(), corners[:, 2].max(), corners[:, 3].max())
 
 
 def _public_finding(finding: LintFinding) -> LintFindingPublic:
@@ -85,30 +115,16 @@ def _in_bbox(xy: Sequence[float], bbox: tuple[float, float, float, float]) -> bo
     return bbox[0] <= xy[0] <= bbox[2] and bbox[1] <= xy[1] <= bbox[3]
 
 
-def lint_site(
-    *,
-    session: Session,
-    site_id: int,
-    cache: LintCache,
-    bbox: tuple[float, float, float, float] | None = None,
-    config: LintConfig = LintConfig(),  # noqa: B008 - frozen, so a shared default is safe
-) -> LintReport:
-    """Lint the site's live elements (the site extent is the region where ends may stop).
-
-    A full-site report is cached until an element changes; with `bbox`, elements near it are linted and only
-    findings located inside it are returned (not cached).
-    """
-    site = get_site(session=session, site_id=site_id)
-    key = _lint_key(session, site_id)
-    if bbox is None:
-        cached = cache.get(site_id, key)
-        if cached is not None:
-            return cached
+def _lint_findings(
+    session: Session, site: Site, bbox: Box | None, config: LintConfig
+) -> tuple[int, list[LintFindingPublic]]:
+    """Lint the live elements (those within reach of `bbox` when given, keeping only findings inside it);
+    the number of elements linted and the findings."""
     query = select(Element.id, Element.cls, Element.points).where(
-        Element.site_id == site_id, Element.deleted.is_(False)
+        Element.site_id == site.id, Element.deleted.is_(False)
     )
     if bbox is not None:
-        reach = max(config.end_connect_m, config.spacing_search_m, config.break_gap_m)
+        reach = _reach(config)
         xmin, ymin, xmax, ymax = bbox[0] - reach, bbox[1] - reach, bbox[2] + reach, bbox[3] + reach
         query = query.where(
             Element.xmax >= xmin, Element.xmin <= xmax, Element.ymax >= ymin, Element.ymin <= ymax
@@ -122,10 +138,68 @@ def lint_site(
     findings = [_public_finding(finding) for finding in lint(views, config=config, region=region)]
     if bbox is not None:
         findings = [finding for finding in findings if _in_bbox(finding.location_xy, bbox)]
-    report = LintReport(site_id=site_id, element_count=len(views), findings=findings)
-    if bbox is None:
-        cache.put(site_id, key, report)
-    logger.info("lint site %d: %d findings over %d elements", site_id, len(findings), len(views))
+    return len(views), findings
+
+
+def _reach(config: LintConfig) -> float:
+    """How far from an element a finding it takes part in may lie."""
+    return max(config.end_connect_m, config.spacing_search_m, config.break_gap_m)
+
+
+def _patched(
+    session: Session, site: Site, cached: CachedLint, elements: dict[int, tuple[int, Box]], config: LintConfig
+) -> list[LintFindingPublic] | None:
+    """The cached findings with those near changed elements linted again; None when too much changed.
+
+    A finding involving a changed element lies within `_reach` of it, so re-linting the changed area grown by
+    that reach (old and new extents) and keeping the cached findings outside it gives the full-site result."""
+    changed = set(cached.elements.items()) ^ set(elements.items())
+    if len(changed) > 2 * INCREMENTAL_MAX_CHANGES:
+        return None
+    area = _changed_box(cached.elements, elements)
+    if area is None:
+        return cached.report.findings
+    reach = _reach(config)
+    grown = (area[0] - reach, area[1] - reach, area[2] + reach, area[3] + reach)
+    _count, fresh = _lint_findings(session, site, grown, config)
+    kept = [finding for finding in cached.report.findings if not _in_bbox(finding.location_xy, grown)]
+    return kept + fresh
+
+
+def lint_site(
+    *,
+    session: Session,
+    site_id: int,
+    cache: LintCache,
+    bbox: Box | None = None,
+    config: LintConfig = LintConfig(),  # noqa: B008 - frozen, so a shared default is safe
+) -> LintReport:
+    """Lint the site's live elements (the site extent is the region where ends may stop).
+
+    A full-site report is cached; after edits it is patched around the changed elements (the whole site is
+    linted again only when many changed). With `bbox`, elements near it are linted and only findings located
+    inside it are returned (not cached).
+    """
+    site = get_site(session=session, site_id=site_id)
+    if bbox is not None:
+        count, findings = _lint_findings(session, site, bbox, config)
+        return LintReport(site_id=site_id, element_count=count, findings=findings)
+    key = _lint_key(session, site_id)
+    cached = cache.get(site_id)
+    if cached is not None and cached.key == key:
+        return cached.report
+    elements = _live_elements(session, site_id)
+    patched = None if cached is None else _patched(session, site, cached, elements, config)
+    findings = patched if patched is not None else _lint_findings(session, site, None, config)[1]
+    report = LintReport(site_id=site_id, element_count=len(elements), findings=findings)
+    cache.put(site_id, CachedLint(key, elements, report))
+    logger.info(
+        "lint site %d (%s): %d findings over %d elements",
+        site_id,
+        "patched" if patched is not None else "full",
+        len(findings),
+        len(elements),
+    )
     return report
 
 

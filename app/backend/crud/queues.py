@@ -5,7 +5,8 @@ Review queue order: confidence ascending, elements without a confidence (drawn b
 Work items: `next_work_item` leases one element at a time. Candidates are live elements of the site that no
 active lease holds and that the requester does not already hold, in this order:
 1. `returned` elements whose last annotator (the latest edit-log entry by a user with role `annotator`) is the
-   requester, oldest id first: returned work goes to the front of its annotator's queue;
+   requester, oldest id first: returned work goes to the front of its annotator's queue; then returned elements
+   no annotator ever edited (pre-accepted by the model and returned by a lead's QA), for anyone;
 2. `proposed` elements with lint errors (the caller passes their ids), then the other `proposed` ones; each
    group lowest confidence first, human-made (no confidence) last.
 Returned elements of other annotators are never handed out.
@@ -50,15 +51,19 @@ def review_queue(
     author: str | None = None,
     bbox: tuple[float, float, float, float] | None = None,
     only_ids: Collection[int] | None = None,
+    qa: bool = False,
     limit: int = 100,
     offset: int = 0,
 ) -> tuple[int, list[Element]]:
     """The total count and one page of live elements, lowest confidence first and no confidence last;
-    `only_ids` restricts the queue to those elements (e.g. the ones with lint findings)."""
+    `only_ids` restricts the queue to those elements (e.g. the ones with lint findings); `qa` to the
+    pre-accepted elements sampled for the lead's QA that are still awaiting a lead (state `accepted`)."""
     get_site(session=session, site_id=site_id)
     conditions: list[ColumnElement[bool]] = [Element.site_id == site_id, Element.deleted.is_(False)]
     if only_ids is not None:
         conditions.append(Element.id.in_(sorted(only_ids)))
+    if qa:
+        conditions += [Element.qa_sample.is_(True), Element.state == "accepted"]
     if cls is not None:
         conditions.append(Element.cls == cls)
     if state is not None:
@@ -115,15 +120,33 @@ def _reclaim_expired(session: Session, *, site_id: int, now: datetime) -> None:
     )
 
 
-def _returned_to(site_id: int, username: str) -> Select[Element]:
-    """Returned elements whose latest edit by an annotator was made by `username`."""
-    last_annotator_edit = (
+def _annotator_edits() -> Select[int, int]:
+    """Per element, the id of its latest edit-log entry made by a user with role `annotator`."""
+    return (
         select(EditLog.element_id, func.max(EditLog.id).label("log_id"))
         .join(User, User.username == EditLog.username)
         .where(User.role == "annotator")
         .group_by(EditLog.element_id)
-        .subquery()
     )
+
+
+def _returned_unowned(site_id: int) -> Select[Element]:
+    """Returned elements no annotator ever edited (pre-accepted ones a lead's QA sent back): anyone's work."""
+    edited = _annotator_edits().subquery()
+    return (
+        select(Element)
+        .where(
+            Element.site_id == site_id,
+            Element.state == "returned",
+            Element.id.not_in(select(edited.c.element_id)),
+        )
+        .order_by(Element.id)
+    )
+
+
+def _returned_to(site_id: int, username: str) -> Select[Element]:
+    """Returned elements whose latest edit by an annotator was made by `username`."""
+    last_annotator_edit = _annotator_edits().subquery()
     return (
         select(Element)
         .join(last_annotator_edit, last_annotator_edit.c.element_id == Element.id)
@@ -140,6 +163,7 @@ def _candidates(
     held = select(Lease.active_element_id).where(Lease.active_element_id.is_not(None))
     free = (Element.deleted.is_(False), Element.id.not_in(held))
     returned = _returned_to(site_id, username).where(*free).limit(CANDIDATES_PER_TRY)
+    unowned = _returned_unowned(site_id).where(*free).limit(CANDIDATES_PER_TRY)
     proposed = (
         select(Element)
         .where(Element.site_id == site_id, Element.state == "proposed", *free)
@@ -151,7 +175,7 @@ def _candidates(
         )
         .limit(CANDIDATES_PER_TRY)
     )
-    return list(session.scalars(returned)) + list(session.scalars(proposed))
+    return [*session.scalars(returned), *session.scalars(unowned), *session.scalars(proposed)]
 
 
 def next_work_item(

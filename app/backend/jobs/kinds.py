@@ -1,7 +1,6 @@
-"""The job kinds: `lift` (2D -> 3D through the site's elevation raster) and `export` (CAMA layout or MapTR).
+"""The job kinds that need no model: `lift` (2D -> 3D through the elevation raster) and `export` (CAMA or MapTR).
 
-`retrain` and `refresh_proposals` need the VMA model (issue 6); they are named in `UNAVAILABLE_KINDS` so that a
-submission gets a clear 422 instead of a job that pretends.
+The VMA loop's kinds (`retrain`, `refresh_proposals`) live in `jobs/vma.py`.
 """
 
 import logging
@@ -30,10 +29,6 @@ ELEVATION_FILE = "elevation.npy"
 LIFTED_FILE = "lifted.json"
 EXPORT_ZIP = "export.zip"
 _FLAG_REPORT_LIMIT = 10
-UNAVAILABLE_KINDS: dict[str, str] = {
-    "retrain": "not available yet: needs the VMA model (issue 6)",
-    "refresh_proposals": "not available yet: needs the VMA model (issue 6)",
-}
 
 
 class LiftParams(BaseModel):

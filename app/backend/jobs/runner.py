@@ -54,14 +54,27 @@ class JobContext:
     """What a job function sees: its ids, its work folder, short DB sessions, and progress reporting."""
 
     def __init__(
-        self, *, job: Job, workdir: Path, sessions: sessionmaker[Session], stop: threading.Event
+        self,
+        *,
+        job: Job,
+        workdir: Path,
+        sessions: sessionmaker[Session],
+        stop: threading.Event,
+        enqueue: Callable[[str, dict[str, Any], str], int] | None = None,
     ) -> None:
         self.job_id = job.id
         self.site_id = job.site_id
         self.workdir = workdir
         self._sessions = sessions
         self._stop = stop
+        self._enqueue = enqueue
         self._last_report = 0.0
+
+    def follow_up(self, kind: str, params: dict[str, Any]) -> int:
+        """Queue another job of this site (e.g. a proposal refresh after a promotion); its id."""
+        if self._enqueue is None:
+            raise RuntimeError(f"job {self.job_id}: this context cannot queue follow-up jobs")
+        return self._enqueue(kind, params, f"job {self.job_id}")
 
     def session(self) -> Session:
         """A new short-lived session (use it in a `with` block); the job holds none while it computes."""
@@ -95,10 +108,13 @@ class JobRunner:
         sessions: sessionmaker[Session],
         data_dir: Path,
         kinds: Mapping[str, JobKind],
+        unavailable: Mapping[str, str] | None = None,
         max_workers: int = DEFAULT_WORKERS,
     ) -> None:
         self.kinds = dict(kinds)
         """Runnable kinds by name; tests may add their own."""
+        self.unavailable = dict(unavailable or {})
+        """Known kinds this server cannot run, with the reason (e.g. retrain without a VMA registry)."""
         self._sessions = sessions
         self._jobs_dir = Path(data_dir).resolve() / "jobs"
         self._executor = ThreadPoolExecutor(max_workers=max_workers, thread_name_prefix="cama-job")
@@ -115,6 +131,35 @@ class JobRunner:
         with self._lock:
             self._submitted.add(job_id)
         self._executor.submit(self._run, job_id)
+
+    def enqueue(
+        self, session: Session, *, site_id: int, kind: str, params: dict[str, Any], username: str
+    ) -> Job:
+        """Store a job with already validated params as queued, commit, and submit it."""
+        now = utc_now()
+        job = Job(
+            site_id=site_id,
+            kind=kind,
+            params=params,
+            state="queued",
+            progress=0.0,
+            message="queued",
+            cancel_requested=False,
+            created_by=username,
+            created_at=now,
+            updated_at=now,
+        )
+        session.add(job)
+        session.commit()
+        self.submit(job.id)
+        logger.info("job %d (%s) of site %d submitted by %s", job.id, kind, site_id, username)
+        return job
+
+    def _follow_up(self, site_id: int, kind: str, params: dict[str, Any], username: str) -> int:
+        """Queue a job of a known kind from inside another job (params validated here)."""
+        checked = self.kinds[kind].params.model_validate(params).model_dump(mode="json")
+        with self._sessions() as session:
+            return self.enqueue(session, site_id=site_id, kind=kind, params=checked, username=username).id
 
     def recover_interrupted(self) -> int:
         """Mark jobs left queued or running by a server that died (e.g. SIGKILL) as failed; call before serving.
@@ -175,7 +220,14 @@ class JobRunner:
         kind = self.kinds[job.kind]
         workdir = self.workdir(job_id)
         workdir.mkdir(parents=True, exist_ok=True)
-        context = JobContext(job=job, workdir=workdir, sessions=self._sessions, stop=self._stop)
+        site_id = job.site_id
+        context = JobContext(
+            job=job,
+            workdir=workdir,
+            sessions=self._sessions,
+            stop=self._stop,
+            enqueue=lambda kind, params, username: self._follow_up(site_id, kind, params, username),
+        )
         logger.info("job %d (%s) of site %d started", job_id, job.kind, job.site_id)
         try:
             result = kind.run(context, kind.params.model_validate(job.params))

@@ -2,7 +2,10 @@
 
 Layout under a site's cache directory:
     <cache>/empty.png                      shared fully transparent tile (served for empty tiles)
-    <cache>/<layer>/<z>/<x>/<y>.png        RGBA PNG tiles; tiles with nothing visible are not written
+    <cache>/<layer>/<z>/<x>/<y>.png        RGBA PNG tiles, all tile_size x tile_size: the right and bottom edge
+                                           tiles are padded with transparent pixels (a plain XYZ client draws
+                                           every tile into a full square, so a cut tile would be stretched);
+                                           tiles with nothing visible are not written
     <cache>/<layer>/pyramid.json           PyramidInfo, written last: its presence means the pyramid is complete
 Level z has the raster downsampled by 2**(max_zoom - z); level 0 is the first to fit in one tile. Tile (x, y)
 of level z covers level pixels [x * tile, (x + 1) * tile) x [y * tile, (y + 1) * tile), column x, row y.
@@ -40,7 +43,7 @@ from cama_pipeline.io import atomic_write_bytes
 logger = logging.getLogger(__name__)
 
 TILE_SIZE = 256
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 """Bump when tile rendering changes, so cached pyramids are rebuilt."""
 INFO_NAME = "pyramid.json"
 EMPTY_TILE_NAME = "empty.png"
@@ -162,19 +165,25 @@ def downsample_half(bgra: np.ndarray, resampling: Resampling) -> np.ndarray:
     return np.clip(np.concatenate([colour, out_alpha], axis=2) + 0.5, 0, 255).astype(np.uint8)
 
 
-def _write_tile(cache_dir: Path, layer: LayerName, z: int, x: int, y: int, bgra: np.ndarray) -> None:
-    """Store a tile unless nothing in it is visible (then the shared empty tile stands for it)."""
-    if bgra[:, :, 3].any():
-        _encode_png(bgra, tile_path(cache_dir, layer, z, x, y))
+def _write_tile(
+    cache_dir: Path, layer: LayerName, z: int, x: int, y: int, bgra: np.ndarray, tile_size: int
+) -> None:
+    """Store a tile padded to a full square unless nothing in it is visible (the shared empty tile stands
+    for it then)."""
+    if not bgra[:, :, 3].any():
+        return
+    full = np.zeros((tile_size, tile_size, 4), dtype=np.uint8)
+    full[: bgra.shape[0], : bgra.shape[1]] = bgra
+    _encode_png(full, tile_path(cache_dir, layer, z, x, y))
 
 
 def _read_tile(
     cache_dir: Path, layer: LayerName, z: int, x: int, y: int, shape: tuple[int, int]
 ) -> np.ndarray:
-    """A stored tile as BGRA, or a transparent one of `shape` when it was empty."""
+    """The part of a stored tile that covers raster pixels (`shape`) as BGRA; transparent when it was empty."""
     path = tile_path(cache_dir, layer, z, x, y)
     tile = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) if path.is_file() else None
-    return tile if tile is not None else np.zeros((*shape, 4), dtype=np.uint8)
+    return tile[: shape[0], : shape[1]] if tile is not None else np.zeros((*shape, 4), dtype=np.uint8)
 
 
 def _parent_tile(
@@ -207,14 +216,14 @@ def _write_levels(
         for y in range(finest.rows):
             for x in range(finest.cols):
                 window = raster[y * tile_size : (y + 1) * tile_size, x * tile_size : (x + 1) * tile_size]
-                _write_tile(cache_dir, style.name, finest.z, x, y, style.render(window))
+                _write_tile(cache_dir, style.name, finest.z, x, y, style.render(window), tile_size)
                 progress.advance(task)
         for child in reversed(levels[1:]):
             parent = levels[child.z - 1]
             for y in range(parent.rows):
                 for x in range(parent.cols):
                     tile = _parent_tile(cache_dir, style, child, x, y, tile_size)
-                    _write_tile(cache_dir, style.name, parent.z, x, y, tile)
+                    _write_tile(cache_dir, style.name, parent.z, x, y, tile, tile_size)
                     progress.advance(task)
 
 

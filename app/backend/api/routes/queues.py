@@ -29,11 +29,15 @@ def review_queue(
     author: Annotated[str | None, Query(max_length=64, description="Last editor's username.")] = None,
     bbox: Annotated[str | None, Query(description="xmin,ymin,xmax,ymax in site metres.")] = None,
     flagged: Annotated[bool, Query(description="Only elements with lint findings.")] = False,
+    qa: Annotated[
+        bool, Query(description="Only pre-accepted elements sampled for QA that await a lead's decision.")
+    ] = False,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
     offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> ReviewQueuePage:
     """Leads: live elements, lowest confidence first; human-made elements (no confidence) come last.
-    Each item carries its lint findings; `flagged=true` keeps only elements that have some."""
+    Each item carries its lint findings; `flagged=true` keeps only elements that have some, `qa=true` only
+    the pre-accepted sample awaiting QA."""
     findings = quality.findings_by_element(quality.lint_site(session=session, site_id=site_id, cache=cache))
     total, elements = queues.review_queue(
         session=session,
@@ -43,6 +47,7 @@ def review_queue(
         author=author,
         bbox=parse_bbox(bbox),
         only_ids=findings.keys() if flagged else None,
+        qa=qa,
         limit=limit,
         offset=offset,
     )

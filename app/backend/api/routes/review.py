@@ -3,10 +3,11 @@
 import logging
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, IdPath, SessionDep, VersionPath
+from app.backend.api.deps import CurrentUser, IdPath, SessionDep, SettingsDep, VersionPath
+from app.backend.loop import CORRECTION_STATES, maybe_retrain
 from app.backend.schemas import ConflictBody, EditLogPublic, ElementPublic, ReviewRequest, VersionRequest
 
 logger = logging.getLogger(__name__)
@@ -18,9 +19,16 @@ CONFLICT: dict[int | str, dict[str, Any]] = {
 
 @router.post("/review", response_model=ElementPublic, responses=CONFLICT)
 def review(
-    site_id: IdPath, element_id: IdPath, request: ReviewRequest, session: SessionDep, user: CurrentUser
+    site_id: IdPath,
+    element_id: IdPath,
+    request: ReviewRequest,
+    session: SessionDep,
+    user: CurrentUser,
+    settings: SettingsDep,
+    http: Request,
 ) -> ElementPublic:
-    """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned."""
+    """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned.
+    Enough new accepted/fixed corrections start a retrain job (when the server is configured for it)."""
     element = crud.review_element(
         session=session,
         site_id=site_id,
@@ -30,7 +38,10 @@ def review(
         username=user.username,
         role=user.role,
     )
-    return crud.public(element)
+    view = crud.public(element)
+    if request.state in CORRECTION_STATES:
+        maybe_retrain(session=session, runner=http.app.state.jobs, settings=settings, site_id=site_id)
+    return view
 
 
 @router.get("/history", response_model=list[EditLogPublic])

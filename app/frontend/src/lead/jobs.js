@@ -1,5 +1,5 @@
-// Jobs: launch an export or a retraining and watch their progress (polled while any job is unfinished).
-// The backend answers retraining with 422 until the VMA model lands; that message is shown as it comes.
+// Jobs: launch an export, a retraining or a proposal refresh and watch their progress (polled while any job is
+// unfinished). A server without a VMA registry answers retraining with 422; that message is shown as it comes.
 import { h, replaceChildren, shortTime, toast } from "../dom.js";
 
 const POLL_MS = 1000;
@@ -23,6 +23,7 @@ export class JobsCard {
         format,
         h("button.primary#launch-export", { onclick: () => this.launch("export", { format: format.value }) }, "Export"),
         h("button#launch-retrain", { onclick: () => this.launch("retrain", {}) }, "Retrain proposals"),
+        h("button#launch-refresh", { onclick: () => this.launch("refresh_proposals", {}) }, "Refresh proposals"),
       ),
       this.message,
       this.list,

@@ -1,5 +1,6 @@
 // The lead's review queue: a table sorted by confidence (lowest first, as the backend orders it), filters by
-// class, state and author, approve/return per row, and a click opens the element in the editor.
+// class, state and author (or only the pre-accepted QA sample), approve/return per row, and a click opens the
+// element in the editor. Pre-accepted elements (entered as accepted by the model's confidence) carry a badge.
 import { h, replaceChildren, shortTime, toast } from "../dom.js";
 import { CLASS_COLORS, CLASS_LABELS, confidenceBucket } from "../editor/styles.js";
 
@@ -18,12 +19,13 @@ export class QueueTable {
     this.cls = h("select#filter-class", { onchange: () => this.reload(0) }, h("option", { value: "" }, "all classes"), ...Object.entries(CLASS_LABELS).map(([v, l]) => h("option", { value: v }, l)));
     this.state = h("select#filter-state", { onchange: () => this.reload(0) }, ...STATES.map((s) => h("option", { value: s }, s || "all states")));
     this.author = h("input#filter-author", { placeholder: "author", onchange: () => this.reload(0) });
+    this.qa = h("input#filter-qa", { type: "checkbox", onchange: () => this.reload(0) });
     this.body = h("tbody");
     this.pager = h("div.pager");
     this.element = h(
       "section.card.queue",
       {},
-      h("div.card-head", {}, h("h3", {}, "Confidence queue"), h("div.filters", {}, this.cls, this.state, this.author)),
+      h("div.card-head", {}, h("h3", {}, "Confidence queue"), h("div.filters", {}, this.cls, this.state, this.author, h("label.qa-filter", { title: "Pre-accepted elements sampled for QA" }, this.qa, "QA sample"))),
       h("table.queue-table#queue-table", {}, h("thead", {}, h("tr", {}, ...["#", "Class", "Confidence", "State", "Author", "Updated", ""].map((t) => h("th", {}, t)))), this.body),
       this.pager,
     );
@@ -36,6 +38,7 @@ export class QueueTable {
         class: this.cls.value,
         state: this.state.value,
         author: this.author.value.trim(),
+        qa: this.qa.checked ? "true" : "",
         limit: PAGE,
         offset,
       });
@@ -79,7 +82,13 @@ export class QueueTable {
       h("td", {}, String(e.id)),
       h("td", {}, h("span.class-dot", { style: `background: ${CLASS_COLORS[e.class]}` }), CLASS_LABELS[e.class]),
       h("td", {}, confidence),
-      h("td", {}, h(`span.state.${e.state}`, {}, e.state)),
+      h(
+        "td",
+        {},
+        h(`span.state.${e.state}`, {}, e.state),
+        e.preaccepted ? h("span.badge.preaccepted", { title: "Entered as accepted: confidence above the calibrated threshold" }, "pre-accepted") : null,
+        e.qa_sample ? h("span.badge.qa", { title: "Sampled for the lead's QA" }, "QA") : null,
+      ),
       h("td.author", {}, e.author || ""),
       h("td.muted", {}, shortTime(e.updated_at)),
       h("td.actions", {}, canDecide ? act("Approve", "approved") : null, canDecide ? act("Return", "returned") : null),

@@ -1,0 +1,239 @@
+"""The VMA loop's job kinds: `retrain` (fine-tune on the site's corrections behind the evaluation gate) and
+`refresh_proposals` (re-run the proposer and replace proposals nobody has touched).
+
+Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
+`models.vma.retrain.retrain_from_corrections` is one long call: the job polls the child, reports the time
+spent, and terminates it when the job is cancelled or the server stops. The child writes `retrain.json` in the
+job folder: {"candidate", "promoted", "labels", "negatives", "current_metrics", "candidate_metrics"} or
+{"error"}. Checkpoint versions are written atomically by `models.vma.checkpoint`, so a killed child leaves at
+most an unpromoted staging folder.
+"""
+
+import json
+import logging
+import multiprocessing
+import time
+from functools import partial
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+from annotations.schema import AnnotationSet
+from app.backend.config import Settings
+from app.backend.crud.refresh import refresh_proposals
+from app.backend.jobs.kinds import site_annotations
+from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
+from app.backend.schemas import STRICT
+from app.backend.vma_loop import preaccept_threshold
+from cama_pipeline.io import atomic_write_json
+from models.vma.config import TrainConfig
+from models.vma.propose import propose
+from models.vma.retrain import (
+    LABEL_STATES,
+    NEGATIVE_STATES,
+    Corrections,
+    RetrainConfig,
+    retrain_from_corrections,
+)
+
+logger = logging.getLogger(__name__)
+
+RETRAIN_FILE = "retrain.json"
+PROPOSALS_FILE = "proposals.json"
+POLL_S = 0.5
+LOOP_USER = "vma-loop"
+"""Edit-log username of loop changes when the proposer names no author."""
+
+
+class RetrainParams(BaseModel):
+    """Parameters of a `retrain` job (the model config comes from the registry's promoted checkpoint)."""
+
+    model_config = STRICT
+    steps: int = Field(default=300, ge=1, le=100_000, description="Fine-tuning batches.")
+    batch_size: int = Field(default=8, ge=1, le=256)
+    learning_rate: float = Field(default=2e-4, gt=0.0, le=1.0)
+    tolerance: float = Field(
+        default=0.0, ge=0.0, le=1.0, description="Gate: promote when mAP >= current - this."
+    )
+    refresh_after_promotion: bool = Field(default=True, description="Queue a proposal refresh when promoted.")
+
+
+class RefreshParams(BaseModel):
+    """Parameters of a `refresh_proposals` job."""
+
+    model_config = STRICT
+    proposer: Literal["auto", "learned", "rule"] = Field(
+        default="auto", description="auto: the learned model when a registry is configured, else rule-based."
+    )
+    min_confidence: float = Field(default=0.1, ge=0.0, le=1.0, description="Drop proposals below this.")
+
+
+def training_view(annotations: AnnotationSet) -> AnnotationSet:
+    """The set as retraining should see it: elements the loop pre-accepted that no person has touched since
+    (still `accepted` by LOOP_USER; any human change sets the author) are the model's own output, not labels."""
+    elements = [
+        e.with_changes(review_state="proposed")
+        if e.review_state == "accepted" and e.author == LOOP_USER
+        else e
+        for e in annotations.elements
+    ]
+    return annotations.model_copy(update={"elements": elements})
+
+
+def _retrain_child(
+    registry: Path, corrections: Corrections, validation: list[Path], config: RetrainConfig, out: Path
+) -> None:
+    """Child process body: retrain and write the outcome (or the error) to `out`."""
+    logging.basicConfig(level=logging.INFO)
+    try:
+        result = retrain_from_corrections(registry, [corrections], validation, config, show_progress=False)
+        payload: dict[str, Any] = {
+            "candidate": result.candidate.name,
+            "promoted": result.promoted,
+            "labels": result.labels,
+            "negatives": result.negatives,
+            "current_metrics": result.current_metrics,
+            "candidate_metrics": result.candidate_metrics,
+        }
+    except Exception as error:  # noqa: BLE001 - handed to the parent as the job's failure message
+        payload = {"error": f"{type(error).__name__}: {error}"}
+    atomic_write_json(out, payload, indent=2)
+
+
+def _run_child(context: JobContext, args: tuple[Any, ...], out: Path) -> dict[str, Any]:
+    """Run `_retrain_child` in a spawned process, reporting while it runs; terminate it on cancel."""
+    process = multiprocessing.get_context("spawn").Process(
+        target=_retrain_child, args=(*args, out), daemon=True
+    )
+    process.start()
+    started = time.monotonic()
+    try:
+        while process.is_alive():
+            process.join(POLL_S)
+            context.report(0.1, f"fine-tuning and evaluating: {time.monotonic() - started:.0f} s")
+    except JobCancelled:
+        process.terminate()
+        process.join()
+        raise
+    if not out.is_file():
+        raise RuntimeError(f"the retraining process ended without a result (exit code {process.exitcode})")
+    payload: dict[str, Any] = json.loads(out.read_text(encoding="utf-8"))
+    if "error" in payload:
+        raise RuntimeError(f"retraining failed: {payload['error']}")
+    return payload
+
+
+def _count(annotations: AnnotationSet, states: tuple[str, ...]) -> int:
+    return sum(e.review_state in states for e in annotations.elements)
+
+
+def _gate_message(outcome: dict[str, Any]) -> str:
+    """One line: the gate decision with both validation mAPs."""
+    new, old = outcome["candidate_metrics"].get("mean_ap"), outcome["current_metrics"].get("mean_ap")
+    verdict = "promoted" if outcome["promoted"] else "kept out by the gate"
+    return (
+        f"{outcome['candidate']} {verdict}: validation mAP {new} vs {old} before; "
+        f"{outcome['labels']} labels, {outcome['negatives']} negatives"
+    )
+
+
+def run_retrain(context: JobContext, params: RetrainParams, *, settings: Settings) -> JobResult:
+    """Fine-tune the promoted model on the site's accepted/fixed elements (rejected ones as negatives)."""
+    if settings.vma_registry is None:
+        raise ValueError("retrain: no VMA registry configured (CAMA_VMA_REGISTRY)")
+    annotations, raster_dir, name = site_annotations(context)
+    annotations = training_view(annotations)
+    labels, negatives = _count(annotations, LABEL_STATES), _count(annotations, NEGATIVE_STATES)
+    if labels == 0:
+        raise ValueError(f"retrain: site {name} has no accepted, fixed or approved elements to learn from")
+    context.report(0.05, f"retraining on {labels} labels and {negatives} negatives of {name}", force=True)
+    config = RetrainConfig(
+        train=TrainConfig(
+            steps=params.steps, batch_size=params.batch_size, learning_rate=params.learning_rate
+        ),
+        tolerance=params.tolerance,
+    )
+    args = (
+        settings.vma_registry,
+        Corrections(raster_dir, annotations),
+        list(settings.vma_validation_sites),
+        config,
+    )
+    out = context.workdir / RETRAIN_FILE
+    outcome = _run_child(context, args, out)
+    message = _gate_message(outcome)
+    if outcome["promoted"] and params.refresh_after_promotion:
+        message += f"; proposal refresh queued as job {context.follow_up('refresh_proposals', {})}"
+    return JobResult(out, message)
+
+
+def run_refresh(context: JobContext, params: RefreshParams, *, settings: Settings) -> JobResult:
+    """Propose again over the site's rasters and replace the proposals nobody has reviewed or edited."""
+    _annotations, raster_dir, name = site_annotations(context)
+    learned = params.proposer == "learned" or (
+        params.proposer == "auto" and settings.vma_registry is not None
+    )
+    if learned and settings.vma_registry is None:
+        raise ValueError("refresh_proposals: the learned proposer needs a VMA registry (CAMA_VMA_REGISTRY)")
+    context.report(0.05, f"proposing over {name} ({'learned' if learned else 'rule-based'})", force=True)
+    out = context.workdir / PROPOSALS_FILE
+    propose(
+        raster_dir,
+        out,
+        proposer="learned" if learned else "rule",
+        checkpoint=settings.vma_registry if learned else None,
+        min_confidence=params.min_confidence,
+        overwrite=True,
+        show_progress=False,
+    )
+    proposals = AnnotationSet.read_json(out)
+    context.report(0.8, f"{len(proposals.elements)} proposals; replacing untouched ones", force=True)
+    threshold = settings.preaccept_threshold
+    if threshold is None and learned and settings.vma_registry is not None:
+        threshold = preaccept_threshold(settings.vma_registry)
+    with context.session() as session:
+        summary = refresh_proposals(
+            session=session,
+            site_id=context.site_id,
+            proposals=proposals,
+            username=LOOP_USER,
+            threshold=threshold,
+            qa_share=settings.qa_share,
+            seed=context.job_id,
+            margin_m=settings.extent_margin_m,
+        )
+    return JobResult(
+        out,
+        f"replaced {summary.replaced} untouched proposals by {summary.added} "
+        f"({summary.preaccepted} pre-accepted, {summary.qa_sample} sampled for QA); "
+        f"{summary.covered} already covered by kept elements, {summary.invalid} invalid",
+    )
+
+
+def unavailable_kinds(settings: Settings) -> dict[str, str]:
+    """The loop's kinds this server cannot run as configured, with the reason (a 422 on submission)."""
+    missing: dict[str, str] = {}
+    if settings.vma_registry is None:
+        missing["retrain"] = "not available: no VMA checkpoint registry configured (set CAMA_VMA_REGISTRY)"
+    elif not settings.vma_validation_sites:
+        missing["retrain"] = "not available: no validation sites for the gate (set CAMA_VMA_VALIDATION_SITES)"
+    return missing
+
+
+def vma_job_kinds(settings: Settings) -> dict[str, JobKind]:
+    """The loop's runnable kinds for these settings (see `unavailable_kinds` for the ones left out)."""
+    kinds = {
+        "refresh_proposals": JobKind(
+            RefreshParams,
+            partial(run_refresh, settings=settings),
+            "Re-run the proposer and replace proposals nobody has reviewed or edited.",
+        )
+    }
+    if "retrain" not in unavailable_kinds(settings):
+        kinds["retrain"] = JobKind(
+            RetrainParams,
+            partial(run_retrain, settings=settings),
+            "Fine-tune the model on the site's corrections; promote it if validation mAP does not drop.",
+        )
+    return kinds
