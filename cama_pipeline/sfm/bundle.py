@@ -1,8 +1,8 @@
 """Bundle adjustment of a guided model: plain (every image's pose free) or rigid (one pose per keyframe,
 camera-to-rig transforms constant or refined), intrinsics constant, robust loss, optional odometry priors.
 
-Gauge: with odometry priors the priors hold the model in place; without them the first keyframe is held
-(its rig fixes the scale in rigid BA with constant extrinsics) or COLMAP's two-camera gauge is used.
+Gauge: with odometry priors the priors hold the model in place; without them the first keyframe's
+cameras are held (their spread fixes the scale; with refined extrinsics a second keyframe is held too).
 """
 
 import logging
@@ -54,11 +54,26 @@ def ba_config(model: GuidedModel, config: SfmConfig) -> pycolmap.BundleAdjustmen
                 setup.set_constant_sensor_from_rig_pose(sensor_id)
     if config.odometry_priors:
         return setup
-    if config.rigid and not config.refine_extrinsics:
-        setup.set_constant_rig_from_world_pose(model.registered_frame_ids()[0])
-    else:
-        setup.fix_gauge(pycolmap.BundleAdjustmentGauge.TWO_CAMS_FROM_WORLD)
+    held = first_keyframe(model)
+    if config.refine_extrinsics:  # free extrinsics leave the scale free: hold a second keyframe too
+        later = [i for i in model.registered_frame_ids() if i not in held]
+        held += first_keyframe(model, later[:1]) if later else []
+    for frame_id in held:
+        setup.set_constant_rig_from_world_pose(frame_id)
     return setup
+
+
+def first_keyframe(model: GuidedModel, among: list[int] | None = None) -> list[int]:
+    """The registered frames of the first keyframe (one rig frame, or its images' frames in plain BA)."""
+    frame_ids = model.registered_frame_ids() if among is None else among
+    if not frame_ids:
+        return []
+    first = model.frames[frame_ids[0]]
+    return [
+        i
+        for i in frame_ids
+        if (model.frames[i].scene, model.frames[i].frame_index) == (first.scene, first.frame_index)
+    ]
 
 
 def bundle_adjust(model: GuidedModel, config: SfmConfig) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.iterative import iterative_bundle_adjustment, single_pass
-from cama_pipeline.sfm.model import GuidedModel, build_model, clip_label
+from cama_pipeline.sfm.model import GuidedModel, build_model, clip_label, matrix_from_rigid
 from cama_pipeline.sfm.triangulate import triangulate_all
 
 logger = logging.getLogger(__name__)
@@ -125,16 +125,21 @@ def reconstruct_views(
         summary["points"],
         summary["mean_reprojection_error_px"],
     )
-    return GuidedResult(model.reconstruction, summary, tuple(sorted(model.flagged)), _refined_poses(model))
+    return GuidedResult(
+        model.reconstruction, summary, tuple(sorted(model.flagged)), _refined_poses(model, views)
+    )
 
 
-def _refined_poses(model: GuidedModel) -> dict[str, np.ndarray]:
-    """Refined world_from_ego of every image of every registered frame."""
+def _refined_poses(model: GuidedModel, views: Sequence[CameraView]) -> dict[str, np.ndarray]:
+    """Refined world_from_ego of every image of every registered frame, at the image's own capture time
+    (from its camera pose and extrinsics; a keyframe's cameras fire tens of ms apart)."""
+    registered = {name for i in model.registered_frame_ids() for name in model.frames[i].image_names}
     poses = {}
-    for frame_id in model.registered_frame_ids():
-        world_from_ego = model.world_from_ego(frame_id)
-        for name in model.frames[frame_id].image_names:
-            poses[name] = world_from_ego
+    for view in views:
+        if view.name in registered:
+            image = model.reconstruction.image(model.image_ids[view.name])
+            world_from_cam = np.linalg.inv(matrix_from_rigid(image.cam_from_world()))
+            poses[view.name] = world_from_cam @ np.linalg.inv(view.ego_from_cam)
     return poses
 
 

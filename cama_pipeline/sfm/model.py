@@ -53,8 +53,6 @@ class FrameInfo:
     channel: str
     """The rig's reference camera (CAM_FRONT for a keyframe; the image's own channel in plain BA)."""
     frame_index: int
-    ego_from_rig: np.ndarray
-    """(4, 4) the rig frame (reference camera) in the ego frame."""
     initial_rig_from_world: np.ndarray
     """(4, 4) the odometry pose the frame started from."""
     image_names: tuple[str, ...]
@@ -92,11 +90,6 @@ class GuidedModel:
         for name in self.frames[frame_id].image_names:
             self.flagged[name] = reason
         logger.info("frame %d (%s) dropped: %s", frame_id, self.frames[frame_id].image_names[0], reason)
-
-    def world_from_ego(self, frame_id: int) -> np.ndarray:
-        """(4, 4) the frame's current ego pose."""
-        rig_from_world = matrix_from_rigid(frame_pose(self.reconstruction, frame_id))
-        return np.linalg.inv(rig_from_world) @ np.linalg.inv(self.frames[frame_id].ego_from_rig)
 
 
 def _calibration_key(view: CameraView) -> tuple[float, ...]:
@@ -188,7 +181,6 @@ class _Builder:
             scene=reference.scene,
             channel=reference.channel,
             frame_index=reference.frame_index,
-            ego_from_rig=reference.ego_from_cam,
             initial_rig_from_world=np.linalg.inv(world_from_rig),
             image_names=tuple(v.name for v in views),
         )

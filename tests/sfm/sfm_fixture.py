@@ -49,6 +49,15 @@ class SfmInputs:
         """The views of one scene (clip), in frame and channel order."""
         return [view for view in self.views if view.scene == scene]
 
+    def longest_drive(self) -> list[CameraView]:
+        """The views of the scene whose keyframes span the longest distance (a moving clip)."""
+
+        def span(scene: str) -> float:
+            centres = np.array([v.world_from_ego[:3, 3] for v in self.scene_views(scene)])
+            return float(np.linalg.norm(centres.max(axis=0) - centres.min(axis=0)))
+
+        return self.scene_views(max(self.scenes, key=span))
+
     @property
     def scenes(self) -> list[str]:
         """Scenes of the site with images, in manifest order."""
@@ -86,3 +95,15 @@ def pose_errors(world_from_ego: dict[str, np.ndarray], truth: dict[str, np.ndarr
         relative = pose[:3, :3].T @ truth[name][:3, :3]
         angles.append(float(np.degrees(np.arccos(np.clip((np.trace(relative) - 1) / 2, -1.0, 1.0)))))
     return float(np.mean(positions)), float(np.mean(angles))
+
+
+def relative_pose_errors(
+    world_from_ego: dict[str, np.ndarray], truth: dict[str, np.ndarray], anchor: str
+) -> tuple[float, float]:
+    """`pose_errors` of the poses relative to the anchor image's (the clip's own frame: free of the
+    absolute offset that GNSS leaves in the odometry and that no SfM can see)."""
+    base, true_base = np.linalg.inv(world_from_ego[anchor]), np.linalg.inv(truth[anchor])
+    return pose_errors(
+        {name: base @ pose for name, pose in world_from_ego.items()},
+        {name: true_base @ truth[name] for name in world_from_ego},
+    )

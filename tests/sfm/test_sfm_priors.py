@@ -1,0 +1,38 @@
+"""Odometry priors in BA: one relative prior per consecutive keyframe pair, one absolute prior per keyframe,
+and the priors (not a held keyframe) keep the model where the odometry put it."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sfm_fixture import SfmInputs  # noqa: E402
+
+from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
+from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+
+
+def test_priors_chain_consecutive_keyframes_and_hold_the_model_near_the_odometry(
+    sfm_inputs: SfmInputs,
+) -> None:
+    views = sfm_inputs.longest_drive()
+    config = SfmConfig.preset("rigid", odometry_priors=True)
+    result = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config)
+    (adjustment,) = result.report["iterations"]
+    keyframes = len({v.frame_index for v in views if v.name in result.world_from_ego})
+    assert adjustment["priors"] == {"relative": keyframes - 1, "absolute": keyframes}
+    odometry = {v.name: v.world_from_ego for v in views}
+    offsets = [result.world_from_ego[n][:3, 3] - odometry[n][:3, 3] for n in result.world_from_ego]
+    assert np.linalg.norm(np.mean(offsets, axis=0)) < 0.1  # the gauge is the odometry's, on average
+
+
+def test_plain_ba_priors_chain_each_camera_separately(sfm_inputs: SfmInputs) -> None:
+    views = sfm_inputs.longest_drive()
+    config = SfmConfig.preset("plain", odometry_priors=True)
+    result = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config)
+    (adjustment,) = result.report["iterations"]
+    kept = [v for v in views if v.name in result.world_from_ego]
+    channels = {v.channel for v in kept}
+    assert adjustment["priors"]["absolute"] == len(kept)
+    assert adjustment["priors"]["relative"] <= len(kept) - len(channels)
