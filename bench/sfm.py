@@ -46,6 +46,7 @@ from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.sfm.baseline import (
     PoseErrors,
     align_to_reference,
+    aligned_poses,
     incremental_model,
     model_poses,
     pose_errors,
@@ -95,12 +96,13 @@ def figures(
 
 
 def gauge_free(model: pycolmap.Reconstruction, truth: dict[str, np.ndarray]) -> dict[str, float]:
-    """Errors of a copy of the model after the similarity that best fits its cameras to the true ones: the
-    shape of the reconstruction without its global placement (how incremental mapping is measured)."""
-    copy = pycolmap.Reconstruction(model)
-    if not align_to_reference(copy, {name: pose[:3, 3] for name, pose in truth.items()}):
-        return {}
-    errors = pose_errors(model_poses(copy), truth)
+    """Errors after the similarity that best fits the model's cameras to the true ones: the shape of the
+    reconstruction without its global placement (how incremental mapping is measured)."""
+    return gauge_free_poses(model_poses(model), truth)
+
+
+def gauge_free_poses(world_from_cam: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> dict[str, float]:
+    errors = pose_errors(aligned_poses(world_from_cam, truth), truth)
     return {"position_cm": round(errors.position_cm, 2), "rotation_deg": round(errors.rotation_deg, 4)}
 
 
@@ -205,7 +207,8 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
     site_database, manifest, views = site_inputs(args.site, args.scenes)
     truth = true_world_from_cam(args.site, views)
     image_dir = args.site / "nuscenes"
-    rows = {"wigo": figures(pose_errors({v.name: v.world_from_cam for v in views}, truth), None, 0.0)}
+    wigo = {v.name: v.world_from_cam for v in views}
+    rows = {"wigo": figures(pose_errors(wigo, truth), None, 0.0, gauge_free=gauge_free_poses(wigo, truth))}
     with tempfile.TemporaryDirectory(prefix="bench-sfm-") as scratch_dir:
         scratch = Path(scratch_dir)
         database = copy_database(site_database, scratch / "database.db")

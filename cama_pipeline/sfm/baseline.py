@@ -75,6 +75,29 @@ def align_to_reference(model: pycolmap.Reconstruction, reference_centres: dict[s
     return True
 
 
+def aligned_poses(
+    estimated_world_from_cam: dict[str, np.ndarray], reference_world_from_cam: dict[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """The estimated camera poses moved by the similarity that best maps their centres onto the reference
+    ones (gauge-free comparison); unchanged when fewer than 3 are shared or no similarity is found."""
+    names = sorted(set(estimated_world_from_cam) & set(reference_world_from_cam))
+    if len(names) < 3:
+        return estimated_world_from_cam
+    source = np.array([estimated_world_from_cam[n][:3, 3] for n in names])
+    found = robust_similarity(source, np.array([reference_world_from_cam[n][:3, 3] for n in names]), 0.5)
+    if found is None:
+        return estimated_world_from_cam
+    similarity = found[0].matrix()
+    rotation = similarity[:, :3] / found[0].scale
+    moved = {}
+    for name, pose in estimated_world_from_cam.items():
+        out = np.eye(4)
+        out[:3, :3] = rotation @ pose[:3, :3]
+        out[:3, 3] = similarity[:, :3] @ pose[:3, 3] + similarity[:, 3]
+        moved[name] = out
+    return moved
+
+
 def model_poses(model: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
     """Registered image name -> (4, 4) world_from_cam of the model."""
     return {
