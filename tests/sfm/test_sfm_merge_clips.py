@@ -1,0 +1,74 @@
+"""The merge on real clips of the tiny site (two drives through one intersection): a clip moved by a known
+similarity is brought back by the alignment from their shared points."""
+
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.guided import reconstruct_views, refined_views
+from cama_pipeline.sfm.merge import ClipModel, MergeConfig, align_clips, aligned_views, cross_clip_matches
+from cama_pipeline.sfm.stage import site_clips
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def clips(sfm_inputs: object) -> list[ClipModel]:
+    """Each clip of the site reconstructed on its own (rigid BA)."""
+    inputs = sfm_inputs
+    manifest = read_site_manifest(site_manifest_path(inputs.workspace, inputs.site_id))  # type: ignore[attr-defined]
+    models = []
+    for scene, views in site_clips(list(inputs.views), manifest).items():  # type: ignore[attr-defined]
+        result = reconstruct_views(views, inputs.database, inputs.image_dir, SfmConfig.preset("rigid"))  # type: ignore[attr-defined]
+        models.append(ClipModel(scene, result.reconstruction, tuple(refined_views(result, views))))
+    assert len(models) == 2
+    return models
+
+
+def offset_clip(clip: ClipModel, world_from_clip: np.ndarray) -> ClipModel:
+    """A copy of the clip moved by a similarity: its points, cameras and views."""
+    model = pycolmap.Reconstruction(clip.reconstruction)
+    model.transform(pycolmap.Sim3d(world_from_clip[:3, :]))
+    return ClipModel(clip.scene, model, tuple(aligned_views(clip.views, world_from_clip)))
+
+
+def known_offset(centre: np.ndarray) -> np.ndarray:
+    """1.5 deg about z and 1 % scale about the clip's centre, then 1.2 m sideways and 0.3 m up."""
+    angle = np.radians(1.5)
+    offset = np.eye(4)
+    offset[:3, :3] = 1.01 * np.array(
+        [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+    )
+    offset[:3, 3] = centre + np.array([0.0, 1.2, 0.3]) - offset[:3, :3] @ centre
+    return offset
+
+
+def relative(alignments: list) -> np.ndarray:  # type: ignore[type-arg]
+    """world_from_clip of the second clip relative to the first's."""
+    return np.linalg.inv(alignments[0].world_from_clip) @ alignments[1].world_from_clip
+
+
+def test_merge_brings_back_a_clip_moved_by_a_known_similarity(
+    sfm_inputs: object, clips: list[ClipModel]
+) -> None:
+    matches = cross_clip_matches(Path(sfm_inputs.database))  # type: ignore[attr-defined]
+    natural = align_clips(clips, matches, MergeConfig())
+    assert natural[1].method == "points" or natural[0].method == "points"
+    centre = np.mean([v.center for v in clips[1].views], axis=0)
+    offset = known_offset(centre)
+    moved = align_clips([clips[0], offset_clip(clips[1], offset)], matches, MergeConfig())
+    assert {a.method for a in moved} == {"points", "poses"} and max(a.correspondences for a in moved) >= 20
+    # Aligned, the moved clip lands where the unmoved one did: relative alignment = natural one undoing the offset.
+    expected = relative(natural) @ np.linalg.inv(offset)
+    found = relative(moved)
+    cameras = np.array([v.center for v in clips[1].views])
+    moved_cameras = cameras @ offset[:3, :3].T + offset[:3, 3]
+    placed = moved_cameras @ found[:3, :3].T + found[:3, 3]
+    wanted = moved_cameras @ expected[:3, :3].T + expected[:3, 3]
+    assert np.abs(placed - wanted).max() < 0.05  # metres
+    # and it took a real correction: the offset alone moves the cameras by over a metre
+    assert np.linalg.norm(moved_cameras - cameras, axis=1).min() > 1.0
