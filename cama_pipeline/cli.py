@@ -80,6 +80,7 @@ def _register_stage_commands() -> None:
     from cama_pipeline.pairs.command import pairs_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
+    from cama_pipeline.surface.command import surface_command
     from cama_pipeline.wigo.command import wigo_command
     from models.vma.commands import (
         propose_command,
@@ -100,6 +101,7 @@ def _register_stage_commands() -> None:
     app.command("sites")(sites_command)
     app.command("pairs")(pairs_command)
     app.command("features")(features_command)
+    app.command("surface")(surface_command)
     app.command("sfm")(sfm_command)
     app.command("propose")(propose_command)
     app.command("train")(train_command)

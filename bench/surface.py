@@ -1,0 +1,181 @@
+"""Road surface benchmark: the reconstructed BEV rasters of a synthetic site against its ground truth.
+
+For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/`), `cama surface` runs into
+its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters are compared with the
+site's `ground_truth/bev/` at each reconstructed cell's centre (nearest ground-truth cell):
+  elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking or crosswalk);
+  semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters;
+  photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
+             after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
+  coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
+  runtime    seconds per phase from the stage's report.
+Baseline in the same run: the elevation of the surface points alone (`--epochs 0`, no image refinement),
+with ground-truth poses.
+
+Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 2]
+Prints the figures and writes bench/results/surface.json.
+"""
+
+import argparse
+import json
+import logging
+import platform
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.surface import SurfaceConfig, run
+
+RESULTS = Path(__file__).parent / "results"
+ROAD_CLASSES = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
+IOU_CLASSES = {"road": Semantic.ROAD, "curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING}
+IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
+logger = logging.getLogger("bench.surface")
+
+
+def load_bev(folder: Path) -> dict[str, Any]:
+    """semantic, photometric (RGB), elevation and georeference of a raster folder."""
+    return {
+        "semantic": cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED),
+        "rgb": cv2.cvtColor(cv2.imread(str(folder / "photometric.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB),
+        "elevation": np.load(folder / "elevation.npy"),
+        "geo": json.loads((folder / "georeference.json").read_text()),
+    }
+
+
+def truth_at(ours: dict[str, Any], truth: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, cols) of our cells and the nearest true cells (-1 when outside the true raster)."""
+    geo, true_geo = ours["geo"], truth["geo"]
+    rows, cols = np.indices((geo["height"], geo["width"]))
+    x = geo["origin_xy"][0] + cols * geo["resolution"]
+    y = geo["origin_xy"][1] - rows * geo["resolution"]
+    tc = np.round((x - true_geo["origin_xy"][0]) / true_geo["resolution"]).astype(int)
+    tr = np.round((true_geo["origin_xy"][1] - y) / true_geo["resolution"]).astype(int)
+    inside = (tr >= 0) & (tr < true_geo["height"]) & (tc >= 0) & (tc < true_geo["width"])
+    return inside, np.where(inside, tr, 0), np.where(inside, tc, 0)
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float(10 * np.log10(255.0**2 / max(mse, 1e-12)))
+
+
+def affine_fit(ours: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """`ours` (N, 3) mapped per channel by the least-squares gain and offset onto `truth`."""
+    fitted = np.empty_like(ours, dtype=np.float64)
+    for ch in range(3):
+        design = np.column_stack([ours[:, ch], np.ones(len(ours))]).astype(np.float64)
+        coef, *_ = np.linalg.lstsq(design, truth[:, ch].astype(np.float64), rcond=None)
+        fitted[:, ch] = np.clip(design @ coef, 0, 255)
+    return fitted
+
+
+def compare(ours: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
+    """Elevation, semantic, photometric and coverage figures of `ours` against `truth`."""
+    inside, tr, tc = truth_at(ours, truth)
+    true_sem = np.where(inside, truth["semantic"][tr, tc], 255)
+    observed = inside & (ours["semantic"] != 255)
+    both = observed & (true_sem != 255)
+    road = observed & np.isin(true_sem, [int(c) for c in ROAD_CLASSES])
+    error = np.abs(ours["elevation"][road] - truth["elevation"][tr[road], tc[road]])
+    ious = {}
+    for name, cls in IOU_CLASSES.items():
+        a, b = ours["semantic"][both] == int(cls), true_sem[both] == int(cls)
+        ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
+    rgb, true_rgb = ours["rgb"][both], truth["rgb"][tr[both], tc[both]]
+    true_road = np.isin(truth["semantic"], [int(c) for c in ROAD_CLASSES]).sum()
+    scale = (ours["geo"]["resolution"] / truth["geo"]["resolution"]) ** 2
+    return {
+        "elevation_rmse_m": float(np.sqrt(np.mean(error**2))),
+        "elevation_mae_m": float(np.mean(error)),
+        "elevation_p95_m": float(np.percentile(error, 95)),
+        "road_cells_evaluated": int(road.sum()),
+        "iou": ious,
+        "psnr_db": psnr(rgb, true_rgb),
+        "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
+        "cells_observed": int(observed.sum()),
+        "true_road_coverage": float(road.sum() * scale / max(true_road, 1)),
+    }
+
+
+def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
+    """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
+    workspace = scratch / f"{poses}-{config.epochs}"
+    workspace.mkdir(parents=True)
+    for shared in ("sites", "sfm"):
+        if (site / "workspace" / shared).exists():
+            (workspace / shared).symlink_to((site / "workspace" / shared).absolute())
+    started = time.perf_counter()
+    result = run(config, site / "nuscenes", workspace, poses=poses, overwrite=True, show_progress=False)[0]
+    seconds = time.perf_counter() - started
+    figures = compare(load_bev(result.folder / "bev"), load_bev(site / "ground_truth" / "bev"))
+    report = result.report
+    return {
+        "poses": poses,
+        "epochs": config.epochs,
+        **figures,
+        "seconds": {**report["seconds"], "total": seconds},
+        "images": report["images"],
+        "vertices": report["vertices"],
+        "points": report["points"],
+        "losses_last_epoch": report["losses"]["epochs"][-1:] or None,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--resolution", type=float, default=0.1)
+    parser.add_argument("--epochs", type=int, default=SurfaceConfig.epochs)
+    parser.add_argument("--threads", type=int, default=2)
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    config = SurfaceConfig(resolution_m=args.resolution, epochs=args.epochs, torch_threads=args.threads)
+    sources = ["ground_truth", "wigo"] + (["sfm"] if (args.site / "workspace" / "sfm").is_dir() else [])
+    scratch = Path(tempfile.mkdtemp(prefix="bench-surface-"))
+    try:
+        baseline = run_source(args.site, "ground_truth", replace(config, epochs=0), scratch)
+        runs = [run_source(args.site, source, config, scratch) for source in sources]
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    for row in [baseline, *runs]:
+        print(
+            f"{row['poses']:>12} epochs {row['epochs']}: elevation RMSE {row['elevation_rmse_m'] * 100:.2f} cm "
+            f"(p95 {row['elevation_p95_m'] * 100:.1f} cm), IoU "
+            + ", ".join(f"{k} {v:.3f}" for k, v in row["iou"].items())
+            + f", PSNR {row['psnr_db']:.2f} dB (affine {row['psnr_affine_db']:.2f}), "
+            f"{row['seconds']['total']:.0f} s {row['seconds']}"
+        )
+    reference = runs[0]
+    results = {
+        "command": " ".join([sys.executable.split("/")[-1], *sys.argv]),
+        "site": str(args.site),
+        "config": {"resolution_m": args.resolution, "epochs": args.epochs, "threads": args.threads},
+        "machine": {
+            "platform": platform.platform(),
+            "torch": torch.__version__,
+            "cuda": torch.cuda.is_available(),
+        },
+        "baseline_points_only_gt_poses": baseline,
+        "runs": runs,
+        "ratios_vs_baseline": {
+            "elevation_rmse": reference["elevation_rmse_m"] / max(baseline["elevation_rmse_m"], 1e-9),
+            "seconds": reference["seconds"]["total"] / max(baseline["seconds"]["total"], 1e-9),
+        },
+    }
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "surface.json").write_text(json.dumps(results, indent=1))
+    print(f"wrote {RESULTS / 'surface.json'}")
+
+
+if __name__ == "__main__":
+    main()

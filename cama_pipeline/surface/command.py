@@ -1,0 +1,52 @@
+"""`cama surface`: road surface mesh and BEV rasters of every site (after `cama sites`, ideally `cama sfm`)."""
+
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.surface.stage import run
+from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
+
+console = Console()
+
+
+def surface_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    poses: Annotated[
+        str, typer.Option(help="Pose source: wigo (site manifest), sfm (after `cama sfm`) or ground_truth.")
+    ] = "wigo",
+    resolution_m: Annotated[float, typer.Option(help="Mesh vertex spacing and raster resolution.")] = 0.1,
+    epochs: Annotated[int, typer.Option(help="Mesh optimisation passes over the keyframe images.")] = 2,
+    refine_elevation: Annotated[
+        bool, typer.Option(help="Refine the elevation MLP through the image losses.")
+    ] = True,
+    threads: Annotated[int, typer.Option(help="torch threads on the CPU.")] = 2,
+    device: Annotated[str, typer.Option(help="auto, cpu or cuda.")] = "auto",
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """RoMe-style road surface: elevation MLP, mesh colour and semantics, BEV rasters per site."""
+    try:
+        config = SurfaceConfig(
+            resolution_m=resolution_m,
+            epochs=epochs,
+            refine_elevation=refine_elevation,
+            torch_threads=threads,
+            device=device,  # type: ignore[arg-type]  # validated by SurfaceConfig
+        )
+        sites = run(config, dataset, workspace, poses=poses, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise fail(err) from err
+    table = Table(title=f"surface ({poses} poses)")
+    for column in ("site", "images", "vertices", "cells observed", "seconds", "folder"):
+        table.add_column(column)
+    for site in sites:
+        report = site.report
+        name = site.site_id + (" (up to date)" if site.skipped else "")
+        seconds = sum(report["seconds"].values())
+        values = (report["images"], report["vertices"], report["cells_observed"], f"{seconds:.1f}")
+        table.add_row(name, *map(str, values), str(site.folder))
+    console.print(table)

@@ -1,0 +1,106 @@
+"""Every parameter of road surface reconstruction in one frozen, validated config."""
+
+from dataclasses import dataclass
+from typing import Literal
+
+PoseSource = Literal["ground_truth", "wigo", "sfm"]
+POSE_SOURCES: tuple[str, ...] = ("ground_truth", "wigo", "sfm")
+
+
+@dataclass(frozen=True)
+class SurfaceConfig:
+    """Parameters of the RoMe-style surface: points initialisation, elevation MLP, mesh optimisation."""
+
+    resolution_m: float = 0.1
+    """Grid spacing of the mesh vertices and of the BEV rasters (one vertex per raster cell)."""
+    region_radius_m: float = 20.0
+    """The mesh covers the cells within this distance of the site's trajectory (its road region)."""
+    use_trajectory_strip: bool = True
+    """Add the road strip under the keyframe poses (covers the road where SfM points are sparse)."""
+    strip_x_range_m: tuple[float, float] = (-1.0, 3.5)
+    """Ego x range (rear, front) of the road strip under each keyframe (origin: ground under the rear axle)."""
+    strip_half_width_m: float = 0.8
+    """Half width (ego y) of the road strip under each keyframe: it stays under the car body."""
+    strip_spacing_m: float = 0.25
+    """Sample spacing of the strip points."""
+    use_sfm_points: bool = True
+    """Add the SfM points labelled road/curb/marking/crosswalk when the workspace has them."""
+    sfm_max_error_px: float = 2.0
+    """SfM points with a larger mean reprojection error are left out."""
+    pe_frequencies: int = 6
+    """Positional-encoding octaves of the elevation MLP; few octaves keep the surface smooth."""
+    mlp_width: int = 64
+    """Hidden units per layer of the elevation MLP (two hidden layers)."""
+    elevation_iterations: int = 800
+    """Adam steps fitting the elevation MLP to the surface points."""
+    elevation_lr: float = 5e-3
+    huber_m: float = 0.05
+    """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
+    control_spacing_m: float = 1.0
+    """The MLP is evaluated on a control grid this coarse and interpolated to the vertices (it is smooth)."""
+    max_range_m: float = 25.0
+    """Vertices farther than this from a camera are not projected into it (too oblique, too blurred)."""
+    min_depth_m: float = 0.5
+    depth_tolerance: float = 0.03
+    """Relative depth slack of the visibility (z-buffer) test, plus `resolution_m` absolute."""
+    epochs: int = 2
+    """Passes over all keyframe images optimising colour, semantics and (optionally) the elevation MLP."""
+    images_per_batch: int = 16
+    vertices_per_image: int = 12000
+    """Visible vertices sampled per image and optimisation step (all of them in the first, averaging pass)."""
+    colour_lr: float = 0.02
+    semantic_lr: float = 0.1
+    refine_elevation: bool = True
+    """Refine the elevation MLP through the photometric/semantic loss during mesh optimisation."""
+    refine_lr: float = 5e-4
+    anchor_weight: float = 1.0
+    """Weight of the surface-point loss kept while refining elevation (holds the MLP near the points)."""
+    semantic_weight: float = 0.1
+    torch_threads: int = 1
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    """`auto`: the GPU when torch sees one, else the CPU with `torch_threads` threads."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        positive = (
+            "resolution_m",
+            "region_radius_m",
+            "strip_half_width_m",
+            "strip_spacing_m",
+            "sfm_max_error_px",
+            "elevation_lr",
+            "huber_m",
+            "control_spacing_m",
+            "max_range_m",
+            "min_depth_m",
+            "colour_lr",
+            "semantic_lr",
+            "refine_lr",
+        )
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"SurfaceConfig.{name} must be > 0, got {getattr(self, name)}")
+        at_least_one = (
+            "pe_frequencies",
+            "mlp_width",
+            "images_per_batch",
+            "vertices_per_image",
+            "torch_threads",
+        )
+        for name in at_least_one:
+            if getattr(self, name) < 1:
+                raise ValueError(f"SurfaceConfig.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("elevation_iterations", "epochs"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("depth_tolerance", "anchor_weight", "semantic_weight"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.strip_x_range_m[0] < self.strip_x_range_m[1]:
+            raise ValueError(
+                f"SurfaceConfig.strip_x_range_m must be (rear, front), got {self.strip_x_range_m}"
+            )
+        if self.control_spacing_m < self.resolution_m:
+            raise ValueError("SurfaceConfig.control_spacing_m must be at least resolution_m")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise ValueError(f"SurfaceConfig.device must be auto, cpu or cuda, got {self.device!r}")

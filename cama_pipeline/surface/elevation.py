@@ -1,0 +1,123 @@
+"""The elevation MLP: z(x, y) with a low-frequency positional encoding, fitted robustly to surface points.
+
+Road elevation changes slowly, so a few encoding octaves keep the surface smooth by design: one bad point
+cannot raise a spike. The MLP is evaluated on a coarse control grid and interpolated to the mesh vertices,
+which is exact enough for so smooth a function and keeps every optimisation step cheap.
+"""
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.surface.grid import SurfaceGrid
+
+
+class ElevationMLP(nn.Module):
+    """z = offset + MLP(positional encoding of the normalised x, y); global metres in and out."""
+
+    centre: torch.Tensor
+    octaves: torch.Tensor
+
+    def __init__(self, frequencies: int, width: int, centre_xy: np.ndarray, scale_m: float, offset_m: float):
+        super().__init__()
+        self.register_buffer("centre", torch.as_tensor(centre_xy, dtype=torch.float64))
+        self.scale_m = float(scale_m)
+        self.offset_m = float(offset_m)
+        self.register_buffer("octaves", math.pi * 2.0 ** torch.arange(frequencies, dtype=torch.float32))
+        inputs = 2 + 4 * frequencies
+        self.net = nn.Sequential(
+            nn.Linear(inputs, width), nn.SiLU(), nn.Linear(width, width), nn.SiLU(), nn.Linear(width, 1)
+        )
+
+    def encode(self, xy: torch.Tensor) -> torch.Tensor:
+        """(N, 2 + 4F): the normalised coordinates and their sines and cosines."""
+        u = ((xy.double() - self.centre) / self.scale_m).float()
+        angles = (u[:, :, None] * self.octaves).reshape(len(u), -1)
+        return torch.cat([u, torch.sin(angles), torch.cos(angles)], dim=1)
+
+    def forward(self, xy: torch.Tensor) -> torch.Tensor:
+        return self.net(self.encode(xy))[:, 0] + self.offset_m
+
+
+def huber(residual: torch.Tensor, scale: float) -> torch.Tensor:
+    """Mean Huber loss (quadratic within `scale`, linear beyond), in metres."""
+    return F.huber_loss(residual, torch.zeros_like(residual), delta=scale)
+
+
+def new_elevation_mlp(grid: SurfaceGrid, points_z: np.ndarray, config: SurfaceConfig) -> ElevationMLP:
+    """An MLP normalised to the grid's extent, its offset the points' median height."""
+    extent = np.array([(grid.cols - 1), (grid.rows - 1)]) * grid.resolution_m
+    centre = np.array([grid.origin_xy[0] + extent[0] / 2, grid.origin_xy[1] - extent[1] / 2])
+    return ElevationMLP(
+        config.pe_frequencies,
+        config.mlp_width,
+        centre,
+        max(extent.max() / 2, 1.0),
+        float(np.median(points_z)),
+    )
+
+
+def fit_elevation(
+    mlp: ElevationMLP,
+    points: torch.Tensor,
+    config: SurfaceConfig,
+    on_step: Callable[[int, float], None] | None = None,
+) -> list[float]:
+    """Fit `mlp` to (N, 3) points with Adam and the Huber loss; the loss every 50 steps."""
+    optimiser = torch.optim.Adam(mlp.parameters(), lr=config.elevation_lr)
+    steps = config.elevation_iterations
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
+        optimiser, max(steps, 1), eta_min=config.elevation_lr / 20
+    )
+    xy, z = points[:, :2], points[:, 2].float()
+    losses: list[float] = []
+    for step in range(steps):
+        optimiser.zero_grad()
+        loss = huber(mlp(xy) - z, config.huber_m)
+        loss.backward()
+        optimiser.step()
+        schedule.step()
+        if step % 50 == 0 or step == steps - 1:
+            losses.append(loss.item())
+            if on_step is not None:
+                on_step(step, losses[-1])
+    return losses
+
+
+class ControlGrid:
+    """The MLP's coarse evaluation grid over a SurfaceGrid, and the vertices' places in it."""
+
+    def __init__(self, grid: SurfaceGrid, spacing_m: float, device: torch.device):
+        step = max(1, int(round(spacing_m / grid.resolution_m)))
+        self.spacing_m = step * grid.resolution_m
+        self.rows = (grid.rows - 1) // step + 2
+        self.cols = (grid.cols - 1) // step + 2
+        r, c = np.meshgrid(np.arange(self.rows) * step, np.arange(self.cols) * step, indexing="ij")
+        self.xy = torch.as_tensor(grid.xy_of_cells(r.ravel(), c.ravel()), device=device)
+        vr, vc = grid.vertex_cells()
+        gx = vc / (step * (self.cols - 1)) * 2 - 1
+        gy = vr / (step * (self.rows - 1)) * 2 - 1
+        self.vertex_grid = torch.as_tensor(np.stack([gx, gy], axis=1), dtype=torch.float32, device=device)
+
+    def heights(self, mlp: ElevationMLP) -> torch.Tensor:
+        """(rows, cols) MLP heights at the control points."""
+        return mlp(self.xy).reshape(self.rows, self.cols)
+
+    def at_vertices(self, control_z: torch.Tensor, vertex_ids: torch.Tensor | None = None) -> torch.Tensor:
+        """Heights of the given vertices (all when None), bilinear in the control grid."""
+        where = self.vertex_grid if vertex_ids is None else self.vertex_grid[vertex_ids]
+        sampled = F.grid_sample(control_z[None, None], where[None, None], mode="bilinear", align_corners=True)
+        return sampled[0, 0, 0]
+
+    def normals(self, control_z: torch.Tensor) -> torch.Tensor:
+        """(V, 3) unit upward surface normals at the vertices (world frame; rows grow with -y)."""
+        d_row, d_col = torch.gradient(control_z.detach(), spacing=self.spacing_m)
+        slopes = torch.stack([-d_col, d_row])
+        sampled = F.grid_sample(slopes[None], self.vertex_grid[None, None], align_corners=True)[0, :, 0]
+        normals = torch.cat([sampled, torch.ones_like(sampled[:1])]).T
+        return normals / normals.norm(dim=1, keepdim=True)

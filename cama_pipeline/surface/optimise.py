@@ -1,0 +1,251 @@
+"""Mesh optimisation: per-vertex colour and semantic logits (and a refined elevation MLP) from the images.
+
+First pass (`observe`): every keyframe image sees its visible vertices; their weighted mean colour and
+class frequencies initialise the mesh and the pixels that hit each cell make the observation count.
+Then `epochs` of Adam over image batches minimise the L1 colour error and the semantic cross-entropy of
+the vertices projected with the current elevation (differentiable `grid_sample`), weighted by the pixels
+each vertex covers and by the ground mask, with the surface-point loss holding the MLP to the points.
+"""
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from cama_pipeline.data import Dataset
+from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.semantics import BEV_CLASSES
+from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, huber
+from cama_pipeline.surface.grid import SurfaceGrid
+from cama_pipeline.surface.observe import (
+    GROUND,
+    Camera,
+    candidate_vertices,
+    image_channels,
+    pixel_area,
+    sample_images,
+    visible_vertices,
+)
+
+Advance = Callable[[int, float], None]
+"""Progress callback: images done in this call, current loss."""
+
+
+@dataclass(eq=False)
+class Mesh:
+    """The surface being optimised: geometry (MLP over the control grid) and per-vertex attributes."""
+
+    grid: SurfaceGrid
+    control: ControlGrid
+    mlp: ElevationMLP
+    vertex_xy: torch.Tensor
+    """(V, 2) float64 global metres."""
+    colour: torch.Tensor
+    """(V, 3) RGB in [0, 1] (a leaf tensor optimised directly)."""
+    logits: torch.Tensor
+    """(V, 5) semantic logits of the BEV classes."""
+    count: torch.Tensor
+    """(V,) camera rays (pixels) that hit each vertex's cell."""
+
+    def heights(self, control_z: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
+        return self.control.at_vertices(control_z, ids)
+
+
+def new_mesh(grid: SurfaceGrid, mlp: ElevationMLP, config: SurfaceConfig, device: torch.device) -> Mesh:
+    """A mesh over the grid's vertices with the MLP's geometry; attributes are set by `observe`."""
+    empty = torch.zeros(0, device=device)
+    vertex_xy = torch.as_tensor(grid.vertex_xy(), device=device)
+    return Mesh(
+        grid, ControlGrid(grid, config.control_spacing_m, device), mlp, vertex_xy, empty, empty, empty
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Batch:
+    """Projected vertices of a batch of images, padded to a common length P."""
+
+    ids: torch.Tensor
+    """(B, P) vertex ids (0 on padding)."""
+    uv: torch.Tensor
+    """(B, P, 2) pixel coordinates (differentiable in the elevation)."""
+    weight: torch.Tensor
+    """(B, P) pixels covered (0 on padding), detached."""
+
+
+def batches(views: list[CameraView], size: int) -> Iterator[list[int]]:
+    """View indices in batches of `size`, each batch of one image size."""
+    by_size: dict[tuple[int, int], list[int]] = {}
+    for i, view in enumerate(views):
+        by_size.setdefault((view.width, view.height), []).append(i)
+    for indices in by_size.values():
+        for start in range(0, len(indices), size):
+            yield indices[start : start + size]
+
+
+def project_batch(
+    mesh: Mesh,
+    control_z: torch.Tensor,
+    normals: torch.Tensor,
+    cameras: list[Camera],
+    id_lists: list[torch.Tensor],
+) -> Batch:
+    """Project each camera's vertices with the current heights into a padded batch."""
+    longest = max((len(ids) for ids in id_lists), default=0)
+    device = mesh.vertex_xy.device
+    ids = torch.zeros((len(cameras), longest), dtype=torch.long, device=device)
+    uv = torch.zeros((len(cameras), longest, 2), device=device)
+    weight = torch.zeros((len(cameras), longest), device=device)
+    rows_uv = []
+    for b, (camera, vertex_ids) in enumerate(zip(cameras, id_lists, strict=True)):
+        n = len(vertex_ids)
+        z = mesh.heights(control_z, vertex_ids)
+        xyz = torch.cat([mesh.vertex_xy[vertex_ids], z.double()[:, None]], dim=1)
+        projected, _, cam = camera.project(xyz)
+        ids[b, :n] = vertex_ids
+        weight[b, :n] = pixel_area(camera, cam.detach(), normals[vertex_ids], mesh.grid.resolution_m)
+        rows_uv.append(F.pad(projected, (0, 0, 0, longest - n)))
+    if rows_uv:
+        uv = torch.stack(rows_uv)
+    return Batch(ids, uv, weight)
+
+
+def visible_ids(mesh: Mesh, control_z: torch.Tensor, camera: Camera, config: SurfaceConfig) -> torch.Tensor:
+    """Vertex ids visible in one camera with the current geometry."""
+    device = mesh.vertex_xy.device
+    candidates = torch.as_tensor(
+        candidate_vertices(mesh.grid, camera.centre, config.max_range_m), device=device
+    )
+    z = mesh.heights(control_z, candidates)
+    xyz = torch.cat([mesh.vertex_xy[candidates], z.double()[:, None]], dim=1)
+    return visible_vertices(camera, xyz, candidates, config)
+
+
+def observe(
+    mesh: Mesh, dataset: Dataset, views: list[CameraView], config: SurfaceConfig, advance: Advance
+) -> list[torch.Tensor]:
+    """The averaging pass: sets colour, logits and count; returns each view's visible vertex ids (int32)."""
+    device = mesh.vertex_xy.device
+    vertices = len(mesh.vertex_xy)
+    sums = torch.zeros((vertices, 3 + len(BEV_CLASSES)), device=device)
+    weights = torch.zeros(vertices, device=device)
+    visible: list[torch.Tensor] = [torch.zeros(0, dtype=torch.int32)] * len(views)
+    with torch.no_grad():
+        control_z = mesh.control.heights(mesh.mlp)
+        normals = mesh.control.normals(control_z)
+        for indices in batches(views, config.images_per_batch):
+            cameras = [Camera.of(views[i], device) for i in indices]
+            id_lists = [visible_ids(mesh, control_z, camera, config) for camera in cameras]
+            batch = project_batch(mesh, control_z, normals, cameras, id_lists)
+            images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
+            samples = sample_images(images, batch.uv)
+            weight = (batch.weight * samples[..., GROUND]).reshape(-1)
+            flat_ids = batch.ids.reshape(-1)
+            sums.index_add_(0, flat_ids, samples[..., :GROUND].reshape(-1, GROUND) * weight[:, None])
+            weights.index_add_(0, flat_ids, weight)
+            for i, ids in zip(indices, id_lists, strict=True):
+                visible[i] = ids.to(torch.int32).cpu()
+            advance(len(indices), 0.0)
+    seen = weights > 0
+    mean = sums[seen] / weights[seen, None]
+    mesh.count = weights
+    mesh.colour = torch.zeros((vertices, 3), device=device)
+    mesh.colour[seen] = mean[:, :3]
+    mesh.logits = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
+    mesh.logits[seen] = torch.log(mean[:, 3:] + 1e-3)
+    return visible
+
+
+def _batch_loss(
+    mesh: Mesh, images: torch.Tensor, batch: Batch, config: SurfaceConfig
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Weighted L1 colour and soft cross-entropy semantic losses of one projected batch."""
+    samples = sample_images(images, batch.uv)
+    ground = samples[..., GROUND]
+    weight = (batch.weight * ground).detach()
+    total = weight.sum().clamp(min=1e-6)
+    colour_error = (mesh.colour[batch.ids] - samples[..., :3]).abs().sum(-1)
+    target = samples[..., 3:GROUND] / ground.clamp(min=1e-6)[..., None]
+    cross_entropy = -(target * torch.log_softmax(mesh.logits[batch.ids], dim=-1)).sum(-1)
+    return (weight * colour_error).sum() / total, (weight * cross_entropy).sum() / total
+
+
+def optimise(
+    mesh: Mesh,
+    dataset: Dataset,
+    views: list[CameraView],
+    visible: list[torch.Tensor],
+    points: torch.Tensor,
+    config: SurfaceConfig,
+    advance: Advance,
+) -> list[dict[str, float]]:
+    """`config.epochs` of Adam over image batches (see the module docstring); per-epoch mean losses."""
+    device = mesh.vertex_xy.device
+    generator = torch.Generator().manual_seed(config.seed)
+    mesh.colour.requires_grad_(True)
+    mesh.logits.requires_grad_(True)
+    groups = [
+        {"params": [mesh.colour], "lr": config.colour_lr},
+        {"params": [mesh.logits], "lr": config.semantic_lr},
+    ]
+    if config.refine_elevation:
+        groups.append({"params": list(mesh.mlp.parameters()), "lr": config.refine_lr})
+    optimiser = torch.optim.Adam(groups)
+    history = []
+    for _ in range(config.epochs):
+        totals = np.zeros(3)
+        steps = 0
+        for indices in batches(views, config.images_per_batch):
+            losses = _step(
+                mesh, dataset, views, visible, indices, points, config, optimiser, generator, device
+            )
+            totals += losses
+            steps += 1
+            advance(len(indices), float(losses[0] + config.semantic_weight * losses[1]))
+        mean = totals / max(steps, 1)
+        history.append(
+            {"colour_l1": float(mean[0]), "semantic_ce": float(mean[1]), "anchor_huber": float(mean[2])}
+        )
+    mesh.colour = mesh.colour.detach().clamp(0, 1)
+    mesh.logits = mesh.logits.detach()
+    return history
+
+
+def _step(
+    mesh: Mesh,
+    dataset: Dataset,
+    views: list[CameraView],
+    visible: list[torch.Tensor],
+    indices: list[int],
+    points: torch.Tensor,
+    config: SurfaceConfig,
+    optimiser: torch.optim.Optimizer,
+    generator: torch.Generator,
+    device: torch.device,
+) -> np.ndarray:
+    """One Adam step on one image batch; its (colour, semantic, anchor) losses."""
+    optimiser.zero_grad()
+    with torch.set_grad_enabled(config.refine_elevation):
+        control_z = mesh.control.heights(mesh.mlp)
+    normals = mesh.control.normals(control_z)
+    id_lists = []
+    for i in indices:
+        ids = visible[i]
+        if len(ids) > config.vertices_per_image:
+            ids = ids[torch.randperm(len(ids), generator=generator)[: config.vertices_per_image]]
+        id_lists.append(ids.long().to(device))
+    cameras = [Camera.of(views[i], device) for i in indices]
+    batch = project_batch(mesh, control_z, normals, cameras, id_lists)
+    images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
+    colour, semantic = _batch_loss(mesh, images, batch, config)
+    loss = colour + config.semantic_weight * semantic
+    anchor = torch.zeros((), device=device)
+    if config.refine_elevation:
+        pick = torch.randint(len(points), (min(len(points), 4096),), generator=generator).to(device)
+        anchor = huber(mesh.mlp(points[pick, :2]) - points[pick, 2].float(), config.huber_m)
+        loss = loss + config.anchor_weight * anchor
+    loss.backward()
+    optimiser.step()
+    return np.array([colour.item(), semantic.item(), anchor.item()])

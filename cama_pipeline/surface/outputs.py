@@ -1,0 +1,118 @@
+"""The surface stage's files in the workspace; this module is the only one that writes or reads them.
+
+<workspace>/surface/<site_id>/mesh.ply      the observed road mesh (trimesh, binary PLY): global metres,
+                                             per-vertex RGB colour and a `label` attribute (class 0-4)
+<workspace>/surface/<site_id>/bev/          BEV rasters, the same format as a synthetic site's
+                                             ground_truth/bev/ (`models.vma.rasters.load_site_rasters` reads it):
+    semantic.png           uint8, classes 0-4 (DESIGN.md), 255 where no camera ray hit the cell
+    photometric.png        8-bit BGR colour, black where unobserved
+    elevation.npy          float32 metres, NaN where unobserved
+    observation_count.png  uint16, camera rays (keyframe pixels) that hit each cell (clipped at 65535)
+    georeference.json      {"origin_xy" (pixel (0, 0) centre, global m), "resolution" m/px, "width",
+                            "height", "frame": "global", "row_axis": "-y", "col_axis": "+x"}
+<workspace>/surface/<site_id>/report.json   schema "cama.surface/1", written last (marks completion):
+    {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images", "points": {"strip", "sfm"},
+     "vertices", "cells_observed", "seconds": {phase: s}, "losses": {"elevation": [huber every 50 steps],
+     "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}}
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import trimesh
+from trimesh.exchange.ply import export_ply
+
+from cama_pipeline.io import atomic_write_bytes, atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.workspace import read_json
+from cama_pipeline.surface.grid import SurfaceGrid
+
+REPORT_SCHEMA = "cama.surface/1"
+MAX_COUNT = np.iinfo(np.uint16).max
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceRasters:
+    """The BEV rasters of a reconstructed surface (see the module docstring)."""
+
+    semantic: np.ndarray
+    photometric_rgb: np.ndarray
+    elevation: np.ndarray
+    observation_count: np.ndarray
+    georeference: dict[str, Any]
+
+
+def surface_dir(workspace: Path, site_id: str) -> Path:
+    """`<workspace>/surface/<site_id>/`."""
+    return Path(workspace) / "surface" / site_id
+
+
+def report_path(workspace: Path, site_id: str) -> Path:
+    return surface_dir(workspace, site_id) / "report.json"
+
+
+def rasters_from_vertices(
+    grid: SurfaceGrid, heights: np.ndarray, colour: np.ndarray, label: np.ndarray, count: np.ndarray
+) -> SurfaceRasters:
+    """Rasters from per-vertex values; cells whose count rounds to 0 stay unobserved (255 / NaN / black)."""
+    rows, cols = grid.vertex_cells()
+    rays = np.minimum(np.round(count), MAX_COUNT).astype(np.uint16)
+    seen = rays > 0
+    r, c = rows[seen], cols[seen]
+    semantic = np.full((grid.rows, grid.cols), int(Semantic.UNOBSERVED), np.uint8)
+    semantic[r, c] = label[seen]
+    photometric = np.zeros((grid.rows, grid.cols, 3), np.uint8)
+    photometric[r, c] = np.round(np.clip(colour[seen], 0, 1) * 255).astype(np.uint8)
+    elevation = np.full((grid.rows, grid.cols), np.nan, np.float32)
+    elevation[r, c] = heights[seen]
+    observation = np.zeros((grid.rows, grid.cols), np.uint16)
+    observation[r, c] = rays[seen]
+    return SurfaceRasters(semantic, photometric, elevation, observation, grid.georeference())
+
+
+def write_rasters(folder: Path, rasters: SurfaceRasters) -> None:
+    """Write the raster folder (every file atomically)."""
+    folder = Path(folder)
+    atomic_write_image(folder / "semantic.png", rasters.semantic)
+    atomic_write_image(folder / "photometric.png", cv2.cvtColor(rasters.photometric_rgb, cv2.COLOR_RGB2BGR))
+    atomic_write_npy(folder / "elevation.npy", rasters.elevation)
+    atomic_write_image(folder / "observation_count.png", rasters.observation_count)
+    atomic_write_json(folder / "georeference.json", rasters.georeference, indent=2)
+
+
+def grid_mesh(grid: SurfaceGrid, rasters: SurfaceRasters) -> trimesh.Trimesh:
+    """The observed cells as a triangle mesh: two upward-facing triangles per square of observed cells."""
+    observed = rasters.semantic != int(Semantic.UNOBSERVED)
+    index = np.full(observed.shape, -1, np.int64)
+    index[observed] = np.arange(int(observed.sum()))
+    rows, cols = np.nonzero(observed)
+    xy = grid.xy_of_cells(rows, cols)
+    vertices = np.column_stack([xy, rasters.elevation[rows, cols]])
+    a, b = index[:-1, :-1], index[:-1, 1:]
+    c, d = index[1:, :-1], index[1:, 1:]
+    full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+    faces = np.concatenate(
+        [np.stack([a[full], c[full], d[full]], 1), np.stack([a[full], d[full], b[full]], 1)], axis=0
+    )
+    colours = np.column_stack([rasters.photometric_rgb[rows, cols], np.full(len(rows), 255, np.uint8)])
+    mesh = trimesh.Trimesh(vertices, faces, vertex_colors=colours, process=False)
+    mesh.vertex_attributes["label"] = rasters.semantic[rows, cols].astype(np.uint8)
+    return mesh
+
+
+def write_mesh(path: Path, mesh: trimesh.Trimesh) -> None:
+    """Binary PLY, atomically."""
+    atomic_write_bytes(path, export_ply(mesh))
+
+
+def write_report(path: Path, report: dict[str, Any]) -> None:
+    """report.json atomically; written last, its fingerprint marks the site complete."""
+    atomic_write_json(path, {"schema": REPORT_SCHEMA, **report}, indent=1)
+
+
+def read_report(path: Path) -> dict[str, Any]:
+    """A stored report, schema-checked."""
+    return read_json(path, REPORT_SCHEMA, "cama surface")

@@ -1,0 +1,192 @@
+"""The surface stage: for every site of the workspace, the RoMe-style road mesh and its BEV rasters.
+
+Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit, observation
+(visibility, mean colour and class, ray counts), mesh optimisation, export (see `outputs` for the files).
+"""
+
+import logging
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.sfm.io import sfm_dir
+from cama_pipeline.site.workspace import (
+    default_workspace,
+    file_stats,
+    fingerprint,
+    read_site_manifest,
+    read_sites_index,
+    site_manifest_path,
+    sites_index_path,
+    stored_fingerprint,
+)
+from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
+from cama_pipeline.surface.elevation import fit_elevation, new_elevation_mlp
+from cama_pipeline.surface.grid import road_grid
+from cama_pipeline.surface.optimise import new_mesh, observe, optimise
+from cama_pipeline.surface.outputs import (
+    grid_mesh,
+    rasters_from_vertices,
+    read_report,
+    report_path,
+    surface_dir,
+    write_mesh,
+    write_rasters,
+    write_report,
+)
+from cama_pipeline.surface.points import NoRoadPointsError, sfm_surface_points, surface_points
+from cama_pipeline.surface.poses import pose_inputs, posed_views
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SiteSurface:
+    """One site's surface outputs and report."""
+
+    site_id: str
+    folder: Path
+    report: dict[str, Any]
+    skipped: bool
+
+
+def pick_device(config: SurfaceConfig) -> torch.device:
+    """The GPU when asked or (auto) available, else the CPU."""
+    if config.device == "cuda" or (config.device == "auto" and torch.cuda.is_available()):
+        return torch.device("cuda")
+    return torch.device("cpu")
+
+
+@contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """torch's intra-op thread count set for the block, restored after."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+class _Phases:
+    """One rich progress bar per phase, its description showing the loss."""
+
+    def __init__(self, progress: Progress, site_id: str):
+        self.progress = progress
+        self.site_id = site_id
+        self.seconds: dict[str, float] = {}
+
+    @contextmanager
+    def phase(self, name: str, total: int) -> Iterator[Callable[[int, float], None]]:
+        task = self.progress.add_task(f"{self.site_id} {name}", total=total)
+        started = time.perf_counter()
+
+        def advance(done: int, loss: float) -> None:
+            self.progress.update(task, advance=done, description=f"{self.site_id} {name} loss {loss:.4f}")
+
+        yield advance
+        self.seconds[name] = round(time.perf_counter() - started, 3)
+        self.progress.update(task, completed=total)
+
+
+def _site_digest(config: SurfaceConfig, dataset_root: Path, workspace: Path, site_id: str, poses: str) -> str:
+    """Fingerprint of the config, the pose source and the files the site's surface is made from."""
+    inputs = [site_manifest_path(workspace, site_id), *pose_inputs(dataset_root, workspace, site_id, poses)]
+    if config.use_sfm_points:
+        inputs.append(sfm_dir(workspace, site_id) / "points.npz")
+    return fingerprint(asdict(config), poses, file_stats(inputs))
+
+
+def reconstruct_site(
+    dataset: Dataset, workspace: Path, site_id: str, config: SurfaceConfig, poses: str, phases: _Phases
+) -> dict[str, Any]:
+    """Run every phase on one site and write its outputs; returns the report (without fingerprint)."""
+    device = pick_device(config)
+    views = posed_views(
+        dataset, read_site_manifest(site_manifest_path(workspace, site_id)), workspace, site_id, poses
+    )
+    try:
+        points = surface_points(views, sfm_surface_points(workspace, site_id, config), config)
+    except NoRoadPointsError as err:
+        raise NoRoadPointsError(f"site {site_id} ({poses} poses): {err}") from None
+    grid = road_grid(points.xyz[:, :2], config.resolution_m, config.region_radius_m)
+    point_tensor = torch.as_tensor(points.xyz, device=device)
+    mlp = new_elevation_mlp(grid, points.xyz[:, 2], config).to(device)
+    with phases.phase("elevation", config.elevation_iterations) as advance:
+        elevation_losses = fit_elevation(
+            mlp, point_tensor, config, lambda step, loss: advance(50 if step else 1, loss)
+        )
+    mesh = new_mesh(grid, mlp, config, device)
+    with phases.phase("observe", len(views)) as advance:
+        visible = observe(mesh, dataset, views, config, advance)
+    with phases.phase("optimise", len(views) * config.epochs) as advance:
+        epoch_losses = optimise(mesh, dataset, views, visible, point_tensor, config, advance)
+    with phases.phase("export", 1) as advance, torch.no_grad():
+        heights = mesh.control.at_vertices(mesh.control.heights(mlp)).cpu().numpy()
+        labels = mesh.logits.argmax(dim=1).cpu().numpy().astype("uint8")
+        rasters = rasters_from_vertices(
+            grid, heights, mesh.colour.cpu().numpy(), labels, mesh.count.cpu().numpy()
+        )
+        folder = surface_dir(workspace, site_id)
+        write_rasters(folder / "bev", rasters)
+        write_mesh(folder / "mesh.ply", grid_mesh(grid, rasters))
+        advance(1, 0.0)
+    return {
+        "site_id": site_id,
+        "poses": poses,
+        "config": asdict(config),
+        "device": str(device),
+        "images": len(views),
+        "points": {"strip": points.strip_count, "sfm": points.sfm_count},
+        "vertices": grid.vertex_count,
+        "cells_observed": int((rasters.observation_count > 0).sum()),
+        "seconds": dict(phases.seconds),
+        "losses": {"elevation": elevation_losses, "epochs": epoch_losses},
+    }
+
+
+def run(
+    config: SurfaceConfig,
+    dataset_root: Path,
+    workspace: Path | None = None,
+    *,
+    poses: str = "wigo",
+    overwrite: bool = False,
+    show_progress: bool = True,
+) -> list[SiteSurface]:
+    """Surface mesh and BEV rasters of every site in `sites/index.json` (after `cama sites`), posed by
+    `poses` (ground_truth: synthetic sites only; wigo: the site manifest; sfm: after `cama sfm`)."""
+    if poses not in POSE_SOURCES:
+        raise ValueError(f"poses must be one of {', '.join(POSE_SOURCES)}, got {poses!r}")
+    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
+    index = read_sites_index(sites_index_path(workspace))
+    dataset: Dataset | None = None
+    done: list[SiteSurface] = []
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    with Progress(*columns, disable=not show_progress) as progress, torch_threads(config.torch_threads):
+        for site in index["sites"]:
+            site_id = site["site_id"]
+            digest = _site_digest(config, Path(dataset_root), workspace, site_id, poses)
+            path = report_path(workspace, site_id)
+            if not overwrite and stored_fingerprint(path) == digest:
+                done.append(
+                    SiteSurface(site_id, surface_dir(workspace, site_id), read_report(path), skipped=True)
+                )
+                continue
+            dataset = dataset or load_dataset(Path(dataset_root))
+            torch.manual_seed(config.seed)
+            report = reconstruct_site(dataset, workspace, site_id, config, poses, _Phases(progress, site_id))
+            report = {**report, "fingerprint": digest}
+            write_report(path, report)
+            logger.info(
+                "site %s: %d cells observed, %s s", site_id, report["cells_observed"], report["seconds"]
+            )
+            done.append(SiteSurface(site_id, surface_dir(workspace, site_id), report, skipped=False))
+    return done
