@@ -19,6 +19,8 @@ from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
 from cama_pipeline.sfm.errors import SfmError  # noqa: E402
 from cama_pipeline.sfm.guided import reconstruct_views, refined_views  # noqa: E402
 
+pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
+
 
 def perturbed(views: list[CameraView], every: int, shift_m: float, turn_deg: float) -> list[CameraView]:
     """Views whose keyframes (all cameras together) with index % every == every - 1 are moved sideways

@@ -4,11 +4,15 @@ the iteration limit, with every iteration in the report."""
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).parent))
 from sfm_fixture import SfmInputs  # noqa: E402
 
 from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
 from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+
+pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 
 
 def run_iterative(inputs: SfmInputs, **overrides: object) -> dict:

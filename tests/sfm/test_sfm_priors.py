@@ -5,12 +5,15 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from sfm_fixture import SfmInputs  # noqa: E402
 
 from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
 from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+
+pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 
 
 def test_priors_chain_consecutive_keyframes_and_hold_the_model_near_the_odometry(

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pycolmap
+import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 from sfm_fixture import SfmInputs  # noqa: E402
@@ -13,6 +14,8 @@ from cama_pipeline.pairs.cameras import CameraView  # noqa: E402
 from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
 from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
 from cama_pipeline.sfm.model import matrix_from_rigid  # noqa: E402
+
+pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 
 
 def largest_rig_deviation(reconstruction: pycolmap.Reconstruction, views: list[CameraView]) -> float:
