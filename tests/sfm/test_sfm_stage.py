@@ -38,6 +38,7 @@ def gauge_free_error_cm(inputs: object, world_from_ego: dict[str, np.ndarray]) -
     return pose_errors(aligned_poses(estimated, reference), reference).position_cm
 
 
+@pytest.mark.slow
 def test_site_outputs_cover_every_clip_and_image(sfm_inputs: object, first_run: SfmResult) -> None:
     (site,) = first_run.sites
     workspace, site_id = first_run.workspace, site.site_id
@@ -55,6 +56,7 @@ def test_site_outputs_cover_every_clip_and_image(sfm_inputs: object, first_run: 
     assert gauge_free_error_cm(sfm_inputs, poses) < 0.7 * wigo
 
 
+@pytest.mark.slow
 def test_rerun_skips_up_to_date_sites(sfm_inputs: object, first_run: SfmResult) -> None:
     report = first_run.sites[0].folder / "report.json"
     before = report.stat().st_mtime_ns
@@ -62,6 +64,7 @@ def test_rerun_skips_up_to_date_sites(sfm_inputs: object, first_run: SfmResult) 
     assert again.sites[0].skipped and report.stat().st_mtime_ns == before
 
 
+@pytest.mark.slow
 def test_clip_that_fails_is_reported_and_left_out(sfm_inputs: object, tmp_path: Path) -> None:
     workspace = copy_workspace(sfm_inputs, tmp_path / "workspace")
     manifest_path = workspace / "sites" / "site-001" / "manifest.json"
