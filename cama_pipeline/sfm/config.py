@@ -31,9 +31,11 @@ class SfmConfig:
     """Points whose rays meet at a smaller angle are filtered (depth not determined)."""
     max_image_reprojection_error_px: float = 2.0
     """Algorithm 1: keyframes (images in plain BA) whose mean reprojection error exceeds this are dropped."""
-    odometry_priors: bool = False
-    """Keep odometry in BA: relative-pose priors between consecutive keyframes, position priors, and an
-    orientation anchor; otherwise the gauge is fixed by holding the first keyframe (plain BA: two cameras)."""
+    odometry_priors: bool = True
+    """Keep odometry in BA: relative-pose priors between consecutive keyframes and an absolute pose prior
+    per keyframe (GNSS-like position, loose orientation anchor). Without them the first keyframe is held,
+    and scale along the drive is only as good as the rig's baselines (measured on the tiny site: 3% drift
+    in one clip, 21 cm relative error, against 1 cm with priors)."""
     relative_rotation_sigma_deg: float = 0.2
     """Odometry prior: sigma of the rotation between consecutive keyframes."""
     relative_translation_sigma_m: float = 0.05
@@ -100,7 +102,7 @@ class SfmConfig:
     @classmethod
     def preset(cls, name: str, **overrides: object) -> "SfmConfig":
         """The benchmark's variants: `plain` (guided triangulation + plain BA), `rigid` (+ rigid BA),
-        `iterative` (+ iterative BA, the default)."""
+        `iterative` (+ iterative BA, the default); odometry priors as the default unless overridden."""
         variants: dict[str, dict[str, bool]] = {
             "plain": {"rigid": False, "iterative": False},
             "rigid": {"rigid": True, "iterative": False},

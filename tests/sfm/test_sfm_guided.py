@@ -44,7 +44,9 @@ def test_guided_sfm_pulls_perturbed_keyframes_towards_the_truth(sfm_inputs: SfmI
     names = {v.name for v in moved if v.frame_index % 3 == 2} | {anchor}
     truth = sfm_inputs.true_world_from_ego
     before = relative_pose_errors({v.name: v.world_from_ego for v in moved if v.name in names}, truth, anchor)
-    result = reconstruct_views(moved, sfm_inputs.database, sfm_inputs.image_dir, SfmConfig.preset("rigid"))
+    result = reconstruct_views(
+        moved, sfm_inputs.database, sfm_inputs.image_dir, SfmConfig.preset("rigid", odometry_priors=False)
+    )
     after = relative_pose_errors(
         {n: p for n, p in result.world_from_ego.items() if n in names}, truth, anchor
     )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs  # noqa: E402
+from sfm_fixture import SfmInputs, relative_pose_errors  # noqa: E402
 
 from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
 from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
@@ -39,3 +39,15 @@ def test_plain_ba_priors_chain_each_camera_separately(sfm_inputs: SfmInputs) -> 
     channels = {v.channel for v in kept}
     assert adjustment["priors"]["absolute"] == len(kept)
     assert adjustment["priors"]["relative"] <= len(kept) - len(channels)
+
+
+def test_priors_keep_the_odometrys_scale_along_the_drive(sfm_inputs: SfmInputs) -> None:
+    views = sfm_inputs.longest_drive()
+    anchor = next(v.name for v in views if v.frame_index == 0 and v.channel == "CAM_FRONT")
+    truth = sfm_inputs.true_world_from_ego
+    errors = {}
+    for priors in (False, True):
+        config = SfmConfig.preset("rigid", odometry_priors=priors)
+        result = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config)
+        errors[priors] = relative_pose_errors(result.world_from_ego, truth, anchor)[0]
+    assert errors[True] < 0.05 and errors[True] < errors[False], errors
