@@ -80,7 +80,7 @@ class ApiVectorSource:
         self._site_origin_xy: np.ndarray | None = None
 
     def _login(self) -> str:
-        response = self._request("POST", "/auth/login", json=self._credentials, with_token=False)
+        response = self._request("POST", "/api/auth/login", json=self._credentials, with_token=False)
         return str(response.json()["access_token"])
 
     def _request(
@@ -102,9 +102,9 @@ class ApiVectorSource:
         if self._token is None:
             self._token = self._login()
         if self._site_origin_xy is None:
-            site = self._request("GET", f"/sites/{self._site_id}").json()
+            site = self._request("GET", f"/api/sites/{self._site_id}").json()
             self._site_origin_xy = np.asarray(site["site_origin_xy"], dtype=np.float64)
-        response = self._request("GET", f"/sites/{self._site_id}/elements", params={"limit": 100_000})
+        response = self._request("GET", f"/api/sites/{self._site_id}/elements", params={"limit": 100_000})
         origin = self._site_origin_xy
         return [
             ViewElement(

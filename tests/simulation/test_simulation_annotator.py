@@ -1,0 +1,112 @@
+"""The scripted annotator against the real backend app: it empties the queue through the HTTP API and books time."""
+
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.backend.config import Settings
+from app.backend.main import create_app
+from app.simulation.annotator import ApiSession, SimulationError, correct_proposals, draw_from_scratch
+from app.simulation.plan import Polyline
+
+sys.path.insert(0, str(Path(__file__).parent.parent / "backend"))
+from backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD  # noqa: E402
+
+TRUTH = [
+    Polyline("boundary", np.array([[1010.0, 2010.0], [1090.0, 2010.0]])),
+    Polyline("boundary", np.array([[1010.0, 2030.0], [1090.0, 2030.0]])),
+    Polyline("divider", np.array([[1010.0, 2020.0], [1050.0, 2020.0], [1090.0, 2021.0]])),
+    Polyline(
+        "ped_crossing",
+        np.array([[1060.0, 2011.0], [1064.0, 2011.0], [1064.0, 2029.0], [1060.0, 2029.0], [1060.0, 2011.0]]),
+    ),
+]
+
+
+@pytest.fixture()
+def client(tmp_path: Path) -> Iterator[TestClient]:
+    settings = Settings(
+        data_dir=tmp_path / "data", scrypt_n=2**4, admin_username="root", admin_password=PASSWORD
+    )
+    with TestClient(create_app(settings)) as test_client:
+        yield test_client
+    test_client.app.state.engine.dispose()  # type: ignore[attr-defined]
+
+
+def _site(client: TestClient, tmp_path: Path, proposals: list[tuple[str, np.ndarray]]) -> int:
+    """A lead registers a site, loads proposals (global points) and makes the annotator account."""
+    admin = ApiSession(client, "root", PASSWORD)
+    admin.call("POST", "/api/users", json={"username": "ann", "password": PASSWORD, "role": "annotator"})
+    rasters = tmp_path / "bev"
+    rasters.mkdir(exist_ok=True)
+    body = {
+        "name": "sim",
+        "site_origin_xy": ORIGIN_XY,
+        "georeference": GEOREFERENCE,
+        "raster_dir": str(rasters),
+    }
+    site_id = int(admin.call("POST", "/api/sites", json=body)["id"])
+    if proposals:
+        elements = [
+            {"class": cls, "points": (pts - ORIGIN_XY).tolist(), "confidence": 0.5, "source": "proposal"}
+            for cls, pts in proposals
+        ]
+        admin.call("POST", f"/api/sites/{site_id}/elements/bulk", json={"elements": elements})
+    return site_id
+
+
+def test_correcting_proposals_accepts_fixes_rejects_and_draws_what_is_missing(
+    client: TestClient, tmp_path: Path
+) -> None:
+    proposals = [
+        ("boundary", TRUTH[0].points + [0.0, 0.05]),  # right: accept
+        ("divider", TRUTH[1].points + [0.0, 0.7]),  # wrong class and off: fix + relabel
+        ("divider", TRUTH[2].points + [0.0, 0.5]),  # off: fix
+        ("divider", np.array([[1010.0, 2050.0], [1090.0, 2050.0]])),  # nothing there: reject
+    ]  # the crosswalk was not proposed: drawn
+    site_id = _site(client, tmp_path, proposals)
+    annotator = ApiSession(client, "ann", PASSWORD)
+    log = correct_proposals(annotator, site_id, TRUTH)
+    assert dict(log.counts) == {"accept": 1, "fix": 2, "reject": 1, "drawn": 1, "vertices_moved": 5}
+    assert annotator.call("POST", f"/api/sites/{site_id}/queue/next") is None
+    final = annotator.call("GET", f"/api/sites/{site_id}/elements")
+    states = sorted(e["state"] for e in final)
+    assert states == ["accepted", "accepted", "fixed", "fixed", "rejected"]
+    fixed = [e for e in final if e["state"] == "fixed"]
+    assert {e["class"] for e in fixed} == {"boundary", "divider"}
+    for element in fixed:
+        truth = next(
+            t
+            for t in TRUTH
+            if t.cls == element["class"]
+            and abs(t.points[0, 1] - ORIGIN_XY[1] - element["points"][0][1]) < 0.01
+        )
+        np.testing.assert_allclose(np.asarray(element["points"])[[0, -1]], truth.points[[0, -1]] - ORIGIN_XY)
+    assert log.road_km == pytest.approx(0.08)
+    assert log.total_s > 0 and log.hours_per_km() > 0
+
+
+def test_good_proposals_cost_less_than_drawing_from_scratch(client: TestClient, tmp_path: Path) -> None:
+    near = [(t.cls, t.points + [0.0, 0.05]) for t in TRUTH]
+    corrected = correct_proposals(ApiSession(client, "root", PASSWORD), _site(client, tmp_path, near), TRUTH)
+    admin = ApiSession(client, "root", PASSWORD)
+    body = {
+        "name": "empty",
+        "site_origin_xy": ORIGIN_XY,
+        "georeference": GEOREFERENCE,
+        "raster_dir": str(tmp_path / "bev"),
+    }
+    empty = int(admin.call("POST", "/api/sites", json=body)["id"])
+    drawn = draw_from_scratch(admin, empty, TRUTH)
+    assert drawn.counts["drawn"] == len(TRUTH) and corrected.counts["accept"] == len(TRUTH)
+    assert corrected.total_s < drawn.total_s
+    assert len(admin.call("GET", f"/api/sites/{empty}/elements")) == len(TRUTH)
+
+
+def test_a_refused_request_names_the_request(client: TestClient) -> None:
+    with pytest.raises(SimulationError, match="POST /api/auth/login: HTTP 401"):
+        ApiSession(client, "nobody", PASSWORD)
