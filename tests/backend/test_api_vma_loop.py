@@ -153,11 +153,14 @@ def test_confident_proposals_enter_preaccepted_and_a_sample_goes_to_qa(
     qa = client.get(f"/api/sites/{site_id}/queue/review?qa=true", headers=headers["lead"]).json()
     assert {item["id"] for item in qa["items"]} == sampled
     assert client.post(f"/api/sites/{site_id}/queue/next", headers=headers["annotator"]).status_code == 204
+    diffs = f"/api/sites/{site_id}/diffs"
+    assert client.get(diffs, headers=headers["lead"]).json() == []  # no person has reviewed them yet
     returned = review(
         client, headers, site_id, next(e for e in new if e["id"] in sampled), "returned", "lead"
     )
     lease = client.post(f"/api/sites/{site_id}/queue/next", headers=headers["annotator"]).json()
     assert lease["element_id"] == returned["id"]  # nobody's own work: anyone may take it
+    assert sum(row["elements"] for row in client.get(diffs, headers=headers["lead"]).json()) == 1
     again = refresh(
         client, headers, site_id
     )  # the two untouched pre-accepted ones are replaced, no duplicates
@@ -228,3 +231,17 @@ def test_auto_retrain_starts_once_after_enough_corrections(
     for element in more:
         review(client, headers, site_id, element, "accepted", "annotator")
     assert len(client.get(f"/api/sites/{site_id}/jobs", headers=headers["lead"]).json()) == 1
+
+
+def test_bulk_proposals_above_the_configured_threshold_enter_preaccepted(
+    client: TestClient, headers: Headers, site_id: int
+) -> None:
+    stored = bulk(client, headers, site_id, [proposal(10.0, 0.95), proposal(20.0, 0.9), proposal(80.0, 0.5)])
+    assert [(e["state"], e["preaccepted"], e["version"]) for e in stored] == [
+        ("accepted", True, 1),
+        ("accepted", True, 1),
+        ("proposed", False, 1),
+    ]
+    assert sum(e["qa_sample"] for e in stored) == 1  # round(0.5 * 2)
+    history = client.get(f"/api/sites/{site_id}/elements/{stored[0]['id']}/history", headers=headers["lead"])
+    assert [(h["action"], h["after"]["state"]) for h in history.json()] == [("create", "accepted")]

@@ -7,7 +7,8 @@ import pytest
 from vma_loop_site import write_registry
 
 from app.backend.config import Settings
-from app.backend.vma_loop import THRESHOLD_KEY, preaccept_threshold, qa_sample, should_retrain
+from app.backend.vma_loop import preaccept_threshold, qa_sample, should_retrain
+from models.vma.loop import THRESHOLD_KEY
 
 
 def test_qa_sample_is_reproducible_and_sized_by_share() -> None:

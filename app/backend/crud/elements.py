@@ -6,6 +6,7 @@ transaction, so nothing is changed without a record of who, when, before and aft
 
 import logging
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import select
@@ -17,6 +18,7 @@ from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import EditLog, Element, Site
 from app.backend.schemas import ElementCreate, ElementPublic, ElementUpdate, Point, check_element
+from app.backend.vma_loop import qa_sample
 
 logger = logging.getLogger(__name__)
 
@@ -116,10 +118,40 @@ def new_element(site: Site, element_in: ElementCreate, *, username: str) -> Elem
     return element
 
 
+@dataclass(frozen=True)
+class Preaccept:
+    """How confident proposals enter: at or above `threshold` as pre-accepted `accepted`, and a reproducible
+    share of those (`qa_share`, drawn with `seed`) flagged for the lead's QA queue."""
+
+    threshold: float
+    qa_share: float
+    seed: int
+
+
+def mark_preaccepted(elements: Sequence[Element], preaccept: Preaccept) -> None:
+    """Set state and flags of unsaved proposals by their confidence (call before they are first flushed, so
+    that they enter at version 1)."""
+    confident = [
+        k
+        for k, e in enumerate(elements)
+        if e.source == "proposal" and e.confidence is not None and e.confidence >= preaccept.threshold
+    ]
+    sampled = qa_sample(confident, preaccept.qa_share, preaccept.seed)
+    for k in confident:
+        elements[k].state, elements[k].preaccepted, elements[k].qa_sample = "accepted", True, k in sampled
+
+
 def create_elements(
-    *, session: Session, site_id: int, elements_in: Sequence[ElementCreate], username: str, margin_m: float
+    *,
+    session: Session,
+    site_id: int,
+    elements_in: Sequence[ElementCreate],
+    username: str,
+    margin_m: float,
+    preaccept: Preaccept | None = None,
 ) -> list[Element]:
-    """Store new elements (all or none), each with a `create` log entry."""
+    """Store new elements (all or none), each with a `create` log entry; confident proposals pre-accepted
+    when `preaccept` is given."""
     site = get_site(session=session, site_id=site_id)
     for index, element_in in enumerate(elements_in):
         try:
@@ -128,6 +160,8 @@ def create_elements(
             field = "points" if len(elements_in) == 1 else f"elements.{index}.points"
             raise InvalidInputError(field, error.message) from None
     elements = [new_element(site, element_in, username=username) for element_in in elements_in]
+    if preaccept is not None:
+        mark_preaccepted(elements, preaccept)
     session.add_all(elements)
     session.flush()
     for element in elements:

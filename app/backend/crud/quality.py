@@ -247,13 +247,15 @@ def element_diff(*, session: Session, site_id: int, element_id: int) -> Proposal
 
 
 def diff_summary(*, session: Session, site_id: int) -> list[ClassDiffSummary]:
-    """Per proposal class, over live reviewed proposals: unchanged count, mean Chamfer, vertex changes."""
+    """Per proposal class, over live reviewed proposals: unchanged count, mean Chamfer, vertex changes.
+    Pre-accepted proposals still awaiting a lead count once a lead has decided (nobody reviewed them yet)."""
     get_site(session=session, site_id=site_id)
     query = select(Element).where(
         Element.site_id == site_id,
         Element.deleted.is_(False),
         Element.proposal.is_not(None),
         Element.state.in_(REVIEWED_STATES),
+        ~(Element.preaccepted.is_(True) & (Element.state == "accepted")),
     )
     diffs: dict[str, list[ProposalDiff]] = defaultdict(list)
     for element in session.scalars(query):

@@ -21,14 +21,20 @@ from sqlalchemy import ColumnElement, and_, or_, select, update
 from sqlalchemy.orm import Session
 
 from annotations.schema import AnnotationSet
-from app.backend.crud.elements import check_in_site, log_change, new_element, snapshot
+from app.backend.crud.elements import (
+    Preaccept,
+    check_in_site,
+    log_change,
+    mark_preaccepted,
+    new_element,
+    snapshot,
+)
 from app.backend.crud.sites import get_site
 from app.backend.crud.users import utc_now
 from app.backend.errors import InvalidInputError
 from app.backend.models import EditLog, Element, Site
 from app.backend.models_review import Lease
 from app.backend.schemas import ElementCreate
-from app.backend.vma_loop import qa_sample
 
 logger = logging.getLogger(__name__)
 
@@ -152,18 +158,12 @@ def _add_proposals(
     elements_in: Sequence[ElementCreate],
     *,
     username: str,
-    threshold: float | None,
-    qa_share: float,
-    seed: int,
+    preaccept: Preaccept | None,
 ) -> list[Element]:
-    """Store new proposals (pre-accepted at or above `threshold`, a share of those for QA), each logged."""
+    """Store new proposals (confident ones pre-accepted, see `mark_preaccepted`), each logged."""
     elements = [new_element(site, element_in, username=username) for element_in in elements_in]
-    confident = [
-        k for k, e in enumerate(elements) if threshold is not None and (e.confidence or 0.0) >= threshold
-    ]
-    sampled = qa_sample(confident, qa_share, seed)
-    for k in confident:
-        elements[k].state, elements[k].preaccepted, elements[k].qa_sample = "accepted", True, k in sampled
+    if preaccept is not None:
+        mark_preaccepted(elements, preaccept)
     session.add_all(elements)
     session.flush()
     for element in elements:
@@ -189,9 +189,8 @@ def refresh_proposals(
     session.flush()
     tree, kept = _kept_index(session, site_id)
     fresh = [c for c in candidates if not _is_covered(LineString(c.points), c.cls, tree, kept)]
-    elements = _add_proposals(
-        session, site, fresh, username=username, threshold=threshold, qa_share=qa_share, seed=seed
-    )
+    preaccept = None if threshold is None else Preaccept(threshold, qa_share, seed)
+    elements = _add_proposals(session, site, fresh, username=username, preaccept=preaccept)
     session.commit()
     summary = RefreshSummary(
         replaced=replaced,

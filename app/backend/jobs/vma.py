@@ -6,7 +6,8 @@ Retraining runs in a child process (spawned, so no lock or thread state of the s
 spent, and terminates it when the job is cancelled or the server stops. The child writes `retrain.json` in the
 job folder: {"candidate", "promoted", "labels", "negatives", "current_metrics", "candidate_metrics"} or
 {"error"}. Checkpoint versions are written atomically by `models.vma.checkpoint`, so a killed child leaves at
-most an unpromoted staging folder.
+most an unpromoted staging folder. `models.vma` (torch) is imported inside the functions that need it, so that
+the server starts without it (see `app/backend/vma_loop.py`).
 """
 
 import json
@@ -15,7 +16,7 @@ import multiprocessing
 import time
 from functools import partial
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import BaseModel, Field
 
@@ -27,15 +28,9 @@ from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.schemas import STRICT
 from app.backend.vma_loop import preaccept_threshold
 from cama_pipeline.io import atomic_write_json
-from models.vma.config import TrainConfig
-from models.vma.propose import propose
-from models.vma.retrain import (
-    LABEL_STATES,
-    NEGATIVE_STATES,
-    Corrections,
-    RetrainConfig,
-    retrain_from_corrections,
-)
+
+if TYPE_CHECKING:
+    from models.vma.retrain import Corrections, RetrainConfig
 
 logger = logging.getLogger(__name__)
 
@@ -82,9 +77,11 @@ def training_view(annotations: AnnotationSet) -> AnnotationSet:
 
 
 def _retrain_child(
-    registry: Path, corrections: Corrections, validation: list[Path], config: RetrainConfig, out: Path
+    registry: Path, corrections: "Corrections", validation: list[Path], config: "RetrainConfig", out: Path
 ) -> None:
     """Child process body: retrain and write the outcome (or the error) to `out`."""
+    from models.vma.retrain import retrain_from_corrections
+
     logging.basicConfig(level=logging.INFO)
     try:
         result = retrain_from_corrections(registry, [corrections], validation, config, show_progress=False)
@@ -140,6 +137,9 @@ def _gate_message(outcome: dict[str, Any]) -> str:
 
 def run_retrain(context: JobContext, params: RetrainParams, *, settings: Settings) -> JobResult:
     """Fine-tune the promoted model on the site's accepted/fixed elements (rejected ones as negatives)."""
+    from models.vma.config import TrainConfig
+    from models.vma.retrain import LABEL_STATES, NEGATIVE_STATES, Corrections, RetrainConfig
+
     if settings.vma_registry is None:
         raise ValueError("retrain: no VMA registry configured (CAMA_VMA_REGISTRY)")
     annotations, raster_dir, name = site_annotations(context)
@@ -170,6 +170,8 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
 
 def run_refresh(context: JobContext, params: RefreshParams, *, settings: Settings) -> JobResult:
     """Propose again over the site's rasters and replace the proposals nobody has reviewed or edited."""
+    from models.vma.propose import propose
+
     _annotations, raster_dir, name = site_annotations(context)
     learned = params.proposer == "learned" or (
         params.proposer == "auto" and settings.vma_registry is not None

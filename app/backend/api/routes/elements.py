@@ -9,6 +9,7 @@ from fastapi import APIRouter, Query, status
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
+from app.backend.crud.elements import Preaccept
 from app.backend.errors import InvalidInputError
 from app.backend.schemas import ConflictBody, ElementCreate, ElementPublic, ElementUpdate, ProposalBulk
 
@@ -77,13 +78,18 @@ def create_element(
 def bulk_proposals(
     site_id: IdPath, bulk: ProposalBulk, session: SessionDep, settings: SettingsDep, user: LeadUser
 ) -> list[ElementPublic]:
-    """Load many proposals at once (leads and admins); all are stored or none."""
+    """Load many proposals at once (leads and admins); all are stored or none. With a configured
+    CAMA_PREACCEPT_THRESHOLD, proposals at or above it enter pre-accepted (a CAMA_QA_SHARE of them to QA)."""
+    preaccept = None
+    if settings.preaccept_threshold is not None:
+        preaccept = Preaccept(settings.preaccept_threshold, settings.qa_share, seed=len(bulk.elements))
     elements = crud.create_elements(
         session=session,
         site_id=site_id,
         elements_in=bulk.elements,
         username=user.username,
         margin_m=settings.extent_margin_m,
+        preaccept=preaccept,
     )
     return [crud.public(element) for element in elements]
 
