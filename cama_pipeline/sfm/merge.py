@@ -34,8 +34,15 @@ class MergeConfig:
     """A similarity rotating the clip more than this is rejected."""
     max_scale_change: float = 0.05
     """A similarity whose scale differs from 1 by more than this is rejected (poses have metric scale)."""
+    global_max_iterations: int = 2
+    """Iterative BA passes of the merged model at most: its clips were refined and cleaned already, so it
+    needs the re-triangulation across clips and a global adjustment, not the whole Algorithm 1 again."""
 
     def __post_init__(self) -> None:
+        if self.global_max_iterations < 1:
+            raise ValueError(
+                f"MergeConfig.global_max_iterations must be >= 1, got {self.global_max_iterations}"
+            )
         if self.min_correspondences < 3:
             raise ValueError(f"MergeConfig.min_correspondences must be >= 3, got {self.min_correspondences}")
         for name in ("max_error_m", "max_shift_m", "max_rotation_deg", "max_scale_change"):

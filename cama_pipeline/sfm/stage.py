@@ -13,7 +13,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from contextlib import closing
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -224,8 +224,11 @@ def merge_site(
     union = [
         v for m, a in zip(models, alignments, strict=True) for v in aligned_views(m.views, a.world_from_clip)
     ]
+    merged_config = replace(
+        config, max_iterations=min(config.max_iterations, merge_config.global_max_iterations)
+    )
     result = reconstruct_views(
-        union, database, image_dir, config, progress=_phase_reporter(progress, "merge")
+        union, database, image_dir, merged_config, progress=_phase_reporter(progress, "merge")
     )
     merge = {"groups": merge_groups(alignments), "alignments": {a.scene: a.to_json() for a in alignments}}
     return result, union, merge
