@@ -13,12 +13,12 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
     (d) iterative     + iterative BA (Algorithm 1)
     (e) parallel      (d) per clip on a process pool, clips merged (similarity from shared points), then
                       re-triangulation and global BA of the merged model
-    (f) + priors      (e) with WIGO's odometry and position priors kept in BA (does odometry help?)
+    (f) no priors     (e) without WIGO's odometry and position priors in BA (do they help?)
 Every guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
 measured, i.e. the model's shape without the global placement it inherits from odometry.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
-       [--workers 2] [--skip-incremental]
+       [--workers 2] [--methods abcdef]
 The site's workspace must hold `cama sites` / `cama pairs` output; missing features are computed first.
 Writes bench/results/sfm.json (with the command line and the site / scenes measured).
 """
@@ -27,7 +27,6 @@ import argparse
 import json
 import logging
 import platform
-import shutil
 import sys
 import tempfile
 import time
@@ -209,33 +208,39 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
     image_dir = args.site / "nuscenes"
     wigo = {v.name: v.world_from_cam for v in views}
     rows = {"wigo": figures(pose_errors(wigo, truth), None, 0.0, gauge_free=gauge_free_poses(wigo, truth))}
+    clips = site_clips(views, manifest)
     with tempfile.TemporaryDirectory(prefix="bench-sfm-") as scratch_dir:
         scratch = Path(scratch_dir)
         database = copy_database(site_database, scratch / "database.db")
-        if not args.skip_incremental:
-            rows["a_incremental"] = guarded("a", lambda: run_incremental(database, image_dir, views, truth))
-        for key, preset in (("b_plain", "plain"), ("c_rigid", "rigid"), ("d_iterative", "iterative")):
-            fresh = Path(shutil.copyfile(database, scratch / f"{preset}.db"))
-            rows[key] = guarded(key, lambda p=preset, f=fresh: run_guided(p, f, image_dir, views, truth))  # type: ignore[misc]
-        clips = site_clips(views, manifest)
-        for key, config in (
-            ("e_parallel", SfmConfig.preset("iterative")),
-            ("f_parallel_priors", SfmConfig.preset("iterative", odometry_priors=True)),
-        ):
-            rows[key] = guarded(
-                key,
-                lambda c=config, k=key: run_parallel(  # type: ignore[misc]
-                    clips, database, image_dir, truth, args.workers, scratch / k, c
-                ),
-            )
+        methods: dict[str, Callable[[], dict[str, Any]]] = {
+            "a_incremental": lambda: run_incremental(database, image_dir, views, truth),
+            "b_plain": lambda: run_guided("plain", database, image_dir, views, truth),
+            "c_rigid": lambda: run_guided("rigid", database, image_dir, views, truth),
+            "d_iterative": lambda: run_guided("iterative", database, image_dir, views, truth),
+            "e_parallel": lambda: run_parallel(
+                clips, database, image_dir, truth, args.workers, scratch / "e", SfmConfig.preset("iterative")
+            ),
+            "f_parallel_no_priors": lambda: run_parallel(
+                clips,
+                database,
+                image_dir,
+                truth,
+                args.workers,
+                scratch / "f",
+                SfmConfig.preset("iterative", odometry_priors=False),
+            ),
+        }
+        for key, measure in methods.items():
+            if key[0] in args.methods:
+                rows[key] = guarded(key, measure)
     return rows, views, manifest
 
 
 def summarize(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Speed ratio (e) over (a), accuracy gain of (e) over WIGO, and whether the paper's goal is met."""
-    wigo, parallel, incremental = rows["wigo"], rows["e_parallel"], rows.get("a_incremental", {})
-    if "error" in parallel:
-        return {"error": "parallel reconstruction failed"}
+    wigo, parallel, incremental = rows["wigo"], rows.get("e_parallel", {}), rows.get("a_incremental", {})
+    if "seconds" not in parallel:
+        return {"error": "parallel reconstruction failed or not run"}
     return {
         "speedup_e_over_a": round(incremental["seconds"] / parallel["seconds"], 2)
         if "seconds" in incremental
@@ -253,7 +258,9 @@ def main() -> None:
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
     parser.add_argument("--scenes", nargs="*", help="Only these clips (moving scenes) of the first site.")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--skip-incremental", action="store_true", help="Leave out (a) (slow on big sites).")
+    parser.add_argument(
+        "--methods", default="abcdef", help="Letters of the methods to run (default all; e is always needed)."
+    )
     parser.add_argument("--out", type=Path, default=RESULTS / "sfm.json")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
