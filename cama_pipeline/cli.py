@@ -78,6 +78,7 @@ def _register_stage_commands() -> None:
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.pairs.command import pairs_command
+    from cama_pipeline.run_command import run_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.surface.command import surface_command
@@ -104,6 +105,7 @@ def _register_stage_commands() -> None:
     app.command("surface")(surface_command)
     app.command("sfm")(sfm_command)
     app.command("propose")(propose_command)
+    app.command("run")(run_command)
     app.command("train")(train_command)
     app.command("retrain")(retrain_command)
     app.command("vma-eval")(vma_eval_command)

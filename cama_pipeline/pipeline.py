@@ -1,0 +1,144 @@
+"""The whole reconstruction path as one call: wigo -> keyframes -> sites -> pairs -> features -> sfm -> surface
+-> VMA proposals, for any nuScenes-layout data set. Only composes the stages' own `run`s (each skips what is up
+to date), times them, and names the stage that failed.
+
+Outputs are the stages' own files in the workspace; the proposals of site `s` are `proposals/<s>.json`
+(an annotation set in the frame of that site's reconstructed rasters, `surface/<s>/bev/`).
+"""
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+from cama_pipeline.site.workspace import default_workspace, read_sites_index, sites_index_path
+
+logger = logging.getLogger(__name__)
+
+STAGES = ("wigo", "keyframes", "sites", "pairs", "features", "sfm", "surface", "propose")
+
+
+class PipelineError(RuntimeError):
+    """A stage failed; the message names the stage and its error."""
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Choices of the whole path (each stage keeps its own defaults)."""
+
+    executor: Literal["local", "ray"] = "local"
+    """Where SfM clips run."""
+    workers: int = 2
+    max_features: int | None = None
+    """SIFT keypoints per image; None keeps the features stage's default."""
+    proposer: Literal["learned", "rule"] = "learned"
+    checkpoint: Path = Path("models/vma/checkpoints")
+    surface_poses: Literal["sfm", "wigo"] = "sfm"
+
+
+@dataclass
+class PipelineResult:
+    """Seconds per stage and where the outputs are."""
+
+    workspace: Path
+    seconds: dict[str, float] = field(default_factory=dict)
+    proposals: dict[str, Path] = field(default_factory=dict)
+
+
+def proposals_path(workspace: Path, site_id: str) -> Path:
+    return Path(workspace) / "proposals" / f"{site_id}.json"
+
+
+def surface_rasters(workspace: Path, site_id: str) -> Path:
+    return Path(workspace) / "surface" / site_id / "bev"
+
+
+def _stage_calls(
+    dataset_root: Path, workspace: Path, config: PipelineConfig, overwrite: bool
+) -> dict[str, Callable[[], object]]:
+    """One zero-argument call per reconstruction stage, imported lazily so `cama run --help` stays fast."""
+    from cama_pipeline.features.config import FeaturesConfig
+    from cama_pipeline.features.stage import run as run_features
+    from cama_pipeline.keyframes import KeyframeConfig
+    from cama_pipeline.keyframes import run as run_keyframes
+    from cama_pipeline.pairs.config import PairsConfig
+    from cama_pipeline.pairs.stage import run as run_pairs
+    from cama_pipeline.sfm.config import SfmConfig
+    from cama_pipeline.sfm.stage import run as run_sfm
+    from cama_pipeline.site.config import SiteConfig
+    from cama_pipeline.site.stage import run as run_sites
+    from cama_pipeline.surface import SurfaceConfig
+    from cama_pipeline.surface import run as run_surface
+    from cama_pipeline.wigo import WigoConfig
+    from cama_pipeline.wigo import run as run_wigo
+
+    features_config = FeaturesConfig()
+    if config.max_features is not None:
+        features_config = replace(features_config, max_num_features=config.max_features)
+    root, ws = dataset_root, workspace
+    return {
+        "wigo": lambda: run_wigo(WigoConfig(), root, ws, overwrite=overwrite),
+        "keyframes": lambda: run_keyframes(KeyframeConfig(), root, ws, overwrite=overwrite),
+        "sites": lambda: run_sites(SiteConfig(), root, ws, overwrite=overwrite),
+        "pairs": lambda: run_pairs(PairsConfig(), root, ws, overwrite=overwrite),
+        "features": lambda: run_features(features_config, root, ws, overwrite=overwrite),
+        "sfm": lambda: run_sfm(
+            SfmConfig(), root, ws, executor=config.executor, workers=config.workers, overwrite=overwrite
+        ),
+        "surface": lambda: run_surface(
+            SurfaceConfig(), root, ws, poses=config.surface_poses, overwrite=overwrite
+        ),
+    }
+
+
+def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool) -> dict[str, Path]:
+    """VMA proposals for every site from its reconstructed rasters."""
+    from models.vma.propose import propose
+
+    out: dict[str, Path] = {}
+    for site in read_sites_index(sites_index_path(workspace))["sites"]:
+        site_id = site["site_id"]
+        result = propose(
+            surface_rasters(workspace, site_id),
+            proposals_path(workspace, site_id),
+            proposer=config.proposer,
+            checkpoint=config.checkpoint if config.proposer == "learned" else None,
+            overwrite=overwrite,
+        )
+        out[site_id] = result.out
+    return out
+
+
+def run(
+    dataset_root: Path,
+    workspace: Path | None = None,
+    config: PipelineConfig | None = None,
+    *,
+    stop_after: str = "propose",
+    overwrite: bool = False,
+    on_stage: Callable[[str], None] | None = None,
+) -> PipelineResult:
+    """Run every stage up to `stop_after` in order; PipelineError naming the stage when one fails."""
+    if stop_after not in STAGES:
+        raise ValueError(f"stop_after must be one of {', '.join(STAGES)}, got {stop_after!r}")
+    config = config or PipelineConfig()
+    dataset_root = Path(dataset_root)
+    workspace = Path(workspace) if workspace is not None else default_workspace(dataset_root)
+    result = PipelineResult(workspace)
+    calls = _stage_calls(dataset_root, workspace, config, overwrite)
+    for stage in STAGES[: STAGES.index(stop_after) + 1]:
+        if on_stage is not None:
+            on_stage(stage)
+        started = time.perf_counter()
+        try:
+            if stage == "propose":
+                result.proposals = _propose_sites(workspace, config, overwrite)
+            else:
+                calls[stage]()
+        except (ValueError, FileNotFoundError, RuntimeError) as err:
+            raise PipelineError(f"stage {stage} failed: {err}") from err
+        result.seconds[stage] = time.perf_counter() - started
+        logger.info("stage %s done in %.1f s", stage, result.seconds[stage])
+    return result

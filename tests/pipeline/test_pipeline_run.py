@@ -1,0 +1,48 @@
+"""`cama run`: stages in order with their times; a failure names its stage; the full path on the tiny site."""
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from cama_pipeline.cli import app
+from cama_pipeline.pipeline import STAGES, PipelineConfig, PipelineError, proposals_path, run
+
+
+def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(
+    site_root: Path, tmp_path: Path
+) -> None:
+    seen: list[str] = []
+    result = run(site_root / "nuscenes", tmp_path / "ws", stop_after="sites", on_stage=seen.append)
+    assert seen == ["wigo", "keyframes", "sites"] == list(result.seconds)
+    index = json.loads((tmp_path / "ws" / "sites" / "index.json").read_text())
+    assert index["sites"]
+    again = run(site_root / "nuscenes", tmp_path / "ws", stop_after="sites")
+    assert again.seconds["wigo"] < result.seconds["wigo"] + 5.0
+
+
+def test_a_failing_stage_is_named(tmp_path: Path) -> None:
+    with pytest.raises(PipelineError, match="stage wigo failed"):
+        run(tmp_path / "no-such-dataset", tmp_path / "ws", stop_after="wigo")
+    with pytest.raises(ValueError, match="stop_after"):
+        run(tmp_path, stop_after="everything")
+
+
+def test_cama_run_reports_a_bad_option_and_a_missing_dataset(tmp_path: Path) -> None:
+    runner = CliRunner()
+    bad = runner.invoke(app, ["run", str(tmp_path), "--executor", "cloud"])
+    assert bad.exit_code == 1 and "--executor" in bad.output
+    missing = runner.invoke(app, ["run", str(tmp_path / "none"), "--stop-after", "wigo"])
+    assert missing.exit_code == 1 and "stage wigo failed" in missing.output
+
+
+@pytest.mark.slow
+def test_the_whole_path_on_the_tiny_site_ends_with_proposals(site_root: Path, tmp_path: Path) -> None:
+    config = PipelineConfig(proposer="rule", max_features=1024)
+    result = run(site_root / "nuscenes", tmp_path / "ws", config)
+    assert list(result.seconds) == list(STAGES)
+    for site_id, path in result.proposals.items():
+        assert path == proposals_path(tmp_path / "ws", site_id) and path.is_file()
+        assert (tmp_path / "ws" / "surface" / site_id / "bev" / "semantic.png").is_file()
+        assert (tmp_path / "ws" / "sfm" / site_id / "points.npz").is_file()
