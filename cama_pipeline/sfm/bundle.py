@@ -36,6 +36,7 @@ def ba_options(config: SfmConfig) -> pycolmap.BundleAdjustmentOptions:
     options.ceres.loss_function_type = _LOSSES[config.loss]
     options.ceres.loss_function_scale = config.loss_scale_px
     options.ceres.solver_options.max_num_iterations = config.ba_max_iterations
+    options.ceres.solver_options.function_tolerance = config.ba_function_tolerance
     options.ceres.solver_options.num_threads = config.num_threads
     return options
 

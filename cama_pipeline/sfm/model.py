@@ -2,9 +2,10 @@
 their rig and keyframes, and the reconstruction loaded from it with every keyframe posed by odometry.
 
 The site's database (written by `cama_pipeline.features`) has one camera per distinct calibration and no
-rigs; the working database copies the views' keypoints and verified matches, adds one camera per channel
-and calibration, and groups images into frames: one frame per keyframe on a rig of its channels (rigid BA)
-or one frame per image on a trivial rig (plain BA). Image ids are the site database's.
+rigs; the working database copies the views' keypoints and verified matches, adds its own cameras
+(principal point moved to COLMAP's pixel convention) and groups images into frames: one frame per keyframe
+on a rig of its channels (rigid BA; motion-compensated, so one rig per keyframe unless the extrinsics are
+refined) or one frame per image on a trivial rig (plain BA). Image ids are the site database's.
 """
 
 import logging
@@ -46,7 +47,7 @@ def frame_pose(reconstruction: pycolmap.Reconstruction, frame_id: int) -> pycolm
 
 @dataclass(frozen=True, eq=False)
 class FrameInfo:
-    """What the model remembers of one frame: its clip and order, its rig's ego offset, its odometry pose."""
+    """What the model remembers of one frame: its clip and order, its images, its odometry pose."""
 
     frame_id: int
     scene: str
@@ -62,8 +63,6 @@ class FrameInfo:
 class GuidedModel:
     """A reconstruction of known-pose views and the bookkeeping to read refined ego poses back."""
 
-    database: Path
-    """The working database the mapper reads."""
     reconstruction: pycolmap.Reconstruction
     frames: dict[int, FrameInfo]
     image_ids: dict[str, int]
@@ -284,4 +283,4 @@ def build_model(
                 frame.initial_rig_from_world
             )
             mapper.observation_manager.register_frame(frame.frame_id)
-    return GuidedModel(database, reconstruction, frames, image_ids, mapper, cache)
+    return GuidedModel(reconstruction, frames, image_ids, mapper, cache)
