@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 import pycolmap
+from scipy.spatial.transform import Rotation
 
 from cama_pipeline.pairs.cameras import CameraView
 
@@ -250,21 +251,33 @@ def align_clips(
     return recentre_groups(clips, [aligned[i] for i in range(len(clips))])
 
 
+def _group_correction(members: list[tuple[ClipModel, Alignment]]) -> np.ndarray:
+    """4x4 rigid correction of a group: undoes the image-weighted mean rotation of its alignments (about the
+    group's centre), then the mean shift of its cameras, so the group keeps its clips' mean placement."""
+    weights = np.array([len(clip.views) for clip, _ in members], dtype=np.float64)
+    rotvecs = np.array(
+        [Rotation.from_matrix(a.world_from_clip[:3, :3] / a.scale).as_rotvec() for _, a in members]
+    )
+    unrotate = Rotation.from_rotvec(-(weights[:, None] * rotvecs).sum(axis=0) / weights.sum()).as_matrix()
+    own = np.concatenate([own_of(clip) for clip, _ in members])
+    moved = np.concatenate([_apply(a.world_from_clip, own_of(clip)) for clip, a in members])
+    centre = moved.mean(axis=0)
+    correction = np.eye(4)
+    correction[:3, :3] = unrotate
+    correction[:3, 3] = centre - unrotate @ centre + (own.mean(axis=0) - centre)
+    return correction
+
+
 def recentre_groups(clips: Sequence[ClipModel], alignments: list[Alignment]) -> list[Alignment]:
-    """Each merged group shifted as a whole so that its cameras' mean position is where their clips put
-    them: the group averages its clips' odometry instead of inheriting the reference clip's offset. A shift
-    only: a rotation fitted to camera centres is ill-posed on straight roads."""
+    """Each merged group moved as a whole so that it keeps its clips' mean placement: relative placement
+    from the shared points, mean rotation and position from the clips themselves (odometry-anchored), rather
+    than all inherited from the reference clip."""
     by_scene = {clip.scene: (clip, alignment) for clip, alignment in zip(clips, alignments, strict=True)}
     recentred = {a.scene: a for a in alignments}
     for group in merge_groups(alignments):
         if len(group) < 2:
             continue
-        own = np.concatenate([own_of(by_scene[s][0]) for s in group])
-        moved = np.concatenate(
-            [_apply(by_scene[s][1].world_from_clip, own_of(by_scene[s][0])) for s in group]
-        )
-        correction = np.eye(4)
-        correction[:3, 3] = (own - moved).mean(axis=0)
+        correction = _group_correction([by_scene[scene] for scene in group])
         for scene in group:
             alignment = recentred[scene]
             recentred[scene] = replace(alignment, world_from_clip=correction @ alignment.world_from_clip)

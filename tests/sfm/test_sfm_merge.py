@@ -3,6 +3,7 @@
 import numpy as np
 import pycolmap
 import pytest
+from scipy.spatial.transform import Rotation
 
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.merge import (
@@ -100,6 +101,10 @@ def test_two_clips_sharing_points_are_aligned_and_grouped() -> None:
     own = np.array([clips[a.scene].views[0].center for a in (moved, reference)])
     placed = np.array([apply(a.world_from_clip, own[i][None])[0] for i, a in enumerate((moved, reference))])
     np.testing.assert_allclose(placed.mean(axis=0), own.mean(axis=0), atol=1e-6)  # the pair is re-centred
+    rotvecs = [
+        Rotation.from_matrix(a.world_from_clip[:3, :3] / a.scale).as_rotvec() for a in (moved, reference)
+    ]
+    np.testing.assert_allclose(np.mean(rotvecs, axis=0), 0.0, atol=1e-9)  # and keeps the clips' mean rotation
     assert by_scene["scene-c"].method == "poses" and np.allclose(
         by_scene["scene-c"].world_from_clip, np.eye(4)
     )
