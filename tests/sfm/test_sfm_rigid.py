@@ -1,6 +1,7 @@
 """Rigid BA: every keyframe's cameras keep the calibrated relative transforms; plain BA lets them drift."""
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from sfm_fixture import SfmInputs  # noqa: E402
 
 from cama_pipeline.pairs.cameras import CameraView  # noqa: E402
 from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+from cama_pipeline.sfm.guided import reconstruct_views, refined_views  # noqa: E402
 from cama_pipeline.sfm.model import matrix_from_rigid  # noqa: E402
 
 pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
@@ -55,3 +56,19 @@ def test_plain_ba_moves_cameras_of_one_keyframe_independently(sfm_inputs: SfmInp
     result = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, SfmConfig.preset("plain"))
     assert result.reconstruction.num_frames() == result.reconstruction.num_images()
     assert largest_rig_deviation(result.reconstruction, views) > 1e-5
+
+
+def test_keyframes_that_ba_moves_too_far_are_flagged_and_dropped(sfm_inputs: SfmInputs) -> None:
+    views = sfm_inputs.longest_drive()
+    last = max(v.frame_index for v in views)
+    shifted = np.eye(4)
+    shifted[1, 3] = 0.5
+    moved = [
+        replace(v, world_from_ego=v.world_from_ego @ shifted) if v.frame_index == last else v for v in views
+    ]
+    config = SfmConfig.preset("rigid", odometry_priors=False, max_camera_shift_m=0.2)
+    result = reconstruct_views(moved, sfm_inputs.database, sfm_inputs.image_dir, config)
+    dropped = {v.name for v in views if v.frame_index == last}
+    assert dropped <= set(result.flagged)
+    assert all("moved" in result.report["flagged_images"][name] for name in dropped)
+    assert not dropped & {v.name for v in refined_views(result, moved)}
