@@ -1,2 +1,7 @@
-"""Odometry-guided SfM: triangulation from WIGO poses, rigid (rig) BA, odometry priors and iterative BA
-(`guided.reconstruct_views`), per-clip parallel reconstruction and merging on top of it."""
+"""Odometry-guided SfM (paper: OGI, rigid prior, iterative BA, parallel reconstruction).
+
+The core is `guided.reconstruct_views(views, database, image_dir, SfmConfig)`: a known-pose model of the
+views from WIGO poses and calibration (`model`), triangulation of every verified match (`triangulate`),
+then one BA or Algorithm 1 (`iterative`), plain or rigid (`bundle`), with odometry priors (`priors`).
+Per-clip execution, merging and the `cama sfm` stage build on it.
+"""
