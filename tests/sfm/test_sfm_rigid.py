@@ -72,3 +72,13 @@ def test_keyframes_that_ba_moves_too_far_are_flagged_and_dropped(sfm_inputs: Sfm
     assert dropped <= set(result.flagged)
     assert all("moved" in result.report["flagged_images"][name] for name in dropped)
     assert not dropped & {v.name for v in refined_views(result, moved)}
+
+
+def test_refined_extrinsics_share_one_rig_across_keyframes(sfm_inputs: SfmInputs) -> None:
+    views = sfm_inputs.longest_drive()
+    config = SfmConfig.preset("rigid", refine_extrinsics=True)
+    result = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config)
+    reconstruction = result.reconstruction
+    assert reconstruction.num_rigs() == 1 and reconstruction.num_cameras() == 6
+    assert reconstruction.num_frames() == len({v.frame_index for v in views})
+    assert result.report["mean_reprojection_error_px"] < 1.0
