@@ -20,7 +20,8 @@ measured, i.e. the model's shape without the global placement it inherits from o
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
        [--workers 2] [--methods abcdef]
 The site's workspace must hold `cama sites` / `cama pairs` output; missing features are computed first.
-Writes bench/results/sfm.json (with the command line and the site / scenes measured).
+Adds the run to bench/results/sfm.json ({"runs": {"<preset>:<scenes>": {...}}}, each with its command line,
+site and scenes), so several sites measured by separate commands add up in one file.
 """
 
 import argparse
@@ -156,21 +157,21 @@ def run_parallel(
 
 
 def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, Any], list[CameraView]]:
-    """The first site's database (features computed when missing), manifest and keyframe views (only the
-    clips of `scenes` when given)."""
+    """The first site's database (features computed when missing), manifest and keyframe views (only those
+    of `scenes` when given: a stationary scene left out is simply not part of its clip)."""
     dataset_root, workspace = site / "nuscenes", site / "workspace"
     site_id = read_sites_index(sites_index_path(workspace))["sites"][0]["site_id"]
-    if not (features_dir(workspace, site_id) / "features.json").is_file():
+    if not (features_dir(workspace, site_id) / "database.db").is_file():
         logger.info("no features yet: running `cama features` on %s", workspace)
         run_features(FeaturesConfig(), dataset_root, workspace)
     manifest = read_site_manifest(site_manifest_path(workspace, site_id))
     views = site_views(load_dataset(dataset_root), manifest)
     if scenes:
-        clips = site_clips(views, manifest)
-        unknown = sorted(set(scenes) - set(clips))
+        known = {view.scene for view in views}
+        unknown = sorted(set(scenes) - known)
         if unknown:
-            raise SystemExit(f"--scenes: {unknown} are not clips of {site_id} (clips: {sorted(clips)})")
-        views = [v for scene in scenes for v in clips[scene]]
+            raise SystemExit(f"--scenes: {unknown} are not scenes of {site_id} ({sorted(known)})")
+        views = [view for view in views if view.scene in scenes]
     return features_dir(workspace, site_id) / "database.db", manifest, views
 
 
@@ -251,12 +252,30 @@ def summarize(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def site_preset(site: Path) -> dict[str, Any]:
+    """The generator preset and seed of a synthetic site (so the measured site can be made again)."""
+    try:
+        manifest = json.loads((site / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return {"preset": manifest.get("preset"), "seed": manifest.get("seed")}
+
+
+def read_runs(path: Path) -> dict[str, Any]:
+    """Runs already in the results file (one per site and scene set), so sites measured apart add up."""
+    try:
+        runs = json.loads(path.read_text()).get("runs", {})
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return runs if isinstance(runs, dict) else {}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
-    parser.add_argument("--scenes", nargs="*", help="Only these clips (moving scenes) of the first site.")
+    parser.add_argument("--scenes", nargs="*", help="Only the images of these scenes of the first site.")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument(
         "--methods", default="abcdef", help="Letters of the methods to run (default all; e is always needed)."
@@ -269,18 +288,23 @@ def main() -> None:
     print_table(rows)
     summary = summarize(rows)
     print(json.dumps(summary))
+    scenes = args.scenes or sorted(site_clips(views, manifest))
     result = {
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "machine": f"{platform.processor() or platform.machine()}, {platform.system()}, shared by other jobs",
         "site": str(args.site),
-        "scenes": args.scenes or sorted(site_clips(views, manifest)),
+        "site_preset": site_preset(args.site),
+        "scenes": scenes,
         "images": len(views),
         "methods": rows,
         "summary": summary,
     }
+    key = f"{site_preset(args.site).get('preset') or args.site.name}:{','.join(scenes)}"
+    runs = read_runs(args.out)
+    runs[key] = result
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
-    print(f"wrote {args.out}")
+    args.out.write_text(json.dumps({"runs": runs}, indent=1))
+    print(f"wrote run {key!r} into {args.out}")
 
 
 if __name__ == "__main__":
