@@ -22,6 +22,18 @@ def serve_command(
         str | None,
         typer.Option(help="Create this admin if there are no users; password from CAMA_ADMIN_PASSWORD."),
     ] = None,
+    vma_registry: Annotated[
+        Path | None,
+        typer.Option(
+            help="VMA checkpoint registry for retrain and proposal-refresh jobs (CAMA_VMA_REGISTRY)."
+        ),
+    ] = None,
+    validation_site: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="Held-out site folder for the retrain gate; repeat for several (CAMA_VMA_VALIDATION_SITES)."
+        ),
+    ] = None,
 ) -> None:
     """Serve the annotation API (OpenAPI at /docs); settings from CAMA_* variables, options win."""
     import uvicorn
@@ -30,7 +42,11 @@ def serve_command(
 
     try:
         settings = Settings.from_env(
-            data_dir=data_dir, database_url=database_url, admin_username=admin_username
+            data_dir=data_dir,
+            database_url=database_url,
+            admin_username=admin_username,
+            vma_registry=vma_registry,
+            vma_validation_sites=tuple(validation_site) if validation_site else None,
         )
     except ValueError as error:
         typer.echo(f"error: {error}", err=True)
