@@ -9,10 +9,11 @@ site's `ground_truth/bev/` at each reconstructed cell's centre (nearest ground-t
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
   coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
   runtime    seconds per phase from the stage's report.
-Baseline in the same run: the elevation of the surface points alone (`--epochs 0`, no image refinement),
-with ground-truth poses.
+Baseline in the same run, ground-truth poses: no mesh optimisation (`epochs 0`: the averaged colour and class
+votes, the elevation of the surface points alone). Also measured: refining the elevation MLP through the
+image losses (`refine_elevation`), ground-truth poses.
 
-Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 2]
+Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 1]
 Prints the figures and writes bench/results/surface.json.
 """
 
@@ -109,7 +110,7 @@ def compare(ours: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
 
 def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
     """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
-    workspace = scratch / f"{poses}-{config.epochs}"
+    workspace = scratch / f"{poses}-{config.epochs}-{config.refine_elevation}"
     workspace.mkdir(parents=True)
     for shared in ("sites", "sfm"):
         if (site / "workspace" / shared).exists():
@@ -122,6 +123,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     return {
         "poses": poses,
         "epochs": config.epochs,
+        "refine_elevation": config.refine_elevation,
         **figures,
         "seconds": {**report["seconds"], "total": seconds},
         "images": report["images"],
@@ -136,7 +138,7 @@ def main() -> None:
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
     parser.add_argument("--resolution", type=float, default=0.1)
     parser.add_argument("--epochs", type=int, default=SurfaceConfig.epochs)
-    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     config = SurfaceConfig(resolution_m=args.resolution, epochs=args.epochs, torch_threads=args.threads)
@@ -145,9 +147,10 @@ def main() -> None:
     try:
         baseline = run_source(args.site, "ground_truth", replace(config, epochs=0), scratch)
         runs = [run_source(args.site, source, config, scratch) for source in sources]
+        refined = run_source(args.site, "ground_truth", replace(config, refine_elevation=True), scratch)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    for row in [baseline, *runs]:
+    for row in [baseline, *runs, refined]:
         print(
             f"{row['poses']:>12} epochs {row['epochs']}: elevation RMSE {row['elevation_rmse_m'] * 100:.2f} cm "
             f"(p95 {row['elevation_p95_m'] * 100:.1f} cm), IoU "
@@ -167,8 +170,11 @@ def main() -> None:
         },
         "baseline_points_only_gt_poses": baseline,
         "runs": runs,
+        "refine_elevation_gt_poses": refined,
         "ratios_vs_baseline": {
             "elevation_rmse": reference["elevation_rmse_m"] / max(baseline["elevation_rmse_m"], 1e-9),
+            "psnr_db_gain": reference["psnr_db"] - baseline["psnr_db"],
+            "iou": {k: v / max(baseline["iou"][k], 1e-9) for k, v in reference["iou"].items()},
             "seconds": reference["seconds"]["total"] / max(baseline["seconds"]["total"], 1e-9),
         },
     }

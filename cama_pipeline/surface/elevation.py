@@ -16,6 +16,8 @@ from torch import nn
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.grid import SurfaceGrid
 
+BATCH_POINTS = 4096
+
 
 class ElevationMLP(nn.Module):
     """z = offset + MLP(positional encoding of the normalised x, y); global metres in and out."""
@@ -68,17 +70,21 @@ def fit_elevation(
     config: SurfaceConfig,
     on_step: Callable[[int, float], None] | None = None,
 ) -> list[float]:
-    """Fit `mlp` to (N, 3) points with Adam and the Huber loss; the loss every 50 steps."""
+    """Fit `mlp` to (N, 3) points with Adam and the Huber loss (random batches of at most BATCH_POINTS);
+    the loss every 50 steps."""
     optimiser = torch.optim.Adam(mlp.parameters(), lr=config.elevation_lr)
     steps = config.elevation_iterations
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
         optimiser, max(steps, 1), eta_min=config.elevation_lr / 20
     )
-    xy, z = points[:, :2], points[:, 2].float()
+    generator = torch.Generator().manual_seed(config.seed)
     losses: list[float] = []
     for step in range(steps):
         optimiser.zero_grad()
-        loss = huber(mlp(xy) - z, config.huber_m)
+        batch = points
+        if len(points) > BATCH_POINTS:
+            batch = points[torch.randint(len(points), (BATCH_POINTS,), generator=generator).to(points.device)]
+        loss = huber(mlp(batch[:, :2]) - batch[:, 2].float(), config.huber_m)
         loss.backward()
         optimiser.step()
         schedule.step()

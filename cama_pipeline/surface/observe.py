@@ -77,13 +77,33 @@ def image_channels(dataset: Dataset, view: CameraView, device: torch.device) -> 
     return torch.cat([rgb, one_hot, one_hot.sum(0, keepdim=True)], dim=0)
 
 
-def candidate_vertices(grid: SurfaceGrid, centre: np.ndarray, radius_m: float) -> np.ndarray:
-    """Vertex ids in the square of `radius_m` around a camera centre."""
-    r0 = max(0, int((grid.origin_xy[1] - centre[1] - radius_m) / grid.resolution_m))
-    r1 = min(grid.rows, int((grid.origin_xy[1] - centre[1] + radius_m) / grid.resolution_m) + 2)
-    c0 = max(0, int((centre[0] - radius_m - grid.origin_xy[0]) / grid.resolution_m))
-    c1 = min(grid.cols, int((centre[0] + radius_m - grid.origin_xy[0]) / grid.resolution_m) + 2)
-    window = grid.vertex_id[r0:r1, c0:c1]
+def footprint_box(camera: Camera, range_m: float) -> tuple[float, float, float, float]:
+    """(xmin, xmax, ymin, ymax) around the camera centre and its frustum's corner rays out to `range_m`."""
+    corners = np.array(
+        [
+            [-camera.cx, -camera.cy],
+            [camera.width - camera.cx, -camera.cy],
+            [-camera.cx, camera.height - camera.cy],
+        ]
+        + [[camera.width - camera.cx, camera.height - camera.cy]]
+    )
+    rays = np.column_stack([corners[:, 0] / camera.fx, corners[:, 1] / camera.fy, np.ones(4)])
+    rays = rays / np.linalg.norm(rays, axis=1, keepdims=True) * range_m
+    world = rays @ camera.cam_from_world_R.cpu().numpy() + camera.centre
+    xs = np.append(world[:, 0], camera.centre[0])
+    ys = np.append(world[:, 1], camera.centre[1])
+    return xs.min(), xs.max(), ys.min(), ys.max()
+
+
+def candidate_vertices(grid: SurfaceGrid, camera: Camera, range_m: float) -> np.ndarray:
+    """Vertex ids in the box of the camera's frustum out to `range_m` (a cheap superset of the visible)."""
+    xmin, xmax, ymin, ymax = footprint_box(camera, range_m)
+    res = grid.resolution_m
+    r0 = max(0, int((grid.origin_xy[1] - ymax) / res))
+    r1 = min(grid.rows, int((grid.origin_xy[1] - ymin) / res) + 2)
+    c0 = max(0, int((xmin - grid.origin_xy[0]) / res))
+    c1 = min(grid.cols, int((xmax - grid.origin_xy[0]) / res) + 2)
+    window = grid.vertex_id[max(r0, 0) : max(r1, 0), max(c0, 0) : max(c1, 0)]
     return window[window >= 0]
 
 

@@ -18,7 +18,7 @@ from cama_pipeline.data import Dataset
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.semantics import BEV_CLASSES
 from cama_pipeline.surface.config import SurfaceConfig
-from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, huber
+from cama_pipeline.surface.elevation import BATCH_POINTS, ControlGrid, ElevationMLP, huber
 from cama_pipeline.surface.grid import SurfaceGrid
 from cama_pipeline.surface.observe import (
     GROUND,
@@ -112,14 +112,11 @@ def project_batch(
     return Batch(ids, uv, weight)
 
 
-def visible_ids(mesh: Mesh, control_z: torch.Tensor, camera: Camera, config: SurfaceConfig) -> torch.Tensor:
-    """Vertex ids visible in one camera with the current geometry."""
+def visible_ids(mesh: Mesh, heights: torch.Tensor, camera: Camera, config: SurfaceConfig) -> torch.Tensor:
+    """Vertex ids visible in one camera, given every vertex's height."""
     device = mesh.vertex_xy.device
-    candidates = torch.as_tensor(
-        candidate_vertices(mesh.grid, camera.centre, config.max_range_m), device=device
-    )
-    z = mesh.heights(control_z, candidates)
-    xyz = torch.cat([mesh.vertex_xy[candidates], z.double()[:, None]], dim=1)
+    candidates = torch.as_tensor(candidate_vertices(mesh.grid, camera, config.max_range_m), device=device)
+    xyz = torch.cat([mesh.vertex_xy[candidates], heights[candidates].double()[:, None]], dim=1)
     return visible_vertices(camera, xyz, candidates, config)
 
 
@@ -135,9 +132,10 @@ def observe(
     with torch.no_grad():
         control_z = mesh.control.heights(mesh.mlp)
         normals = mesh.control.normals(control_z)
+        heights = mesh.control.at_vertices(control_z)
         for indices in batches(views, config.images_per_batch):
             cameras = [Camera.of(views[i], device) for i in indices]
-            id_lists = [visible_ids(mesh, control_z, camera, config) for camera in cameras]
+            id_lists = [visible_ids(mesh, heights, camera, config) for camera in cameras]
             batch = project_batch(mesh, control_z, normals, cameras, id_lists)
             images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
             samples = sample_images(images, batch.uv)
@@ -243,7 +241,7 @@ def _step(
     loss = colour + config.semantic_weight * semantic
     anchor = torch.zeros((), device=device)
     if config.refine_elevation:
-        pick = torch.randint(len(points), (min(len(points), 4096),), generator=generator).to(device)
+        pick = torch.randint(len(points), (min(len(points), BATCH_POINTS),), generator=generator).to(device)
         anchor = huber(mesh.mlp(points[pick, :2]) - points[pick, 2].float(), config.huber_m)
         loss = loss + config.anchor_weight * anchor
     loss.backward()

@@ -1,0 +1,134 @@
+"""`cama surface` on the tiny site: outputs in the ground-truth raster format, unobserved cells marked, reruns
+skip, a site without road points and a bad pose source give clear errors, the CLI runs."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from typer.testing import CliRunner
+
+sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
+from site_workspace import build_site_workspace  # noqa: E402
+
+from cama_pipeline.cli import app  # noqa: E402
+from cama_pipeline.data import load_dataset  # noqa: E402
+from cama_pipeline.semantics import Semantic  # noqa: E402
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path  # noqa: E402
+from cama_pipeline.surface import SiteSurface, SurfaceConfig, run  # noqa: E402
+from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip  # noqa: E402
+from cama_pipeline.surface.poses import posed_views  # noqa: E402
+from models.vma.rasters import load_site_rasters  # noqa: E402
+
+FAST = SurfaceConfig(
+    resolution_m=0.5, region_radius_m=12.0, elevation_iterations=150, epochs=1, images_per_batch=8
+)
+
+
+@pytest.fixture(scope="module")
+def dataset_root(tiny_site) -> Path:  # type: ignore[no-untyped-def]
+    return tiny_site.result.dataset_root
+
+
+@pytest.fixture(scope="module")
+def workspace(dataset_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_site_workspace(dataset_root, tmp_path_factory.mktemp("surface-ws"))
+
+
+@pytest.fixture(scope="module")
+def surface(dataset_root: Path, workspace: Path) -> SiteSurface:
+    return run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False)[0]
+
+
+def test_rasters_have_the_ground_truth_format_and_load_for_proposals(surface: SiteSurface, tiny_site) -> None:  # type: ignore[no-untyped-def]
+    bev = surface.folder / "bev"
+    truth = tiny_site.result.ground_truth_dir / "bev"
+    assert sorted(p.name for p in bev.iterdir()) == sorted(p.name for p in truth.iterdir())
+    geo, true_geo = (json.loads((f / "georeference.json").read_text()) for f in (bev, truth))
+    assert geo.keys() == true_geo.keys() and geo["resolution"] == 0.5
+    rasters = load_site_rasters(bev)
+    assert rasters.shape == (geo["height"], geo["width"])
+    assert np.load(bev / "elevation.npy").dtype == np.float32
+    observed = rasters.semantic != int(Semantic.UNOBSERVED)
+    assert observed.any() and (~observed).any()
+    assert set(np.unique(rasters.semantic[observed])) <= {0, 1, 2, 3, 4}
+    assert np.mean(rasters.semantic[observed] == int(Semantic.ROAD)) > 0.3
+
+
+def test_unobserved_cells_are_255_nan_black_and_zero_rays(surface: SiteSurface) -> None:
+    import cv2
+
+    bev = surface.folder / "bev"
+    semantic = cv2.imread(str(bev / "semantic.png"), cv2.IMREAD_UNCHANGED)
+    count = cv2.imread(str(bev / "observation_count.png"), cv2.IMREAD_UNCHANGED)
+    photometric = cv2.imread(str(bev / "photometric.png"), cv2.IMREAD_COLOR)
+    elevation = np.load(bev / "elevation.npy")
+    assert count.dtype == np.uint16
+    unobserved = semantic == int(Semantic.UNOBSERVED)
+    np.testing.assert_array_equal(unobserved, count == 0)
+    np.testing.assert_array_equal(unobserved, np.isnan(elevation))
+    assert np.all(photometric[unobserved] == 0)
+
+
+def test_mesh_and_report(surface: SiteSurface) -> None:
+    mesh = trimesh.load(surface.folder / "mesh.ply", process=False)
+    report = surface.report
+    assert len(mesh.vertices) == report["cells_observed"] and len(mesh.faces) > 0
+    assert mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
+    assert np.all(mesh.face_normals[:, 2] > 0.5)  # upward, the road seen from above
+    assert set(report["seconds"]) == {"elevation", "observe", "optimise", "export"}
+    assert report["points"]["strip"] > 0 and report["points"]["sfm"] == 0
+    assert report["losses"]["epochs"] and report["losses"]["elevation"][-1] < report["losses"]["elevation"][0]
+
+
+def test_elevation_matches_the_true_road_under_the_trajectory(
+    surface: SiteSurface,
+    tiny_site,
+    dataset_root: Path,
+    workspace: Path,  # type: ignore[no-untyped-def]
+) -> None:
+    manifest = read_site_manifest(site_manifest_path(workspace, surface.site_id))
+    views = posed_views(load_dataset(dataset_root), manifest, workspace, surface.site_id, "ground_truth")
+    under_car = trajectory_strip(ego_poses(views), SurfaceConfig(strip_half_width_m=0.5))
+    ours = load_site_rasters(surface.folder / "bev")
+    elevation = np.load(surface.folder / "bev" / "elevation.npy")
+    truth_dir = tiny_site.result.ground_truth_dir / "bev"
+    truth = load_site_rasters(truth_dir)
+    col, row = np.round(ours.pixel_from_global(under_car[:, :2])).astype(int).T
+    true_col, true_row = np.round(truth.pixel_from_global(under_car[:, :2])).astype(int).T
+    error = elevation[row, col] - np.load(truth_dir / "elevation.npy")[true_row, true_col]
+    assert not np.isnan(error).any()
+    assert np.median(np.abs(error)) < 0.03
+
+
+def test_rerun_skips(surface: SiteSurface, dataset_root: Path, workspace: Path) -> None:
+    report = surface.folder / "report.json"
+    before = report.stat().st_mtime_ns
+    again = run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False)[0]
+    assert again.skipped and report.stat().st_mtime_ns == before
+    assert again.report["fingerprint"] == surface.report["fingerprint"]
+
+
+def test_no_road_points_is_a_clear_error(dataset_root: Path, tmp_path: Path, workspace: Path) -> None:
+    config = SurfaceConfig(use_trajectory_strip=False, resolution_m=0.5)
+    with pytest.raises(NoRoadPointsError, match=r"site .*no road surface points"):
+        run(config, dataset_root, workspace, poses="ground_truth", show_progress=False)
+
+
+def test_bad_pose_source_is_a_clear_error(dataset_root: Path, workspace: Path) -> None:
+    with pytest.raises(ValueError, match="poses must be one of"):
+        run(FAST, dataset_root, workspace, poses="lidar", show_progress=False)
+    with pytest.raises(FileNotFoundError, match="cama sfm"):
+        run(FAST, dataset_root, workspace, poses="sfm", overwrite=True, show_progress=False)
+
+
+def test_cli_runs_and_reports_bad_input(dataset_root: Path, workspace: Path) -> None:
+    runner = CliRunner()
+    args = ["surface", str(dataset_root), "--workspace", str(workspace), "--resolution-m", "0.5"]
+    result = runner.invoke(app, [*args, "--epochs", "0", "--poses", "wigo"])
+    assert result.exit_code == 0, result.output
+    assert "site" in result.output and "cells" in result.output
+    bad = runner.invoke(app, [*args, "--poses", "lidar"])
+    assert bad.exit_code == 2 and "poses must be one of" in bad.output
