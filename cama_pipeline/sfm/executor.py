@@ -32,6 +32,11 @@ class Executor(Protocol):
     ) -> list[R]: ...
 
 
+def _log_like_parent(level: int) -> None:
+    """Worker start-up: log at the parent's level, so each clip's per-iteration lines are seen."""
+    logging.basicConfig(level=level, format="%(levelname)s %(processName)s %(name)s: %(message)s")
+
+
 class LocalExecutor:
     """A process pool on this machine (spawned processes: safe beside threads such as progress bars)."""
 
@@ -50,7 +55,10 @@ class LocalExecutor:
             return []
         context = multiprocessing.get_context("spawn")
         results: dict[int, R] = {}
-        with ProcessPoolExecutor(min(self.workers, len(tasks)), mp_context=context) as pool:
+        level = logging.getLogger().getEffectiveLevel()
+        with ProcessPoolExecutor(
+            min(self.workers, len(tasks)), mp_context=context, initializer=_log_like_parent, initargs=(level,)
+        ) as pool:
             pending = {pool.submit(fn, task): i for i, task in enumerate(tasks)}
             while pending:
                 finished, _ = wait(pending, return_when=FIRST_COMPLETED)

@@ -1,6 +1,6 @@
 """Per-point semantic labels of a sparse model: the majority class of the semantic masks at the point's
 2D observations, mapped to the BEV raster classes (road, curb, lane marking, crosswalk; anything else is
-background)."""
+background); and the labelled sparse points the SfM stage stores."""
 
 import logging
 from collections.abc import Callable
@@ -8,7 +8,10 @@ from collections.abc import Callable
 import numpy as np
 import pycolmap
 
+from cama_pipeline.data import Dataset
+from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.semantics import BEV_CLASSES, Semantic
+from cama_pipeline.sfm.io import SparsePoints
 
 logger = logging.getLogger(__name__)
 
@@ -56,3 +59,26 @@ def point_labels(
     labels = np.where(np.isin(majority, [int(c) for c in BEV_CLASSES]), majority, int(Semantic.BACKGROUND))
     labels[votes.sum(axis=1) == 0] = int(Semantic.BACKGROUND)
     return labels.astype(np.uint8)
+
+
+def dataset_masks(dataset: Dataset, views: list[CameraView]) -> MaskReader:
+    """Semantic mask by image name, read from the data set (None when the image has none)."""
+    token_of = {view.name: view.token for view in views}
+
+    def read(name: str) -> np.ndarray | None:
+        image = dataset.image(token_of[name])
+        return image.load_semantic() if image.semantic_mask_path is not None else None
+
+    return read
+
+
+def sparse_points(reconstruction: pycolmap.Reconstruction, read_mask: MaskReader) -> SparsePoints:
+    """The model's points with their labels, errors and track lengths (point id order)."""
+    ids = sorted(reconstruction.point3D_ids())
+    points = [reconstruction.point3D(pid) for pid in ids]
+    return SparsePoints(
+        xyz=np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3),
+        label=point_labels(reconstruction, ids, read_mask),
+        error_px=np.array([p.error for p in points], dtype=np.float64),
+        track_length=np.array([p.track.length() for p in points], dtype=np.int32),
+    )

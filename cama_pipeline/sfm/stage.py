@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pycolmap
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -30,7 +29,6 @@ from cama_pipeline.sfm.executor import Executor, make_executor
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views, refined_views
 from cama_pipeline.sfm.io import (
     PoseEntry,
-    SparsePoints,
     read_model,
     read_report,
     sfm_dir,
@@ -39,7 +37,7 @@ from cama_pipeline.sfm.io import (
     write_poses,
     write_report,
 )
-from cama_pipeline.sfm.labels import MaskReader, point_labels
+from cama_pipeline.sfm.labels import MaskReader, dataset_masks, sparse_points
 from cama_pipeline.sfm.merge import (
     ClipModel,
     MergeConfig,
@@ -304,29 +302,6 @@ class SfmResult:
     seconds: float
 
 
-def _mask_reader(dataset: Dataset, views: list[CameraView]) -> MaskReader:
-    """Semantic mask by image name (None when the image has none)."""
-    token_of = {view.name: view.token for view in views}
-
-    def read(name: str) -> np.ndarray | None:
-        image = dataset.image(token_of[name])
-        return image.load_semantic() if image.semantic_mask_path is not None else None
-
-    return read
-
-
-def sparse_points(reconstruction: pycolmap.Reconstruction, read_mask: MaskReader) -> SparsePoints:
-    """The model's points with their labels, errors and track lengths (point id order)."""
-    ids = sorted(reconstruction.point3D_ids())
-    points = [reconstruction.point3D(pid) for pid in ids]
-    return SparsePoints(
-        xyz=np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3),
-        label=point_labels(reconstruction, ids, read_mask),
-        error_px=np.array([p.error for p in points], dtype=np.float64),
-        track_length=np.array([p.track.length() for p in points], dtype=np.int32),
-    )
-
-
 def _pose_entries(site: SiteReconstruction) -> dict[str, PoseEntry]:
     """poses.json entries: refined registered views, then the flagged ones with their incoming pose."""
     entries = {}
@@ -395,7 +370,7 @@ def run_site(
             progress=progress,
         )
     extra = {"config": asdict(config), "merge_config": asdict(merge_config)}
-    report = write_site(folder, site_id, digest, site, _mask_reader(dataset, views), extra)
+    report = write_site(folder, site_id, digest, site, dataset_masks(dataset, views), extra)
     merged = report["merged"]
     logger.info(
         "site %s: %d of %d images registered, %d points, %.2f px",

@@ -4,7 +4,7 @@ import numpy as np
 import pycolmap
 
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.sfm.labels import point_labels
+from cama_pipeline.sfm.labels import point_labels, sparse_points
 
 WIDTH, HEIGHT = 40, 30
 
@@ -46,3 +46,12 @@ def test_points_seen_by_no_mask_are_background() -> None:
     model = two_view_model(3)
     labels = point_labels(model, sorted(model.point3D_ids()), lambda name: None)
     assert labels.tolist() == [0, 0, 0]
+
+
+def test_sparse_points_keep_point_order_with_labels_and_tracks() -> None:
+    model = two_view_model(3)
+    masks = {"im1.jpg": np.full((HEIGHT, WIDTH), Semantic.CROSSWALK, np.uint8)}
+    points = sparse_points(model, masks.get)
+    np.testing.assert_allclose(points.xyz[:, 0], [0.0, 1.0, 2.0])
+    assert points.label.tolist() == [Semantic.CROSSWALK] * 3
+    assert points.track_length.tolist() == [2, 2, 2] and points.error_px.shape == (3,)
