@@ -78,18 +78,12 @@ def image_channels(dataset: Dataset, view: CameraView, device: torch.device) -> 
 
 
 def footprint_box(camera: Camera, range_m: float) -> tuple[float, float, float, float]:
-    """(xmin, xmax, ymin, ymax) around the camera centre and its frustum's corner rays out to `range_m`."""
-    corners = np.array(
-        [
-            [-camera.cx, -camera.cy],
-            [camera.width - camera.cx, -camera.cy],
-            [-camera.cx, camera.height - camera.cy],
-        ]
-        + [[camera.width - camera.cx, camera.height - camera.cy]]
-    )
-    rays = np.column_stack([corners[:, 0] / camera.fx, corners[:, 1] / camera.fy, np.ones(4)])
-    rays = rays / np.linalg.norm(rays, axis=1, keepdims=True) * range_m
-    world = rays @ camera.cam_from_world_R.cpu().numpy() + camera.centre
+    """(xmin, xmax, ymin, ymax) of the camera's frustum cut at depth `range_m`: it holds every point of the
+    frustum nearer than `range_m` (depth never exceeds distance)."""
+    u = np.array([0.0, camera.width, 0.0, camera.width]) - camera.cx
+    v = np.array([0.0, 0.0, camera.height, camera.height]) - camera.cy
+    rays = np.column_stack([u / camera.fx, v / camera.fy, np.ones(4)])
+    world = rays * range_m @ camera.cam_from_world_R.cpu().numpy() + camera.centre
     xs = np.append(world[:, 0], camera.centre[0])
     ys = np.append(world[:, 1], camera.centre[1])
     return xs.min(), xs.max(), ys.min(), ys.max()
