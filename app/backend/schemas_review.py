@@ -60,6 +60,21 @@ class LeasePublic(BaseModel):
     )
 
 
+class RegionRequest(LeaseRequest):
+    """Optional lease length and grid cell size for `queue/next-region`."""
+
+    cell_m: float = Field(
+        default=50.0, ge=5.0, le=1000.0, description="Side of the region grid cells, metres."
+    )
+
+
+class RegionWorkItem(BaseModel):
+    """A region work item: a grid cell of the site and one lease per proposal in it (release or renew each)."""
+
+    bbox: tuple[float, float, float, float] = Field(description="xmin, ymin, xmax, ymax in site metres.")
+    leases: list[LeasePublic]
+
+
 class IssueCreate(BaseModel):
     """Pin an issue to a point (site metres), to an element, or both; the comment opens the thread."""
 

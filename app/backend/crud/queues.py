@@ -11,12 +11,17 @@ active lease holds and that the requester does not already hold, in this order:
    group lowest confidence first, human-made (no confidence) last.
 Returned elements of other annotators are never handed out.
 
+Region work items: `next_region` leases, in one transaction, every free `proposed` element whose bounding-box
+centre lies in the grid cell (of side `cell_m`, site metres) holding the element `next_work_item` would hand out
+first; each element gets its own lease, so reviews, expiry and release work as for single elements.
+
 The guard against two annotators getting one element is the UNIQUE `leases.active_element_id`: an insert that
 loses a race fails with IntegrityError and the next candidate is tried. Expired leases are reclaimed (their
 `active_element_id` cleared) at the start of each request, so an abandoned item is free again.
 """
 
 import logging
+import math
 from collections.abc import Callable, Collection, Sequence
 from datetime import datetime, timedelta
 
@@ -40,6 +45,8 @@ clock: Callable[[], datetime] = utc_now
 CANDIDATES_PER_TRY = 16
 """How many candidates one attempt considers before looking again."""
 MAX_ATTEMPTS = 8
+Box = tuple[float, float, float, float]
+"""xmin, ymin, xmax, ymax in site metres."""
 
 
 def review_queue(
@@ -208,6 +215,73 @@ def next_work_item(
             continue
         logger.info("leased element %s to %s until %s", element.id, username, lease.expires_at)
         return lease
+    raise ConflictError("queue: too many concurrent requests for work items; try again")
+
+
+def _region_members(session: Session, site_id: int, seed: Element, cell: Box) -> list[Element]:
+    """The seed and the free proposals centred in `cell`, by id."""
+    held = select(Lease.active_element_id).where(Lease.active_element_id.is_not(None))
+    cx, cy = (Element.xmin + Element.xmax) / 2, (Element.ymin + Element.ymax) / 2
+    query = select(Element).where(
+        Element.site_id == site_id,
+        Element.state == "proposed",
+        Element.deleted.is_(False),
+        Element.id.not_in(held),
+        Element.id != seed.id,
+        cx >= cell[0],
+        cx < cell[2],
+        cy >= cell[1],
+        cy < cell[3],
+    )
+    return [seed, *session.scalars(query.order_by(Element.id))]
+
+
+def _cell_of(element: Element, cell_m: float) -> Box:
+    """The grid cell holding the element's bounding-box centre."""
+    col = math.floor((element.xmin + element.xmax) / 2 / cell_m)
+    row = math.floor((element.ymin + element.ymax) / 2 / cell_m)
+    return (col * cell_m, row * cell_m, (col + 1) * cell_m, (row + 1) * cell_m)
+
+
+def next_region(
+    *,
+    session: Session,
+    site_id: int,
+    username: str,
+    lease_s: int,
+    cell_m: float,
+    flagged_ids: Collection[int] = (),
+) -> tuple[Box, list[Lease]] | None:
+    """Lease the next region work item to `username` (see the module docstring): its cell and one lease per
+    element; None when there is no work left."""
+    get_site(session=session, site_id=site_id)
+    for _attempt in range(MAX_ATTEMPTS):
+        now = clock()
+        _reclaim_expired(session, site_id=site_id, now=now)
+        candidates = _candidates(session, site_id=site_id, username=username, flagged_ids=flagged_ids)
+        if not candidates:
+            session.commit()
+            return None
+        cell = _cell_of(candidates[0], cell_m)
+        leases = [
+            Lease(
+                site_id=site_id,
+                element_id=element.id,
+                active_element_id=element.id,
+                username=username,
+                acquired_at=now,
+                expires_at=now + timedelta(seconds=lease_s),
+            )
+            for element in _region_members(session, site_id, candidates[0], cell)
+        ]
+        session.add_all(leases)
+        try:
+            session.commit()
+        except IntegrityError:
+            session.rollback()  # another request leased one of them first: look again
+            continue
+        logger.info("leased region %s (%d elements) to %s", cell, len(leases), username)
+        return cell, leases
     raise ConflictError("queue: too many concurrent requests for work items; try again")
 
 

@@ -4,13 +4,23 @@ import logging
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response, status
+from sqlalchemy.orm import Session
 
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, LintCacheDep, SessionDep
 from app.backend.api.routes.elements import parse_bbox
 from app.backend.crud import quality, queues
-from app.backend.schemas_review import LeasePublic, LeaseRequest, QueueItem, ReviewQueuePage
+from app.backend.crud.quality import LintCache
+from app.backend.schemas_quality import LintFindingPublic
+from app.backend.schemas_review import (
+    LeasePublic,
+    LeaseRequest,
+    QueueItem,
+    RegionRequest,
+    RegionWorkItem,
+    ReviewQueuePage,
+)
 
 logger = logging.getLogger(__name__)
 router = APIRouter(tags=["queues"])
@@ -58,6 +68,14 @@ def review_queue(
     return ReviewQueuePage(total=total, limit=limit, offset=offset, items=items)
 
 
+def _lint_of(
+    session: Session, site_id: int, cache: LintCache
+) -> tuple[dict[int, list[LintFindingPublic]], list[int]]:
+    """The site's lint findings by element, and the elements with errors (handed out first)."""
+    findings = quality.findings_by_element(quality.lint_site(session=session, site_id=site_id, cache=cache))
+    return findings, [i for i, found in findings.items() if any(f.severity == "error" for f in found)]
+
+
 @router.post("/sites/{site_id}/queue/next", response_model=LeasePublic, responses=NO_WORK)
 def next_work_item(
     site_id: IdPath,
@@ -69,14 +87,44 @@ def next_work_item(
     """Lease the next work item: your returned elements first, then proposals with lint errors, then the
     other proposals, each by lowest confidence; the lease lists the item's lint findings."""
     lease_s = (request or LeaseRequest()).lease_s
-    findings = quality.findings_by_element(quality.lint_site(session=session, site_id=site_id, cache=cache))
-    errors = [i for i, found in findings.items() if any(f.severity == "error" for f in found)]
+    findings, errors = _lint_of(session, site_id, cache)
     lease = queues.next_work_item(
         session=session, site_id=site_id, username=user.username, lease_s=lease_s, flagged_ids=errors
     )
     if lease is None:
         return Response(status_code=status.HTTP_204_NO_CONTENT)
     return queues.lease_public(session, lease, lint=findings.get(lease.element_id, []))
+
+
+@router.post("/sites/{site_id}/queue/next-region", response_model=RegionWorkItem, responses=NO_WORK)
+def next_region(
+    site_id: IdPath,
+    session: SessionDep,
+    cache: LintCacheDep,
+    user: CurrentUser,
+    request: RegionRequest | None = None,
+) -> RegionWorkItem | Response:
+    """Lease a region: the grid cell holding your next work item (same order as `queue/next`) with every free
+    proposal centred in it, one lease each; review, renew or release them like single work items."""
+    request = request or RegionRequest()
+    findings, errors = _lint_of(session, site_id, cache)
+    region = queues.next_region(
+        session=session,
+        site_id=site_id,
+        username=user.username,
+        lease_s=request.lease_s,
+        cell_m=request.cell_m,
+        flagged_ids=errors,
+    )
+    if region is None:
+        return Response(status_code=status.HTTP_204_NO_CONTENT)
+    bbox, leases = region
+    return RegionWorkItem(
+        bbox=bbox,
+        leases=[
+            queues.lease_public(session, lease, lint=findings.get(lease.element_id, [])) for lease in leases
+        ],
+    )
 
 
 @router.get("/leases/{lease_id}", response_model=LeasePublic)
