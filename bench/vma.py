@@ -1,14 +1,18 @@
 """Acceptance benchmark of the VMA proposers on held-out synthetic sites that training never saw.
 
 Held-out sites are BEV-only generator sites of seeds 2000-2004 (layouts drawn from the seed; the shipped
-checkpoint was trained on the default site and seeds 1000-1007). For the rule-based and the learned proposer:
+checkpoints were trained on the default site and seeds 1000-1007, gated on seeds 3000-3002). Proposers: the
+rule-based one, the promoted learned checkpoint (`learned`; the anchored hybrid whose instance queries start
+from rule-based candidates) and, for comparison, the free-query MapTR checkpoint (`learned_free`, v0001). For each:
 Chamfer-AP at 0.5 / 1.0 / 1.5 m per class and mean (MapTR protocol, 30 m evaluation tiles), precision per
 confidence bin (does confidence rank errors?), and inference seconds per km² of site on this machine's CPU
 threads (torch limited to --threads). Two input conditions: the generator's clean rasters, and the same
 rasters with reconstruction-like damage (`models.vma.degrade`: missed marking pieces, edge jitter, speckle,
-colour noise; seeded per site) that both proposers receive alike.
+colour noise; seeded per site) that all proposers receive alike. The calibrated pre-accept threshold of each
+proposer on these sites is reported too (`models.vma.loop`).
 
-Usage: .venv/bin/python bench/vma.py [--checkpoint models/vma/checkpoints] [--seeds 2000-2004] [--threads 2]
+Usage: .venv/bin/python bench/vma.py [--checkpoint models/vma/checkpoints]
+       [--free-checkpoint models/vma/checkpoints/v0001 | ''] [--seeds 2000-2004] [--threads 2]
 Prints the figures and writes them to bench/results/vma.json.
 """
 
@@ -28,6 +32,7 @@ from models.vma.commands import seed_range
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
+from models.vma.model import VmaNet
 from models.vma.rasters import SiteRasters
 from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import Vector
@@ -38,6 +43,11 @@ RESULTS = Path(__file__).parent / "results"
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/checkpoints"))
+    parser.add_argument(
+        "--free-checkpoint",
+        default="models/vma/checkpoints/v0001",
+        help="free-query MapTR checkpoint to compare ('' to skip)",
+    )
     parser.add_argument("--seeds", default="2000-2004", help="held-out site seeds ('A-B')")
     parser.add_argument("--site-root", type=Path, default=Path("data/vma/heldout"))
     parser.add_argument("--threads", type=int, default=2)
@@ -49,25 +59,29 @@ def main() -> None:
     checkpoint = load_checkpoint(args.checkpoint)
     started = time.perf_counter()
 
-    def learned(rasters: SiteRasters) -> list[Vector]:
-        return predict_site(checkpoint.model, rasters, InferenceConfig(), show_progress=False)
-
     proposers: dict[str, Callable[[SiteRasters], list[Vector]]] = {
         "rule_based": propose_rule_based,
-        "learned": learned,
+        "learned": _learned(checkpoint.model),
     }
+    if args.free_checkpoint:
+        proposers["learned_free"] = _learned(load_checkpoint(Path(args.free_checkpoint)).model)
     results: dict[str, dict] = {"clean": {}, "degraded": {}}
     for name, propose in proposers.items():
         console.print(f"evaluating {name} ...")
         results["clean"][name] = evaluate_proposer(propose, sites)
         results["degraded"][name] = evaluate_proposer(_on_degraded(propose), sites)
     report = {
-        "command": "python bench/vma.py " + f"--seeds {args.seeds} --threads {args.threads}",
+        "command": "python bench/vma.py "
+        + f"--checkpoint {args.checkpoint} --free-checkpoint '{args.free_checkpoint}' "
+        + f"--seeds {args.seeds} --threads {args.threads}",
         "held_out_seeds": seed_range(args.seeds),
         "checkpoint": {
             "version": checkpoint.path.name,
             "data": checkpoint.meta.get("data"),
-            "train_metrics": checkpoint.meta.get("metrics"),
+            "model_config": checkpoint.meta.get("model_config"),
+            "train_metrics": {
+                k: v for k, v in (checkpoint.meta.get("metrics") or {}).items() if k != "validation"
+            },
         },
         "results": results,
         "learned_beats_rule_based": {
@@ -84,7 +98,8 @@ def main() -> None:
             classes = ", ".join(f"{c} {_fmt(v)}" for c, v in result["class_ap"].items())
             console.print(
                 f"[bold]{condition} {name}[/bold]: mAP {_fmt(result['mean_ap'])} ({classes}); "
-                f"{result['seconds_per_km2']:.1f} s/km² (incl. damage on 'degraded')"
+                f"{result['seconds_per_km2']:.1f} s/km² (incl. damage on 'degraded'); "
+                f"pre-accept threshold {_fmt(result['preaccept_threshold'])}"
             )
             bins = "  ".join(
                 f"[{b['low']:.2f},{b['high']:.2f}) n={b['count']} P={_fmt(b['precision'])}"
@@ -92,6 +107,13 @@ def main() -> None:
             )
             console.print(f"  precision per confidence bin: {bins}")
     console.print(f"written to {args.out}")
+
+
+def _learned(model: VmaNet) -> Callable[[SiteRasters], list[Vector]]:
+    def run(rasters: SiteRasters) -> list[Vector]:
+        return predict_site(model, rasters, InferenceConfig(), show_progress=False)
+
+    return run
 
 
 def _on_degraded(

@@ -4,7 +4,8 @@ Windows of the model's patch size step by `patch - overlap` over the site's mode
 row/column of windows is flush with the far edge; a site smaller than one patch is zero-padded). Each window's
 predictions above `min_score` become global vectors (score: the best class probability), clipped to the
 window's core and merged (`models.vma.merge`). An anchored model first runs the rule-based proposer on the
-site; each window's anchors are those candidates clipped to the window.
+site; each window's anchors are those candidates clipped to the window, and only anchored slots are output
+(its free slots, measured on validation sites, proposed nothing right: precision 1 in 6,800).
 """
 
 import logging
@@ -84,7 +85,10 @@ def predict_site(
                 else None
             )
             logits, points = model(images, anchors)
-            scores = torch.sigmoid(logits).cpu().numpy()
+            scores = torch.sigmoid(logits)
+            if anchors is not None:  # free slots of an anchored model only add false positives
+                scores = scores * anchors[1][..., -1:]
+            scores = scores.cpu().numpy()
             final = points[-1].cpu().numpy()
             for (col, row, core), s, p in zip(chunk, scores, final, strict=True):
                 window_vectors = _window_vectors(grid, model.config, col, row, s, p, config.min_score)

@@ -1,20 +1,25 @@
 """The anchored (hybrid) model: rule-based candidates as instance queries, in patches, training and inference."""
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from annotations import Georeference
 from models.vma.anchors import ANCHOR_FEATURES, patch_anchors, stack_anchors
+from models.vma.checkpoint import promote, save_version
 from models.vma.config import ModelConfig, TrainConfig, config_fingerprint
 from models.vma.infer import InferenceConfig, predict_site
+from models.vma.loop import THRESHOLD_KEY
 from models.vma.model import VmaNet
 from models.vma.patches import procedural_sample, site_grid, site_sample
 from models.vma.rasters import load_site_rasters, vector_map_of
+from models.vma.retrain import Corrections, RetrainConfig, retrain_from_corrections
 from models.vma.rule_based import propose_rule_based
 from models.vma.train import fit, load_training_sites, mixed_sampler
-from models.vma.vectors import CLASSES, Vector, read_vectors
+from models.vma.vectors import CLASSES, Vector, proposals_as_annotations, read_vectors
 
 ANCHORED = ModelConfig(
     resolution_m=0.4,
@@ -109,3 +114,20 @@ def test_anchored_training_lowers_the_loss_and_infers_a_site(drawn_site: Path) -
 def test_procedural_patches_get_rule_based_anchors() -> None:
     sample = procedural_sample(ANCHORED, np.random.default_rng(4))
     assert sample.anchors is not None and sample.anchors.points.shape == (6, 5, 2)
+
+
+def test_anchored_retrain_records_the_calibrated_threshold(drawn_site: Path, tmp_path: Path) -> None:
+    registry = tmp_path / "registry"
+    promote(registry, save_version(registry, VmaNet(ANCHORED), {"metrics": {}}).name)
+    rasters = load_site_rasters(drawn_site)
+    georeference = Georeference(
+        site_origin_xy=rasters.origin_xy, origin_xy=rasters.origin_xy, resolution=0.1, width=600, height=400
+    )
+    truth = proposals_as_annotations(read_vectors(vector_map_of(drawn_site)), georeference, "drawn", "lead")
+    accepted = truth.model_copy(
+        update={"elements": [e.with_changes(review_state="accepted") for e in truth.elements]}
+    )
+    config = RetrainConfig(train=TrainConfig(steps=3, batch_size=2, threads=1), replay_share=0.0)
+    result = retrain_from_corrections(registry, [Corrections(drawn_site, accepted)], [drawn_site], config)
+    meta = json.loads((result.candidate / "checkpoint.json").read_text(encoding="utf-8"))
+    assert THRESHOLD_KEY in meta and meta[THRESHOLD_KEY] == result.candidate_metrics[THRESHOLD_KEY]

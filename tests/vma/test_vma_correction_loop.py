@@ -7,7 +7,7 @@ import pytest
 
 from annotations import Georeference
 from cama_pipeline.evaluate.chamfer_ap import chamfer_distance, resample
-from models.vma.checkpoint import current_version, promote, save_version
+from models.vma.checkpoint import current_version, load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig
 from models.vma.model import VmaNet
 from models.vma.rasters import load_site_rasters, vector_map_of
@@ -83,7 +83,7 @@ def test_gate_refuses_a_deliberately_bad_checkpoint(bev_sites: dict[str, Path], 
     for name in ("model.pt", "checkpoint.json"):
         (registry / "v0001" / name).write_bytes((good / name).read_bytes())
     promote(registry, "v0001")
-    bad = VmaNet(ModelConfig())  # untrained weights: proposes nothing useful
+    bad = VmaNet(load_checkpoint(good).config)  # untrained weights: proposes nothing useful
     candidate = save_version(registry, bad, {"metrics": {}, "data": {"note": "deliberately bad"}})
     promoted, current, challenger = gate_checkpoint(registry, candidate, [bev_sites["val"]])
     assert current["mean_ap"] > 0.0
