@@ -2,8 +2,9 @@
 
 Held-out sites are BEV-only generator sites of seeds 2000-2004 (layouts drawn from the seed; the shipped
 checkpoints were trained on the default site and seeds 1000-1007, gated on seeds 3000-3002). Proposers: the
-rule-based one, the promoted learned checkpoint (`learned`; the anchored hybrid whose instance queries start
-from rule-based candidates) and, for comparison, the free-query MapTR checkpoint (`learned_free`, v0001). For each:
+rule-based one, the promoted learned checkpoint (`learned`: the anchored hybrid whose instance queries start
+from rule-based candidates, output as the candidates rescored by the model), the same network's own refined
+points (`learned_refined`) and, for comparison, the free-query MapTR checkpoint (`learned_free`, v0001). For each:
 Chamfer-AP at 0.5 / 1.0 / 1.5 m per class and mean (MapTR protocol, 30 m evaluation tiles), precision per
 confidence bin (does confidence rank errors?), and inference seconds per km² of site on this machine's CPU
 threads (torch limited to --threads). Two input conditions: the generator's clean rasters, and the same
@@ -61,10 +62,13 @@ def main() -> None:
 
     proposers: dict[str, Callable[[SiteRasters], list[Vector]]] = {
         "rule_based": propose_rule_based,
-        "learned": _learned(checkpoint.model),
+        "learned": _learned(checkpoint.model, InferenceConfig()),
     }
+    if checkpoint.config.anchored:  # the same network with its own refined points instead of the candidates'
+        proposers["learned_refined"] = _learned(checkpoint.model, InferenceConfig(anchored_output="refined"))
     if args.free_checkpoint:
-        proposers["learned_free"] = _learned(load_checkpoint(Path(args.free_checkpoint)).model)
+        free = load_checkpoint(Path(args.free_checkpoint)).model
+        proposers["learned_free"] = _learned(free, InferenceConfig())
     results: dict[str, dict] = {"clean": {}, "degraded": {}}
     for name, propose in proposers.items():
         console.print(f"evaluating {name} ...")
@@ -109,9 +113,9 @@ def main() -> None:
     console.print(f"written to {args.out}")
 
 
-def _learned(model: VmaNet) -> Callable[[SiteRasters], list[Vector]]:
+def _learned(model: VmaNet, config: InferenceConfig) -> Callable[[SiteRasters], list[Vector]]:
     def run(rasters: SiteRasters) -> list[Vector]:
-        return predict_site(model, rasters, InferenceConfig(), show_progress=False)
+        return predict_site(model, rasters, config, show_progress=False)
 
     return run
 

@@ -32,21 +32,32 @@ class Anchors:
     """(Q, P, 2) float32 normalised patch coordinates (0 where no candidate)."""
     features: np.ndarray
     """(Q, ANCHOR_FEATURES) float32."""
+    sources: np.ndarray
+    """(Q,) int64 index of each slot's candidate in the given list, -1 where empty."""
+    lengths: np.ndarray
+    """(Q,) float64 length of each slot's clipped piece in patch pixels (0 where empty)."""
 
 
 def patch_anchors(candidates: Sequence[Vector], config: ModelConfig, min_length_px: float) -> Anchors:
     """Anchors of candidates given in patch pixels (col, row; pixel centres at +0.5), clipped to the patch."""
     size = float(config.patch_px)
-    pieces = clip_vectors(candidates, (0.0, size, 0.0, size), min_length_px)
-    pieces.sort(key=lambda v: -v.score * v.length_m())
+    pieces = [
+        (piece, index)
+        for index, candidate in enumerate(candidates)
+        for piece in clip_vectors([candidate], (0.0, size, 0.0, size), min_length_px)
+    ]
+    pieces.sort(key=lambda p: -p[0].score * p[0].length_m())
     points = np.zeros((config.num_queries, config.num_points, 2), np.float32)
     features = np.zeros((config.num_queries, ANCHOR_FEATURES), np.float32)
-    for k, piece in enumerate(pieces[: config.num_queries]):
+    sources = np.full(config.num_queries, -1, np.int64)
+    lengths = np.zeros(config.num_queries, np.float64)
+    for k, (piece, index) in enumerate(pieces[: config.num_queries]):
+        sources[k], lengths[k] = index, piece.length_m()
         points[k] = resample(piece.points, config.num_points) / size
         features[k, CLASSES.index(piece.cls)] = 1.0
         features[k, -2] = piece.score
         features[k, -1] = 1.0
-    return Anchors(points, features)
+    return Anchors(points, features, sources, lengths)
 
 
 def stack_anchors(

@@ -37,8 +37,15 @@ class InferenceConfig:
     """Predictions scoring lower are dropped before merging."""
     batch_size: int = 8
     merge: MergeConfig = MergeConfig()
+    anchored_output: str = "rescored"
+    """Anchored models: 'rescored' keeps each rule-based candidate's full-resolution geometry with the model's
+    score (length-weighted mean over windows of its class probability), 'refined' outputs the model's points."""
 
     def __post_init__(self) -> None:
+        if self.anchored_output not in ("rescored", "refined"):
+            raise ValueError(
+                f"InferenceConfig.anchored_output must be 'rescored' or 'refined', got {self.anchored_output!r}"
+            )
         if self.overlap_px < 0 or not 0.0 <= self.min_score < 1.0 or self.batch_size < 1:
             raise ValueError(
                 "InferenceConfig: overlap_px >= 0, 0 <= min_score < 1 and batch_size >= 1 required"
@@ -63,11 +70,13 @@ def predict_site(
     grid = site_grid(rasters, model.config)
     windows = _windows(grid, model.config, config.overlap_px)
     device = next(model.parameters()).device
+    rule = propose_rule_based(rasters) if model.config.anchored else []
     candidates = (
-        [Vector(v.cls, grid.pixel_from_global(v.points), v.score) for v in propose_rule_based(rasters)]
+        [Vector(v.cls, grid.pixel_from_global(v.points), v.score) for v in rule]
         if model.config.anchored
         else None
     )
+    weighted = np.zeros((len(rule), 2))  # per candidate: sum of length x own-class probability, sum of length
     pieces: list[Vector] = []
     columns = (TextColumn("proposing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, disable=not show_progress) as progress, torch.no_grad():
@@ -77,24 +86,33 @@ def predict_site(
             images = torch.as_tensor(
                 np.stack([_crop(grid, model.config, w[0], w[1]) for w in chunk]), device=device
             )
-            anchors = (
-                stack_anchors(
-                    [_window_anchors(candidates, model.config, col, row) for col, row, _ in chunk], device
-                )
+            windows_anchors = (
+                [_window_anchors(candidates, model.config, col, row) for col, row, _ in chunk]
                 if candidates is not None
-                else None
+                else []
             )
+            anchors = stack_anchors(windows_anchors, device)
             logits, points = model(images, anchors)
-            scores = torch.sigmoid(logits)
+            probabilities = torch.sigmoid(logits)
             if anchors is not None:  # free slots of an anchored model only add false positives
-                scores = scores * anchors[1][..., -1:]
-            scores = scores.cpu().numpy()
+                probabilities = probabilities * anchors[1][..., -1:]
+            scores = probabilities.cpu().numpy()
             final = points[-1].cpu().numpy()
+            if anchors is not None:
+                _accumulate(weighted, anchors[1].cpu().numpy(), scores, windows_anchors)
             for (col, row, core), s, p in zip(chunk, scores, final, strict=True):
                 window_vectors = _window_vectors(grid, model.config, col, row, s, p, config.min_score)
                 pieces += clip_to_core(window_vectors, core, config.merge.min_length_m)
             progress.advance(bar, len(chunk))
-    vectors = merge_windows(pieces, config.merge)
+    if model.config.anchored and config.anchored_output == "rescored":
+        score = weighted[:, 0] / np.maximum(weighted[:, 1], 1e-9)
+        vectors = [
+            Vector(v.cls, v.points, float(s))
+            for v, s in zip(rule, score, strict=True)
+            if s >= config.min_score
+        ]
+    else:
+        vectors = merge_windows(pieces, config.merge)
     logger.info(
         "learned proposer: %d vectors from %d windows on %s", len(vectors), len(windows), rasters.name
     )
@@ -120,6 +138,18 @@ def _windows(
             x_lo, x_hi = core_bounds(centre_x, i)
             out.append((col, row, (x_lo, x_hi, y_lo, y_hi)))
     return out
+
+
+def _accumulate(
+    weighted: np.ndarray, features: np.ndarray, scores: np.ndarray, windows_anchors: list[Anchors]
+) -> None:
+    """Add each anchored slot's own-class probability, weighted by its piece length, to its candidate."""
+    for window_features, window_scores, anchors in zip(features, scores, windows_anchors, strict=True):
+        for slot in np.flatnonzero(anchors.sources >= 0):
+            own_class = int(np.argmax(window_features[slot, : len(CLASSES)]))
+            weighted[anchors.sources[slot]] += anchors.lengths[slot] * np.array(
+                [window_scores[slot, own_class], 1.0]
+            )
 
 
 def _window_anchors(candidates: list[Vector], model_config: ModelConfig, col: int, row: int) -> Anchors:

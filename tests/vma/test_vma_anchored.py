@@ -105,10 +105,18 @@ def test_anchored_training_lowers_the_loss_and_infers_a_site(drawn_site: Path) -
         show_progress=False,
     )
     assert np.mean(losses[-5:]) < np.mean(losses[:5])
-    vectors = predict_site(
-        model, load_site_rasters(drawn_site), InferenceConfig(min_score=0.0), show_progress=False
+    rasters = load_site_rasters(drawn_site)
+    rescored = predict_site(model, rasters, InferenceConfig(min_score=0.0), show_progress=False)
+    rule = propose_rule_based(rasters)
+    assert len(rescored) == len(rule)  # the candidates' own geometry, with the model's scores
+    assert all(
+        np.array_equal(a.points, b.points) and 0.0 <= a.score <= 1.0
+        for a, b in zip(rescored, rule, strict=True)
     )
-    assert vectors and all(0.0 <= v.score <= 1.0 for v in vectors)
+    refined = InferenceConfig(min_score=0.0, anchored_output="refined")
+    assert predict_site(model, rasters, refined, show_progress=False)
+    with pytest.raises(ValueError, match="anchored_output"):
+        InferenceConfig(anchored_output="both")
 
 
 def test_procedural_patches_get_rule_based_anchors() -> None:
