@@ -1,10 +1,14 @@
-"""`cama demo`: load a generated site and its VMA proposals into a backend database, then serve the editor.
+"""`cama demo`: load a generated site and its VMA proposals into a backend database, then serve the editor
+(and the viser 3D review beside it).
 
-The demo server keeps its database in `--data-dir`; a rerun reuses it (the site and its proposals are loaded
-once, so people's edits survive restarts). Three demo accounts are made on first run, one per role, with the
-password from CAMA_DEMO_PASSWORD (default `cama-demo`): they are printed with the URL.
+With `--rasters <workspace>/surface/<site_id>/bev` the editor shows the reconstructed BEV rasters (the proposals
+made from them share their frame); without it, the generator's ground-truth rasters. The demo server keeps its
+database in `--data-dir`; a rerun reuses it (the site and its proposals are loaded once, so people's edits survive
+restarts). Three demo accounts are made on first run, one per role, with the password from CAMA_DEMO_PASSWORD
+(default `cama-demo`): they are printed with the URL.
 """
 
+import json
 import logging
 import os
 from pathlib import Path
@@ -19,7 +23,7 @@ from app.backend import crud
 from app.backend.config import Settings
 from app.backend.errors import InvalidInputError
 from app.backend.models import Site, User
-from app.backend.schemas import ElementCreate, SiteCreate
+from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
 
 logger = logging.getLogger(__name__)
 DEMO_USERS = (("admin", "admin"), ("lead", "lead"), ("annotator", "annotator"))
@@ -35,20 +39,51 @@ def ensure_demo_users(session: Session, password: str, scrypt_n: int) -> None:
             )
 
 
+def read_proposals(proposals: Path) -> AnnotationSet:
+    """The proposals file; InvalidInputError naming it when unreadable."""
+    try:
+        return AnnotationSet.read_json(proposals)
+    except (OSError, ValueError) as err:
+        raise InvalidInputError("proposals", f"{proposals}: {err}") from None
+
+
+def site_request(site_dir: Path, rasters: Path | None, proposals: Path | None, name: str) -> SiteCreate:
+    """The synthetic site with its ground-truth rasters, or with a reconstructed raster folder (in the frame
+    of the proposals made from it: their site origin, else the raster's own origin)."""
+    if rasters is None:
+        return SiteCreate(name=name, synthetic_dir=str(site_dir))
+    path = rasters / "georeference.json"
+    try:
+        georeference = GeoreferenceIn.model_validate(
+            {
+                k: v
+                for k, v in json.loads(path.read_text(encoding="utf-8")).items()
+                if k in GeoreferenceIn.model_fields
+            }
+        )
+    except (OSError, ValueError) as err:
+        raise InvalidInputError("rasters", f"{path}: {err}") from None
+    origin = read_proposals(proposals).georeference.site_origin_xy if proposals else georeference.origin_xy
+    return SiteCreate(name=name, site_origin_xy=origin, georeference=georeference, raster_dir=str(rasters))
+
+
 def load_site(
-    session: Session, site_dir: Path, proposals: Path | None, name: str, *, margin_m: float
+    session: Session,
+    site_dir: Path,
+    proposals: Path | None,
+    name: str,
+    *,
+    margin_m: float,
+    rasters: Path | None = None,
 ) -> tuple[Site, int]:
     """Register the site (once) and bulk-load its proposals (once); returns the site and how many were loaded."""
     existing = session.scalar(select(Site).where(Site.name == name))
     if existing is not None:
         return existing, 0
-    site = crud.create_site(session=session, site_in=SiteCreate(name=name, synthetic_dir=str(site_dir)))
+    site = crud.create_site(session=session, site_in=site_request(site_dir, rasters, proposals, name))
     if proposals is None:
         return site, 0
-    try:
-        annotation_set = AnnotationSet.read_json(proposals)
-    except (OSError, ValueError) as err:
-        raise InvalidInputError("proposals", f"{proposals}: {err}") from None
+    annotation_set = read_proposals(proposals)
     elements = [
         ElementCreate(cls=e.cls, points=list(e.points_2d), confidence=e.confidence, source="proposal")
         for e in annotation_set.elements
@@ -70,8 +105,17 @@ def demo_command(
     data_dir: Annotated[Path, typer.Option(help="The demo server's database and tiles.")] = Path(
         "data/demo-server"
     ),
+    rasters: Annotated[
+        Path | None,
+        typer.Option(
+            help="Reconstructed raster folder (<workspace>/surface/<site_id>/bev) to show instead of the ground truth."
+        ),
+    ] = None,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port.")] = 8000,
+    view_port: Annotated[
+        int, typer.Option(min=0, max=65535, help="Port of the viser 3D review beside the editor; 0: none.")
+    ] = 8080,
 ) -> None:
     """Load the site and its proposals into the backend and serve the editor (Ctrl+C stops it)."""
     import uvicorn
@@ -84,8 +128,9 @@ def demo_command(
     try:
         with app.state.sessionmaker() as session:
             ensure_demo_users(session, password, settings.scrypt_n)
+            name = site_dir.resolve().name + (" (reconstructed)" if rasters else "")
             site, loaded = load_site(
-                session, site_dir, proposals, site_dir.resolve().name, margin_m=settings.extent_margin_m
+                session, site_dir, proposals, name, margin_m=settings.extent_margin_m, rasters=rasters
             )
             site_id = site.id
     except InvalidInputError as err:
@@ -97,4 +142,21 @@ def demo_command(
     typer.echo(
         f"log in as annotator, lead or admin; password {password!r} (set CAMA_DEMO_PASSWORD to change)"
     )
+    if view_port:
+        _start_review(site_dir, rasters, site_id, password, f"http://{host}:{port}", host, view_port)
     uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+def _start_review(
+    site_dir: Path, rasters: Path | None, site_id: int, password: str, api: str, host: str, port: int
+) -> None:
+    """The viser 3D review of the demo site, following the demo server's vectors (as the lead)."""
+    from app.viewer.review import ViewInputs, serve_in_background
+    from app.viewer.sources import ApiVectorSource
+
+    workspace, site_key = (
+        (rasters.parents[2], rasters.parent.name) if rasters else (site_dir / "workspace", "site-001")
+    )
+    inputs = ViewInputs(site_dir, workspace, site_key)
+    serve_in_background(inputs, ApiVectorSource(api, site_id, "lead", password), host=host, port=port)
+    typer.echo(f"3D review: http://{host}:{port}/")

@@ -2,6 +2,7 @@
 
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,3 +69,43 @@ def follow(scene: ReviewScene, source: VectorSource, stop: threading.Event, *, i
             logger.info(
                 "vectors: %d added, %d updated, %d removed", counts.added, counts.updated, counts.removed
             )
+
+
+def _wait_for(source: VectorSource, timeout_s: float, stop: threading.Event) -> bool:
+    """Whether the source answers within `timeout_s` (e.g. a backend still starting)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not stop.is_set():
+        try:
+            source.load()
+            return True
+        except VectorSourceError:
+            stop.wait(1.0)
+    return False
+
+
+def serve_in_background(
+    inputs: ViewInputs,
+    source: VectorSource,
+    *,
+    host: str,
+    port: int,
+    interval_s: float = 2.0,
+    wait_s: float = 120.0,
+) -> threading.Event:
+    """Serve the 3D review from a daemon thread once the source answers; set the returned event to stop it."""
+    stop = threading.Event()
+
+    def serve() -> None:
+        if not _wait_for(source, wait_s, stop):
+            logger.error("3D review not started: the vector source did not answer within %.0f s", wait_s)
+            return
+        server = viser.ViserServer(host=host, port=port, label="CAMA Studio 3D review", verbose=False)
+        try:
+            follow(open_review(server, inputs, source), source, stop, interval_s=interval_s)
+        except (ValueError, OSError) as err:
+            logger.error("3D review stopped: %s", err)
+        finally:
+            server.stop()
+
+    threading.Thread(target=serve, name="cama-3d-review", daemon=True).start()
+    return stop

@@ -1,6 +1,7 @@
 """`cama demo`: a generated site and its proposals loaded once into the backend, demo accounts, then serving."""
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -9,7 +10,7 @@ from typer.testing import CliRunner
 from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.backend.config import Settings
 from app.backend.main import create_app
-from app.backend.models import Element
+from app.backend.models import Element, Site
 from cama_pipeline.cli import app as cli
 
 runner = CliRunner()
@@ -42,6 +43,7 @@ def test_demo_loads_once_and_serves(site_root: Path, tmp_path: Path, monkeypatch
     monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: served.append(kwargs))
     proposals = proposals_file(site_root, tmp_path / "proposals.json")
     args = ["demo", str(site_root), "--proposals", str(proposals), "--data-dir", str(tmp_path / "server")]
+    args += ["--view-port", "0"]
     first = runner.invoke(cli, args)
     assert first.exit_code == 0, first.output
     assert "with 2 proposals" in first.output and "#/site/1" in first.output and "cama-demo" in first.output
@@ -56,5 +58,29 @@ def test_demo_loads_once_and_serves(site_root: Path, tmp_path: Path, monkeypatch
 
 def test_demo_names_a_folder_that_is_not_a_site(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: None)
-    result = runner.invoke(cli, ["demo", str(tmp_path), "--data-dir", str(tmp_path / "server")])
+    result = runner.invoke(
+        cli, ["demo", str(tmp_path), "--data-dir", str(tmp_path / "server"), "--view-port", "0"]
+    )
     assert result.exit_code == 2 and "synthetic_dir" in result.output
+
+
+def test_demo_shows_a_reconstructed_raster_folder_in_the_proposals_frame(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: None)
+    rasters = tmp_path / "ws" / "surface" / "site-001" / "bev"
+    shutil.copytree(site_root / "ground_truth" / "bev", rasters)
+    proposals = proposals_file(site_root, tmp_path / "proposals.json")
+    args = ["demo", str(site_root), "--proposals", str(proposals), "--rasters", str(rasters)]
+    result = runner.invoke(cli, [*args, "--data-dir", str(tmp_path / "server"), "--view-port", "0"])
+    assert result.exit_code == 0, result.output
+    app = create_app(Settings(data_dir=tmp_path / "server"))
+    with app.state.sessionmaker() as session:
+        site = session.query(Site).one()
+        assert site.name.endswith("(reconstructed)") and Path(site.raster_dir) == rasters.resolve()
+        expected = AnnotationSet.read_json(proposals).georeference.site_origin_xy
+        assert (site.site_origin_x, site.site_origin_y) == pytest.approx(expected)
+    broken = runner.invoke(
+        cli, ["demo", str(site_root), "--rasters", str(tmp_path), "--data-dir", str(tmp_path / "s2")]
+    )
+    assert broken.exit_code == 2 and "georeference.json" in broken.output

@@ -1,0 +1,342 @@
+"""End-to-end benchmark: the whole path on a synthetic site, measured against the truth the generator kept.
+
+1. `cama run` (wigo ... surface -> proposals) into the site's workspace; seconds per stage of this run (a stage
+   that was already up to date shows the time of its skip check; its own report's timings are listed too).
+2. Camera pose error of the coarse WIGO poses and of the SfM poses against the true poses (absolute, and
+   gauge-free after the best similarity).
+3. Elevation RMSE of the reconstructed raster over cells that are road in the ground truth and observed.
+4. Chamfer-AP (0.5 / 1.0 / 1.5 m) of the VMA proposals against the true vectors, inside the reconstructed extent.
+5. The paper's comparison table on known truth: SRE / precision / recall / F1 of lane dividers against the image
+   lane masks for (a) the true 3D map with true poses, (b) the baseline 2D map with coarse poses, (c1) the
+   pipeline's proposals accepted as they are and (c2) the pipeline's annotations after the simulated annotator's
+   correction pass; (c) are lifted through the reconstructed elevation and projected with the SfM poses.
+6. The simulated annotator's person-hours per km: drawing from scratch vs correcting the proposals.
+
+Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-count map) go to
+bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json.
+
+Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|rule]
+"""
+
+import argparse
+import json
+import logging
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import matplotlib
+import numpy as np
+from fastapi.testclient import TestClient
+from scipy.spatial.transform import Rotation
+
+from annotations.lift import lift_points
+from annotations.schema import AnnotationSet, Georeference
+from app.backend.config import Settings
+from app.backend.main import create_app
+from app.simulation.annotator import ApiSession, correct_proposals, draw_from_scratch
+from app.simulation.plan import Polyline
+from cama_pipeline.data import Pose, load_dataset
+from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate.inputs import VectorElement
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.pipeline import PipelineConfig, proposals_path, surface_rasters
+from cama_pipeline.pipeline import run as run_pipeline
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
+from cama_pipeline.sfm.io import read_refined_poses
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from models.vma.evaluate import evaluate_sites
+from models.vma.rasters import load_site_rasters
+from models.vma.vectors import read_vectors, vectors_from_annotations
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+PLOTS = RESULTS / "end_to_end"
+PASSWORD = "bench-end-to-end"
+logger = logging.getLogger("bench.end_to_end")
+
+
+def stage_reports(workspace: Path, site_id: str) -> dict[str, Any]:
+    """Timings the stages wrote into their own reports (the run that made the outputs)."""
+    found: dict[str, Any] = {}
+    for stage, path in {
+        "features": workspace / "features" / site_id / "features.json",
+        "sfm": workspace / "sfm" / site_id / "report.json",
+        "surface": workspace / "surface" / site_id / "report.json",
+    }.items():
+        if path.is_file():
+            report = json.loads(path.read_text())
+            found[stage] = report.get("seconds")
+    return found
+
+
+def pose_figures(site: Path, views: list[CameraView], workspace: Path, site_id: str) -> dict[str, Any]:
+    """WIGO and SfM camera pose errors against the truth."""
+    truth_poses = load_true_poses(site / "ground_truth" / "poses.json")
+    truth = {v.name: truth_poses[v.token].matrix() @ v.ego_from_cam for v in views}
+    wigo = {v.name: v.world_from_cam for v in views}
+    refined = read_refined_poses(workspace, site_id)
+    sfm = {v.name: refined[v.token] @ v.ego_from_cam for v in views if v.token in refined}
+    out = {}
+    for name, poses in (("wigo", wigo), ("sfm", sfm)):
+        absolute = pose_errors(poses, truth)
+        gauge_free = pose_errors(aligned_poses(poses, truth), truth)
+        out[name] = {
+            "position_cm": absolute.position_cm,
+            "rotation_deg": absolute.rotation_deg,
+            "registered_ratio": absolute.registered_ratio,
+            "gauge_free_position_cm": gauge_free.position_cm,
+            "gauge_free_rotation_deg": gauge_free.rotation_deg,
+        }
+    return out
+
+
+def _raster(folder: Path) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+    geo = json.loads((folder / "georeference.json").read_text())
+    elevation = np.load(folder / "elevation.npy").astype(np.float64)
+    semantic = cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED)
+    return geo, elevation, semantic
+
+
+def elevation_figures(site: Path, folder: Path) -> tuple[dict[str, Any], np.ndarray]:
+    """RMSE of the reconstructed elevation over observed cells that are road in the truth; the error map."""
+    geo, ours, ours_sem = _raster(folder)
+    true_geo, truth, true_sem = _raster(site / "ground_truth" / "bev")
+    rows, cols = np.indices(ours.shape)
+    x = geo["origin_xy"][0] + cols * geo["resolution"]
+    y = geo["origin_xy"][1] - rows * geo["resolution"]
+    tc = np.rint((x - true_geo["origin_xy"][0]) / true_geo["resolution"]).astype(int)
+    tr = np.rint((true_geo["origin_xy"][1] - y) / true_geo["resolution"]).astype(int)
+    inside = (tr >= 0) & (tr < truth.shape[0]) & (tc >= 0) & (tc < truth.shape[1])
+    error = np.full(ours.shape, np.nan)
+    road = np.zeros(ours.shape, dtype=bool)
+    t_sem = true_sem[tr[inside], tc[inside]]
+    road[inside] = (t_sem >= int(Semantic.ROAD)) & (t_sem != int(Semantic.UNOBSERVED))
+    observed = (ours_sem != int(Semantic.UNOBSERVED)) & np.isfinite(ours)
+    use = inside & road & observed
+    error[use] = ours[use] - truth[tr[use], tc[use]]
+    values = error[use]
+    figures = {
+        "cells": int(use.sum()),
+        "rmse_cm": float(np.sqrt(np.mean(values**2)) * 100) if values.size else None,
+        "median_abs_cm": float(np.median(np.abs(values)) * 100) if values.size else None,
+        "p95_abs_cm": float(np.percentile(np.abs(values), 95) * 100) if values.size else None,
+    }
+    return figures, error
+
+
+def proposal_vectors(path: Path) -> list[Any]:
+    return vectors_from_annotations(
+        AnnotationSet.read_json(path), ("proposed", "accepted", "fixed", "approved")
+    )
+
+
+def proposals_ap(site: Path, rasters_folder: Path, proposals: Path) -> dict[str, Any]:
+    """Chamfer-AP of the proposals against the true vectors inside the reconstructed extent."""
+    extent = load_site_rasters(rasters_folder).extent()
+    result = evaluate_sites(
+        [(proposal_vectors(proposals), read_vectors(site / "ground_truth" / "vector_map.json"), extent)]
+    )
+    return {key: result[key] for key in ("mean_ap", "class_ap", "confidence_bins") if key in result}
+
+
+def lifted_map(vectors_xy: list[tuple[str, np.ndarray]], folder: Path) -> list[VectorElement]:
+    """2D global vectors lifted through a raster folder's elevation (vertices without elevation dropped)."""
+    geo = Georeference.from_raster_file(folder / "georeference.json", site_origin_xy=(0.0, 0.0))
+    _, elevation, semantic = _raster(folder)
+    unobserved = semantic == int(Semantic.UNOBSERVED)
+    out = []
+    for k, (cls, points) in enumerate(vectors_xy):
+        lifted = lift_points(points, elevation, geo, unobserved=unobserved, search_radius_m=2.0).points_3d
+        lifted = lifted[np.isfinite(lifted[:, 2])]
+        if len(lifted) >= 2:
+            out.append(VectorElement(f"v{k}", cls, lifted, cls == "ped_crossing"))
+    return out
+
+
+def sfm_pose_map(workspace: Path, site_id: str) -> dict[str, Pose]:
+    """SfM world_from_ego by image token, as the SRE evaluation takes poses."""
+    out = {}
+    for token, matrix in read_refined_poses(workspace, site_id).items():
+        quaternion = Rotation.from_matrix(matrix[:3, :3]).as_quat(scalar_first=True)
+        out[token] = Pose(matrix[:3, 3], quaternion)
+    return out
+
+
+def simulated_pass(site: Path, proposals: Path) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
+    """The scripted annotator on the proposals and on an empty site; the corrected map (global 2D)."""
+    truths = [
+        Polyline(e.cls, np.asarray(e.points)[:, :2])
+        for e in load_vector_map(site / "ground_truth" / "vector_map.json")
+    ]
+    annotations = AnnotationSet.read_json(proposals)
+    origin = np.asarray(annotations.georeference.site_origin_xy, float)
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = Settings(
+            data_dir=Path(tmp), scrypt_n=2**4, admin_username="admin", admin_password=PASSWORD
+        )
+        with TestClient(create_app(settings)) as client:
+            admin = ApiSession(client, "admin", PASSWORD)
+            admin.call(
+                "POST", "/api/users", json={"username": "sim", "password": PASSWORD, "role": "annotator"}
+            )
+            annotator = ApiSession(client, "sim", PASSWORD)
+            site_ids = []
+            for name in ("corrected", "scratch"):
+                body = {"name": name, "synthetic_dir": str(site.resolve())}
+                site_ids.append(int(admin.call("POST", "/api/sites", json=body)["id"]))
+            backend_origin = np.asarray(
+                admin.call("GET", f"/api/sites/{site_ids[0]}")["site_origin_xy"], float
+            )
+            elements = [
+                {
+                    "class": e.cls,
+                    "points": (np.asarray(e.points_2d) + origin - backend_origin).tolist(),
+                    "confidence": e.confidence,
+                    "source": "proposal",
+                }
+                for e in annotations.elements
+            ]
+            if elements:
+                admin.call("POST", f"/api/sites/{site_ids[0]}/elements/bulk", json={"elements": elements})
+            corrected = correct_proposals(annotator, site_ids[0], truths)
+            scratch = draw_from_scratch(annotator, site_ids[1], truths)
+            final = annotator.call("GET", f"/api/sites/{site_ids[0]}/elements")
+            client.app.state.engine.dispose()  # type: ignore[attr-defined]
+    kept = [
+        (e["class"], np.asarray(e["points"], float) + backend_origin)
+        for e in final
+        if e["state"] != "rejected"
+    ]
+    figures = {
+        "scratch": scratch.as_dict(),
+        "corrected": corrected.as_dict(),
+        "speed_up": scratch.total_s / corrected.total_s if corrected.total_s else None,
+    }
+    return figures, kept
+
+
+def sre_rows(
+    site: Path, workspace: Path, site_id: str, rows: dict[str, tuple[list[VectorElement], dict | None]]
+) -> dict[str, Any]:
+    dataset = load_dataset(site / "nuscenes")
+    config = SreConfig(class_pairs=(("divider", int(Semantic.LANE_MARKING)),))
+    scenes = [s["scene"] for s in read_site_manifest(site_manifest_path(workspace, site_id))["scenes"]]
+    out = {}
+    for name, (elements, poses) in rows.items():
+        report = evaluate_sre(dataset, elements, config, true_poses=poses, scenes=scenes)
+        out[name] = {k: v for k, v in vars(report.overall).items()}
+    return out
+
+
+def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) -> list[str]:
+    PLOTS.mkdir(parents=True, exist_ok=True)
+    written = []
+    stages = figures["stage_seconds"]
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.bar(list(stages), list(stages.values()), color="#38bdf8")
+    ax.set_ylabel("seconds (this run)")
+    ax.set_title("Time per stage")
+    fig.tight_layout()
+    fig.savefig(PLOTS / "stage_seconds.png", dpi=110)
+    written.append("stage_seconds.png")
+    sre = figures["sre"]
+    names = list(sre)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.5))
+    axes[0].bar(names, [sre[n]["sre_px"] for n in names], color="#f87171")
+    axes[0].set_title("SRE (px, lower is better)")
+    axes[1].bar(names, [sre[n]["f1"] for n in names], color="#22c55e")
+    axes[1].set_title("F1 (higher is better)")
+    for ax in axes:
+        ax.tick_params(axis="x", rotation=20)
+    fig.tight_layout()
+    fig.savefig(PLOTS / "sre_f1.png", dpi=110)
+    written.append("sre_f1.png")
+    fig, ax = plt.subplots(figsize=(6, 5))
+    image = ax.imshow(error_map * 100, cmap="coolwarm", vmin=-10, vmax=10)
+    fig.colorbar(image, ax=ax, label="reconstructed - true elevation (cm)")
+    ax.set_title("Elevation error on road cells")
+    ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(PLOTS / "elevation_error.png", dpi=110)
+    written.append("elevation_error.png")
+    counts = cv2.imread(str(rasters_folder / "observation_count.png"), cv2.IMREAD_UNCHANGED).astype(float)
+    fig, ax = plt.subplots(figsize=(6, 5))
+    image = ax.imshow(np.where(counts > 0, counts, np.nan), cmap="viridis")
+    fig.colorbar(image, ax=ax, label="camera rays per cell")
+    ax.set_title("Observation count")
+    ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(PLOTS / "observation_count.png", dpi=110)
+    written.append("observation_count.png")
+    plt.close("all")
+    return written
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--site-id", default="site-001")
+    parser.add_argument("--proposer", choices=("learned", "rule"), default="learned")
+    parser.add_argument("--max-features", type=int, default=None)
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    site, site_id = args.site, args.site_id
+    workspace = site / "workspace"
+    seen: list[str] = []
+    result = run_pipeline(
+        site / "nuscenes",
+        workspace,
+        PipelineConfig(proposer=args.proposer, max_features=args.max_features),
+        on_stage=lambda s: (seen.append(s), print(f"== {s}", flush=True)),
+    )
+    dataset = load_dataset(site / "nuscenes")
+    views = site_views(dataset, read_site_manifest(site_manifest_path(workspace, site_id)))
+    rasters = surface_rasters(workspace, site_id)
+    proposals = proposals_path(workspace, site_id)
+    figures: dict[str, Any] = {
+        "site": str(site),
+        "site_id": site_id,
+        "proposer": args.proposer,
+        "stage_seconds": {k: round(v, 1) for k, v in result.seconds.items()},
+        "stage_reports": stage_reports(workspace, site_id),
+        "poses": pose_figures(site, views, workspace, site_id),
+    }
+    figures["elevation"], error_map = elevation_figures(site, rasters)
+    figures["proposals_ap"] = proposals_ap(site, rasters, proposals)
+    figures["annotator"], corrected = simulated_pass(site, proposals)
+    truth = site / "ground_truth"
+    sfm_poses = sfm_pose_map(workspace, site_id)
+    proposal_xy = [(v.cls, v.points) for v in proposal_vectors(proposals)]
+    figures["sre"] = sre_rows(
+        site,
+        workspace,
+        site_id,
+        {
+            "a_truth": (load_vector_map(truth / "vector_map.json"), load_true_poses(truth / "poses.json")),
+            "b_baseline_2d": (load_vector_map(truth / "baseline_map.json"), None),
+            "c1_proposals": (lifted_map(proposal_xy, rasters), sfm_poses),
+            "c2_corrected": (lifted_map(corrected, rasters), sfm_poses),
+        },
+    )
+    figures["plots"] = plots(figures, error_map, rasters)
+    figures["command"] = "python bench/end_to_end.py " + " ".join(sys.argv[1:])
+    figures["machine"] = {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")}
+    (RESULTS / "end_to_end.json").write_text(json.dumps(figures, indent=1, default=float) + "\n")
+    print(
+        json.dumps(
+            {k: figures[k] for k in ("stage_seconds", "poses", "elevation", "sre")}, indent=1, default=float
+        )
+    )
+    print(f"wrote {RESULTS / 'end_to_end.json'} and {PLOTS}/")
+
+
+if __name__ == "__main__":
+    main()
