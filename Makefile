@@ -5,7 +5,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 DEMO_ROOT ?= data/synthetic/default
 DEMO_DATA := $(DEMO_ROOT)/nuscenes
-DEMO_PROPOSALS := $(DEMO_ROOT)/workspace/proposals.json
+DEMO_WORKSPACE := $(DEMO_ROOT)/workspace
+DEMO_SITE ?= site-001
 
 .PHONY: demo test setup lint clean frontend chromium postgresql
 
@@ -48,16 +49,13 @@ ifeq ($(INITDB),)
 	apt-get update && apt-get install -y postgresql
 endif
 
-# The pipeline as far as it exists, then the editor. Until the road-surface stage lands (issue 10), VMA proposes
-# from the generator's ground-truth BEV rasters; features/SfM are left out until SfM exists (issue 9).
+# The whole path on the default synthetic site (each stage skips what is up to date), then the editor on the
+# reconstructed rasters with the VMA proposals, and the viser 3D review beside it.
 demo: $(STAMP) frontend
 	$(BIN)/cama synth --preset default --out $(DEMO_ROOT)
-	$(BIN)/cama wigo $(DEMO_DATA)
-	$(BIN)/cama keyframes $(DEMO_DATA)
-	$(BIN)/cama sites $(DEMO_DATA)
-	$(BIN)/cama pairs $(DEMO_DATA)
-	$(BIN)/cama propose $(DEMO_ROOT) --proposer rule --out $(DEMO_PROPOSALS)
-	$(BIN)/cama demo $(DEMO_ROOT) --proposals $(DEMO_PROPOSALS)
+	$(BIN)/cama run $(DEMO_DATA)
+	$(BIN)/cama demo $(DEMO_ROOT) --proposals $(DEMO_WORKSPACE)/proposals/$(DEMO_SITE).json \
+		--rasters $(DEMO_WORKSPACE)/surface/$(DEMO_SITE)/bev
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
