@@ -23,7 +23,7 @@ def surface_command(
     epochs: Annotated[int, typer.Option(help="Mesh optimisation passes over the keyframe images.")] = 1,
     refine_elevation: Annotated[
         bool, typer.Option(help="Refine the elevation MLP through the image losses.")
-    ] = False,
+    ] = True,
     threads: Annotated[int, typer.Option(help="torch threads on the CPU.")] = 1,
     device: Annotated[str, typer.Option(help="auto, cpu or cuda.")] = "auto",
     overwrite: OverwriteOpt = False,

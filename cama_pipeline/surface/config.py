@@ -50,11 +50,14 @@ class SurfaceConfig:
     images_per_batch: int = 16
     vertices_per_image: int = 12000
     """Visible vertices sampled per image and optimisation step (all of them in the first, averaging pass)."""
-    colour_lr: float = 0.02
-    semantic_lr: float = 0.1
-    refine_elevation: bool = False
-    """Refine the elevation MLP through the photometric/semantic loss during mesh optimisation. Off by
-    default: measured, it raised the elevation error on the synthetic sites (see bench/surface.py)."""
+    colour_lr: float = 0.0
+    """Adam step on the per-vertex colours in the optimisation epochs; 0 keeps the weighted means of the
+    observation pass (measured on the default site: Adam's per-vertex steps on sparse batches add noise,
+    -1.7 dB PSNR, see bench/surface.py)."""
+    semantic_lr: float = 0.0
+    """Adam step on the per-vertex semantic logits; 0 keeps the observation pass's class votes."""
+    refine_elevation: bool = True
+    """Refine the elevation MLP through the photometric/semantic loss during mesh optimisation."""
     refine_lr: float = 5e-4
     anchor_weight: float = 1.0
     """Weight of the surface-point loss kept while refining elevation (holds the MLP near the points)."""
@@ -76,8 +79,6 @@ class SurfaceConfig:
             "control_spacing_m",
             "max_range_m",
             "min_depth_m",
-            "colour_lr",
-            "semantic_lr",
             "refine_lr",
         )
         for name in positive:
@@ -96,7 +97,7 @@ class SurfaceConfig:
         for name in ("elevation_iterations", "epochs"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("depth_tolerance", "anchor_weight", "semantic_weight"):
+        for name in ("depth_tolerance", "anchor_weight", "semantic_weight", "colour_lr", "semantic_lr"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not self.strip_x_range_m[0] < self.strip_x_range_m[1]:

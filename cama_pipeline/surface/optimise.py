@@ -9,6 +9,7 @@ each vertex covers and by the ground mask, with the surface-point loss holding t
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -182,16 +183,16 @@ def optimise(
     """`config.epochs` of Adam over image batches (see the module docstring); per-epoch mean losses."""
     device = mesh.vertex_xy.device
     generator = torch.Generator().manual_seed(config.seed)
-    mesh.colour.requires_grad_(True)
-    mesh.logits.requires_grad_(True)
-    groups = [
-        {"params": [mesh.colour], "lr": config.colour_lr},
-        {"params": [mesh.logits], "lr": config.semantic_lr},
-    ]
+    groups: list[dict[str, Any]] = []
+    for tensor, lr in ((mesh.colour, config.colour_lr), (mesh.logits, config.semantic_lr)):
+        if lr > 0:
+            groups.append({"params": [tensor.requires_grad_(True)], "lr": lr})
     if config.refine_elevation:
         groups.append({"params": list(mesh.mlp.parameters()), "lr": config.refine_lr})
+    history: list[dict[str, float]] = []
+    if not groups:
+        return history
     optimiser = torch.optim.Adam(groups)
-    history = []
     for _ in range(config.epochs):
         totals = np.zeros(3)
         steps = 0
