@@ -3,7 +3,8 @@
 For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/<site>/poses.json`), `cama surface` runs into
 its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters are compared with the
 site's `ground_truth/bev/` at each reconstructed cell's centre (nearest ground-truth cell):
-  elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking or crosswalk);
+  elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking or crosswalk),
+             and RMSE by distance from the site's keyframe trajectory (beyond the strip it is extrapolated);
   semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters;
   photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
@@ -32,11 +33,17 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
+from scipy import ndimage
 
+from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
 from cama_pipeline.surface import SurfaceConfig, run
+from cama_pipeline.surface.points import ego_poses
+from cama_pipeline.surface.poses import posed_views
 
 RESULTS = Path(__file__).parent / "results"
+BANDS_M = ((0, 2), (2, 4), (4, 6), (6, 8), (8, 10), (10, 14), (14, 100))
 ROAD_CLASSES = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
 IOU_CLASSES = {"road": Semantic.ROAD, "curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING}
 IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
@@ -80,14 +87,32 @@ def affine_fit(ours: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return fitted
 
 
-def compare(ours: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
+def rmse_by_distance(
+    ours: dict[str, Any], road: np.ndarray, error: np.ndarray, trajectory_xy: np.ndarray
+) -> dict[str, float | None]:
+    """Elevation RMSE of the road cells in bands of distance (m) from the nearest keyframe position."""
+    geo = ours["geo"]
+    cols = np.round((trajectory_xy[:, 0] - geo["origin_xy"][0]) / geo["resolution"]).astype(int)
+    rows = np.round((geo["origin_xy"][1] - trajectory_xy[:, 1]) / geo["resolution"]).astype(int)
+    free = np.ones(road.shape, bool)
+    free[rows, cols] = False
+    distance = ndimage.distance_transform_edt(free, sampling=geo["resolution"])
+    bands = {}
+    for lo, hi in BANDS_M:
+        band = road & (distance >= lo) & (distance < hi)
+        bands[f"{lo}-{hi}"] = float(np.sqrt(np.mean(error[band] ** 2))) if band.any() else None
+    return bands
+
+
+def compare(ours: dict[str, Any], truth: dict[str, Any], trajectory_xy: np.ndarray) -> dict[str, Any]:
     """Elevation, semantic, photometric and coverage figures of `ours` against `truth`."""
     inside, tr, tc = truth_at(ours, truth)
     true_sem = np.where(inside, truth["semantic"][tr, tc], 255)
     observed = inside & (ours["semantic"] != 255)
     both = observed & (true_sem != 255)
     road = observed & np.isin(true_sem, [int(c) for c in ROAD_CLASSES])
-    error = np.abs(ours["elevation"][road] - truth["elevation"][tr[road], tc[road]])
+    signed = ours["elevation"] - truth["elevation"][tr, tc]
+    error = np.abs(signed[road])
     ious = {}
     for name, cls in IOU_CLASSES.items():
         a, b = ours["semantic"][both] == int(cls), true_sem[both] == int(cls)
@@ -100,6 +125,7 @@ def compare(ours: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
         "elevation_mae_m": float(np.mean(error)),
         "elevation_p95_m": float(np.percentile(error, 95)),
         "road_cells_evaluated": int(road.sum()),
+        "elevation_rmse_m_by_distance_from_trajectory_m": rmse_by_distance(ours, road, signed, trajectory_xy),
         "iou": ious,
         "psnr_db": psnr(rgb, true_rgb),
         "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
@@ -118,7 +144,10 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     started = time.perf_counter()
     result = run(config, site / "nuscenes", workspace, poses=poses, overwrite=True, show_progress=False)[0]
     seconds = time.perf_counter() - started
-    figures = compare(load_bev(result.folder / "bev"), load_bev(site / "ground_truth" / "bev"))
+    manifest = read_site_manifest(site_manifest_path(workspace, result.site_id))
+    views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.site_id, "ground_truth")
+    trajectory_xy = ego_poses(views)[:, :2, 3]
+    figures = compare(load_bev(result.folder / "bev"), load_bev(site / "ground_truth" / "bev"), trajectory_xy)
     report = result.report
     return {
         "poses": poses,
@@ -161,6 +190,10 @@ def main() -> None:
             + ", ".join(f"{k} {v:.3f}" for k, v in row["iou"].items())
             + f", PSNR {row['psnr_db']:.2f} dB (affine {row['psnr_affine_db']:.2f}), "
             f"{row['seconds']['total']:.0f} s {row['seconds']}"
+        )
+        print(
+            "    RMSE by distance from the trajectory (m):",
+            row["elevation_rmse_m_by_distance_from_trajectory_m"],
         )
     reference = runs[0]
     results = {
