@@ -15,85 +15,33 @@ import json
 import logging
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from fastapi.testclient import TestClient
+from app.simulation.annotator import correct_proposals, draw_from_scratch
+from app.simulation.workbench import load_proposals, local_backend, register_synthetic_site, true_polylines
 
-from annotations.schema import AnnotationSet
-from app.backend.config import Settings
-from app.backend.main import create_app
-from app.simulation.annotator import ApiSession, correct_proposals, draw_from_scratch
-from app.simulation.plan import Polyline
-from cama_pipeline.evaluate.inputs import load_vector_map
-
-PASSWORD = "bench-annotator-pw"
 RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
 
-def _truths(site: Path) -> list[Polyline]:
-    return [
-        Polyline(e.cls, np.asarray(e.points)[:, :2])
-        for e in load_vector_map(site / "ground_truth" / "vector_map.json")
-    ]
-
-
-def _register(admin: ApiSession, site: Path, name: str) -> int:
-    return int(
-        admin.call("POST", "/api/sites", json={"name": name, "synthetic_dir": str(site.resolve())})["id"]
-    )
-
-
-def _load_proposals(admin: ApiSession, site_id: int, path: Path) -> int:
-    """Bulk-load a proposals file into the site, moving points from the file's site frame to the backend's."""
-    proposals = AnnotationSet.read_json(path)
-    backend_origin = np.asarray(admin.call("GET", f"/api/sites/{site_id}")["site_origin_xy"], float)
-    shift = np.asarray(proposals.georeference.site_origin_xy, float) - backend_origin
-    elements = [
-        {
-            "class": e.cls,
-            "points": (np.asarray(e.points_2d) + shift).tolist(),
-            "confidence": e.confidence,
-            "source": "proposal",
-        }
-        for e in proposals.elements
-    ]
-    admin.call("POST", f"/api/sites/{site_id}/elements/bulk", json={"elements": elements})
-    return len(elements)
-
-
 def run(site: Path, proposal_files: list[Path]) -> dict[str, Any]:
-    truths = _truths(site)
-    with tempfile.TemporaryDirectory() as tmp:
-        settings = Settings(
-            data_dir=Path(tmp), scrypt_n=2**4, admin_username="admin", admin_password=PASSWORD
-        )
-        with TestClient(create_app(settings)) as client:
-            admin = ApiSession(client, "admin", PASSWORD)
-            admin.call(
-                "POST", "/api/users", json={"username": "sim", "password": PASSWORD, "role": "annotator"}
-            )
-            annotator = ApiSession(client, "sim", PASSWORD)
+    truths = true_polylines(site)
+    with local_backend() as (admin, annotator):
+        started = time.perf_counter()
+        scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)
+        out: dict[str, Any] = {"from_scratch": {**scratch.as_dict(), "wall_s": time.perf_counter() - started}}
+        for path in proposal_files:
+            site_id = register_synthetic_site(admin, site, f"proposals-{path.stem}")
+            loaded = load_proposals(admin, site_id, path)
             started = time.perf_counter()
-            scratch = draw_from_scratch(annotator, _register(admin, site, "scratch"), truths)
-            out: dict[str, Any] = {
-                "from_scratch": {**scratch.as_dict(), "wall_s": time.perf_counter() - started}
+            log = correct_proposals(annotator, site_id, truths)
+            out[str(path)] = {
+                **log.as_dict(),
+                "proposals": loaded,
+                "wall_s": time.perf_counter() - started,
+                "speed_up_vs_scratch": scratch.total_s / log.total_s if log.total_s else None,
             }
-            for path in proposal_files:
-                site_id = _register(admin, site, f"proposals-{path.stem}")
-                loaded = _load_proposals(admin, site_id, path)
-                started = time.perf_counter()
-                log = correct_proposals(annotator, site_id, truths)
-                out[str(path)] = {
-                    **log.as_dict(),
-                    "proposals": loaded,
-                    "wall_s": time.perf_counter() - started,
-                    "speed_up_vs_scratch": scratch.total_s / log.total_s if log.total_s else None,
-                }
-            client.app.state.engine.dispose()  # type: ignore[attr-defined]
     return {"site": str(site), "true_elements": len(truths), "results": out}
 
 

@@ -23,7 +23,6 @@ import json
 import logging
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -31,15 +30,18 @@ from typing import Any
 import cv2
 import matplotlib
 import numpy as np
-from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
-from app.backend.config import Settings
-from app.backend.main import create_app
-from app.simulation.annotator import ApiSession, correct_proposals, draw_from_scratch
-from app.simulation.plan import Polyline
+from app.simulation.annotator import correct_proposals, draw_from_scratch
+from app.simulation.workbench import (
+    kept_map,
+    load_proposals,
+    local_backend,
+    register_synthetic_site,
+    true_polylines,
+)
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
@@ -59,7 +61,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 PLOTS = RESULTS / "end_to_end"
-PASSWORD = "bench-end-to-end"
 logger = logging.getLogger("bench.end_to_end")
 
 
@@ -172,49 +173,13 @@ def sfm_pose_map(workspace: Path, site_id: str) -> dict[str, Pose]:
 
 def simulated_pass(site: Path, proposals: Path) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     """The scripted annotator on the proposals and on an empty site; the corrected map (global 2D)."""
-    truths = [
-        Polyline(e.cls, np.asarray(e.points)[:, :2])
-        for e in load_vector_map(site / "ground_truth" / "vector_map.json")
-    ]
-    annotations = AnnotationSet.read_json(proposals)
-    origin = np.asarray(annotations.georeference.site_origin_xy, float)
-    with tempfile.TemporaryDirectory() as tmp:
-        settings = Settings(
-            data_dir=Path(tmp), scrypt_n=2**4, admin_username="admin", admin_password=PASSWORD
-        )
-        with TestClient(create_app(settings)) as client:
-            admin = ApiSession(client, "admin", PASSWORD)
-            admin.call(
-                "POST", "/api/users", json={"username": "sim", "password": PASSWORD, "role": "annotator"}
-            )
-            annotator = ApiSession(client, "sim", PASSWORD)
-            site_ids = []
-            for name in ("corrected", "scratch"):
-                body = {"name": name, "synthetic_dir": str(site.resolve())}
-                site_ids.append(int(admin.call("POST", "/api/sites", json=body)["id"]))
-            backend_origin = np.asarray(
-                admin.call("GET", f"/api/sites/{site_ids[0]}")["site_origin_xy"], float
-            )
-            elements = [
-                {
-                    "class": e.cls,
-                    "points": (np.asarray(e.points_2d) + origin - backend_origin).tolist(),
-                    "confidence": e.confidence,
-                    "source": "proposal",
-                }
-                for e in annotations.elements
-            ]
-            if elements:
-                admin.call("POST", f"/api/sites/{site_ids[0]}/elements/bulk", json={"elements": elements})
-            corrected = correct_proposals(annotator, site_ids[0], truths)
-            scratch = draw_from_scratch(annotator, site_ids[1], truths)
-            final = annotator.call("GET", f"/api/sites/{site_ids[0]}/elements")
-            client.app.state.engine.dispose()  # type: ignore[attr-defined]
-    kept = [
-        (e["class"], np.asarray(e["points"], float) + backend_origin)
-        for e in final
-        if e["state"] != "rejected"
-    ]
+    truths = true_polylines(site)
+    with local_backend() as (admin, annotator):
+        corrected_site = register_synthetic_site(admin, site, "corrected")
+        load_proposals(admin, corrected_site, proposals)
+        corrected = correct_proposals(annotator, corrected_site, truths)
+        scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)
+        kept = kept_map(annotator, corrected_site)
     figures = {
         "scratch": scratch.as_dict(),
         "corrected": corrected.as_dict(),
