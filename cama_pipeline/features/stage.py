@@ -5,14 +5,17 @@ matching with geometric verification on the pairs chosen by `cama pairs`.
     <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
         counts {"name": {"features", "masked"}}, "low_feature_images" [name], "pairs_listed",
         "pairs_verified", "median_inliers", "seconds": {"extract", "match"}
-Reruns reuse the database: images already in it are not extracted again and matched pairs are not
-matched again. A change of extractor needs `--overwrite`.
+    "fingerprint": config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
+        as this stage left it (not its mtime: merely reading a SQLite database can touch that).
+A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
+later stages keyed on it stay up to date). Otherwise the database is reused: images already in it are not
+extracted again and matched pairs are not matched again. A change of extractor needs `--overwrite`.
 """
 
 import logging
 import statistics
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +34,8 @@ from cama_pipeline.pairs.io import pairs_dir
 from cama_pipeline.site.workspace import (
     WorkspaceError,
     default_workspace,
+    file_stats,
+    fingerprint,
     read_json,
     read_site_manifest,
     read_sites_index,
@@ -123,7 +128,15 @@ def run_site(
         database.unlink(missing_ok=True)
         report_path.unlink(missing_ok=True)
     previous = _previous_report(report_path, extractor)
-    views = site_views(dataset, read_site_manifest(site_manifest_path(workspace, site_id)))
+    manifest_path = site_manifest_path(workspace, site_id)
+    digest = fingerprint(
+        asdict(config), extractor.name, matcher.name, file_stats([manifest_path, pairs_file])
+    )
+    size = database.stat().st_size if database.is_file() else None
+    if size is not None and previous.get("fingerprint") == digest and previous.get("database_bytes") == size:
+        logger.info("features of %s up to date", site_id)
+        return SiteFeatures(site_id, database, previous)
+    views = site_views(dataset, read_site_manifest(manifest_path))
     started = time.perf_counter()
     with open_database(database) as db:
         counts = {
@@ -151,6 +164,8 @@ def run_site(
         "median_inliers": statistics.median(verified.values()) if verified else 0,
         "seconds": {"extract": extracted - started, "match": time.perf_counter() - extracted},
     }
+    report["fingerprint"] = digest
+    report["database_bytes"] = database.stat().st_size
     atomic_write_json(report_path, report, indent=1)
     return SiteFeatures(site_id, database, report)
 

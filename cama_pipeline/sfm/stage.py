@@ -350,8 +350,8 @@ def run_site(
     if not database.is_file():
         raise FileNotFoundError(f"{database}: not found; run `cama features` first")
     folder = sfm_dir(workspace, site_id)
-    inputs = file_stats([manifest_path, database, database.with_name("features.json")])
-    digest = fingerprint(asdict(config), asdict(merge_config), inputs)
+    features = stored_fingerprint(database.with_name("features.json")) or file_stats([database])
+    digest = fingerprint(asdict(config), asdict(merge_config), file_stats([manifest_path]), features)
     if not overwrite and stored_fingerprint(folder / "report.json") == digest:
         return SiteSfm(site_id, folder, read_report(workspace, site_id), skipped=True)
     manifest = read_site_manifest(manifest_path)

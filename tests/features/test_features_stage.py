@@ -16,7 +16,7 @@ from site_workspace import build_site_workspace  # noqa: E402
 from cama_pipeline.cli import app  # noqa: E402
 from cama_pipeline.data import load_dataset  # noqa: E402
 from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
-from cama_pipeline.features.database import FeatureStore, open_database  # noqa: E402
+from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs  # noqa: E402
 from cama_pipeline.features.sift import SiftExtractor  # noqa: E402
 from cama_pipeline.features.stage import features_dir, run  # noqa: E402
 from cama_pipeline.pairs.cameras import site_views  # noqa: E402
@@ -77,20 +77,29 @@ def test_features_are_masked_stored_and_matched(dataset_root: Path, workspace: P
     assert on_blocked == 0
 
 
-def test_rerun_reuses_the_database_and_another_extractor_is_refused(
+def test_rerun_skips_when_up_to_date_reuses_the_database_otherwise_and_refuses_another_extractor(
     dataset_root: Path, workspace: Path
 ) -> None:
-    report_path = features_dir(workspace, "site-001") / "features.json"
+    folder = features_dir(workspace, "site-001")
+    report_path, database = folder / "features.json", folder / "database.db"
     before = json.loads(report_path.read_text())
+    with open_database(database) as db:  # a later stage reading the database leaves it up to date
+        assert verified_pairs(db)
+    stamp = database.stat().st_mtime_ns
     (again,) = run(FeaturesConfig(), dataset_root, workspace)
-    assert again.report["images"] == before["images"]
-    assert again.report["seconds"]["extract"] < 0.5 * max(before["seconds"]["extract"], 0.5)
+    assert again.report == before and database.stat().st_mtime_ns == stamp
+    pairs_file = workspace / "pairs" / "site-001" / "pairs.txt"
+    pairs_file.write_text(pairs_file.read_text())  # new pair list: match again, reuse extracted features
+    (changed,) = run(FeaturesConfig(), dataset_root, workspace)
+    assert changed.report["images"] == before["images"]
+    assert changed.report["fingerprint"] != before["fingerprint"]
+    assert changed.report["seconds"]["extract"] < 0.5 * max(before["seconds"]["extract"], 0.5)
     stale = json.loads(report_path.read_text())
     stale["extractor"] = "someone-elses-features"
     report_path.write_text(json.dumps(stale))
     with pytest.raises(WorkspaceError, match="overwrite"):
         run(FeaturesConfig(), dataset_root, workspace)
-    report_path.write_text(json.dumps(before))
+    report_path.write_text(json.dumps(changed.report))
 
 
 def test_blank_and_dark_images_give_few_features_and_a_warning_not_a_crash(
