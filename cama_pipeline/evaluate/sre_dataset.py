@@ -1,7 +1,7 @@
 """SRE over a data set: every key-frame camera image of the chosen scenes, with coarse or true poses."""
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -22,16 +22,24 @@ def evaluate_sre(
     *,
     true_poses: Mapping[str, Pose] | None = None,
     scenes: Sequence[str] | None = None,
+    images: Collection[str] | None = None,
     show_progress: bool = False,
 ) -> SreReport:
-    """SRE / precision / recall of a vector map over key-frame images (true poses when given, else coarse)."""
+    """SRE / precision / recall of a vector map over key-frame images (true poses when given, else coarse);
+    `images` restricts it to those image tokens (e.g. the ones a reconstruction posed)."""
     chosen = [s for s in dataset.scenes if scenes is None or s.name in scenes]
     if scenes is not None and len(chosen) != len(set(scenes)):
         missing = sorted(set(scenes) - {s.name for s in chosen})
         raise EvaluationInputError(f"{dataset.root}: no scene named {', '.join(missing)}")
     map_classes = {m for m, _ in config.class_pairs}
     used = [e for e in elements if e.cls in map_classes]
-    work = [(s.name, f.token, im) for s in chosen for f in s.frames for im in f.images.values()]
+    work = [
+        (s.name, f.token, im)
+        for s in chosen
+        for f in s.frames
+        for im in f.images.values()
+        if images is None or im.token in images
+    ]
     results = []
     columns = (TextColumn("sre"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, disable=not show_progress) as progress:
