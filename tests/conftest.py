@@ -5,6 +5,8 @@ from pathlib import Path
 
 import pytest
 
+from cama_pipeline.pipeline import PipelineConfig, PipelineResult
+from cama_pipeline.pipeline import run as run_pipeline
 from cama_pipeline.synthetic.config import SynthConfig, preset
 from cama_pipeline.synthetic.generate import SynthResult, run
 
@@ -29,3 +31,11 @@ def tiny_site(tmp_path_factory: pytest.TempPathFactory) -> GeneratedSite:
 def site_root(tiny_site: GeneratedSite) -> Path:
     """Root folder of the tiny site."""
     return tiny_site.result.out_dir
+
+
+@pytest.fixture(scope="session")
+def whole_path(tiny_site: GeneratedSite, tmp_path_factory: pytest.TempPathFactory) -> PipelineResult:
+    """`cama run` on the tiny site once (rule-based proposals, 1024 SIFT features): every stage's outputs."""
+    workspace = tmp_path_factory.mktemp("whole-path") / "workspace"
+    config = PipelineConfig(proposer="rule", max_features=1024)
+    return run_pipeline(tiny_site.result.out_dir / "nuscenes", workspace, config)
