@@ -31,6 +31,7 @@ import cv2
 import matplotlib
 import numpy as np
 from scipy.spatial.transform import Rotation
+from surface import load_bev, truth_at  # bench/surface.py: this script's folder is on sys.path
 
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
@@ -99,30 +100,18 @@ def pose_figures(site: Path, views: list[CameraView], workspace: Path, site_id: 
     return out
 
 
-def _raster(folder: Path) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
-    geo = json.loads((folder / "georeference.json").read_text())
-    elevation = np.load(folder / "elevation.npy").astype(np.float64)
-    semantic = cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED)
-    return geo, elevation, semantic
-
-
 def elevation_figures(site: Path, folder: Path) -> tuple[dict[str, Any], np.ndarray]:
-    """RMSE of the reconstructed elevation over observed cells that are road in the truth; the error map."""
-    geo, ours, ours_sem = _raster(folder)
-    true_geo, truth, true_sem = _raster(site / "ground_truth" / "bev")
-    rows, cols = np.indices(ours.shape)
-    x = geo["origin_xy"][0] + cols * geo["resolution"]
-    y = geo["origin_xy"][1] - rows * geo["resolution"]
-    tc = np.rint((x - true_geo["origin_xy"][0]) / true_geo["resolution"]).astype(int)
-    tr = np.rint((true_geo["origin_xy"][1] - y) / true_geo["resolution"]).astype(int)
-    inside = (tr >= 0) & (tr < truth.shape[0]) & (tc >= 0) & (tc < truth.shape[1])
-    error = np.full(ours.shape, np.nan)
-    road = np.zeros(ours.shape, dtype=bool)
-    t_sem = true_sem[tr[inside], tc[inside]]
-    road[inside] = (t_sem >= int(Semantic.ROAD)) & (t_sem != int(Semantic.UNOBSERVED))
-    observed = (ours_sem != int(Semantic.UNOBSERVED)) & np.isfinite(ours)
-    use = inside & road & observed
-    error[use] = ours[use] - truth[tr[use], tc[use]]
+    """RMSE of the reconstructed elevation over observed cells that are road in the truth; the error map.
+    Cells are paired with the true raster as `bench/surface.py` pairs them."""
+    ours, truth = load_bev(folder), load_bev(site / "ground_truth" / "bev")
+    inside, tr, tc = truth_at(ours, truth)
+    elevation = ours["elevation"].astype(np.float64)
+    true_sem = truth["semantic"][tr, tc]
+    road = inside & (true_sem >= int(Semantic.ROAD)) & (true_sem != int(Semantic.UNOBSERVED))
+    observed = (ours["semantic"] != int(Semantic.UNOBSERVED)) & np.isfinite(elevation)
+    use = road & observed
+    error = np.full(elevation.shape, np.nan)
+    error[use] = elevation[use] - truth["elevation"][tr[use], tc[use]]
     values = error[use]
     figures = {
         "cells": int(use.sum()),
@@ -151,8 +140,9 @@ def proposals_ap(site: Path, rasters_folder: Path, proposals: Path) -> dict[str,
 def lifted_map(vectors_xy: list[tuple[str, np.ndarray]], folder: Path) -> list[VectorElement]:
     """2D global vectors lifted through a raster folder's elevation (vertices without elevation dropped)."""
     geo = Georeference.from_raster_file(folder / "georeference.json", site_origin_xy=(0.0, 0.0))
-    _, elevation, semantic = _raster(folder)
-    unobserved = semantic == int(Semantic.UNOBSERVED)
+    bev = load_bev(folder)
+    elevation = bev["elevation"].astype(np.float64)
+    unobserved = bev["semantic"] == int(Semantic.UNOBSERVED)
     out = []
     for k, (cls, points) in enumerate(vectors_xy):
         lifted = lift_points(points, elevation, geo, unobserved=unobserved, search_radius_m=2.0).points_3d
