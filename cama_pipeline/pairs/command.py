@@ -25,13 +25,13 @@ def pairs_command(
             help="Nearest cameras considered per image for spatial pairs; 0: all within the radius."
         ),
     ] = 0,
-    knn_radius_m: Annotated[float, typer.Option(help="Spatial pairs are at most this far apart.")] = 30.0,
+    knn_radius_m: Annotated[float, typer.Option(help="Spatial pairs are at most this far apart.")] = 40.0,
     max_dz_m: Annotated[
         float, typer.Option(help="Largest camera height difference of a spatial pair.")
     ] = 3.0,
     min_footprint_overlap: Annotated[
         float, typer.Option(help="Least shared ground (share of the larger footprint) of a spatial pair.")
-    ] = 0.3,
+    ] = 0.4,
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Sequential and HSP pairs of each site's keyframe images (after `cama sites`)."""

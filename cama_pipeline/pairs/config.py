@@ -16,8 +16,10 @@ class PairsConfig:
     knn: int = 0
     """Nearest camera centres considered per image (scipy cKDTree); 0 considers every camera within the
     radius (a fixed k misses co-visible cameras where many clips, or a stationary clip, crowd one place)."""
-    knn_radius_m: float = 30.0
-    """Neighbours farther than this are never spatial pairs."""
+    knn_radius_m: float = 40.0
+    """Neighbours farther than this are never spatial pairs. Footprints reach `footprint_max_range_m` ahead, so
+    cameras 30-40 m apart can still share half their ground: on the default site 30 m missed 2.5 % of the
+    strongly co-visible pairs, 40 m misses 0.1 % (50 m adds nothing)."""
     max_dz_m: float = 3.0
     """Largest height difference of two camera centres (the paper's Δz): other levels, other roads."""
     face_to_face_angle_deg: float = 150.0
@@ -28,8 +30,11 @@ class PairsConfig:
     """Ground footprints reach at most this far from the camera (far road is too oblique to match)."""
     footprint_grid: tuple[int, int] = (20, 72)
     """Ground samples around the camera (ranges, azimuths) projected into the image to trace the footprint."""
-    min_footprint_overlap: float = 0.3
-    """Least overlap of two ground footprints, as a share of the smaller one, to keep a spatial pair."""
+    min_footprint_overlap: float = 0.4
+    """Least overlap of two ground footprints (shared area over the larger one) to keep a spatial pair. It tracks
+    the true mutual co-visibility closely (correlation 0.98 on the default site), so this sets the pair count:
+    with a 40 m radius, 0.3 keeps 12.4 % of all pairs, 0.35 10.5 %, 0.4 9.1 % (97.4 % recall of strongly
+    co-visible pairs), 0.45 8.0 % (94.8 %)."""
 
     def __post_init__(self) -> None:
         for name in ("sequential_window", "rig_window", "knn"):
