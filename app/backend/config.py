@@ -2,6 +2,7 @@
 
 import logging
 import os
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,6 +14,10 @@ DEFAULT_MAX_PAYLOAD_BYTES = 8 * 1024 * 1024
 DEFAULT_EXTENT_MARGIN_M = 50.0
 DEFAULT_SCRYPT_N = 2**14
 DEFAULT_QA_SHARE = 0.1
+
+
+_REVIEW_URL = re.compile(r"https?://[^\s/?#]+(/[^\s?#]*)?|:\d{1,5}")
+"""An http(s) URL without query or fragment (the editor adds the query), or `:<port>`."""
 
 
 def _paths(value: str) -> tuple[Path, ...]:
@@ -50,6 +55,12 @@ class Settings:
     """Share of pre-accepted proposals sampled for the lead's QA queue."""
     preaccept_threshold: float | None = None
     """Confidence at or above which proposals enter pre-accepted; None: the registry's calibrated value."""
+    review_url: str = ""
+    """Where the viser 3D review (`cama view`) is served, for the editor's "3D review" link: an http(s) URL,
+    or `:<port>` for that port on the host the browser reached the editor by; empty: no link."""
+    review_site_id: int | None = None
+    """The backend site the 3D review shows (the link carries the selected element only on that site);
+    None: any site."""
 
     def __post_init__(self) -> None:
         """Validate the fields so that a bad environment fails at start, naming the variable."""
@@ -69,6 +80,10 @@ class Settings:
             raise ValueError(f"CAMA_QA_SHARE: must be in [0, 1], got {self.qa_share}")
         if self.preaccept_threshold is not None and not 0.0 <= self.preaccept_threshold <= 1.0:
             raise ValueError(f"CAMA_PREACCEPT_THRESHOLD: must be in [0, 1], got {self.preaccept_threshold}")
+        if self.review_url and not _REVIEW_URL.fullmatch(self.review_url):
+            raise ValueError(f"CAMA_REVIEW_URL: must be an http(s) URL or :<port>, got {self.review_url!r}")
+        if self.review_site_id is not None and self.review_site_id < 1:
+            raise ValueError(f"CAMA_REVIEW_SITE_ID: must be a site id >= 1, got {self.review_site_id}")
 
     @property
     def resolved_database_url(self) -> str:
@@ -104,4 +119,6 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "retrain_after": int,
     "qa_share": float,
     "preaccept_threshold": float,
+    "review_url": str,
+    "review_site_id": int,
 }

@@ -1,5 +1,5 @@
 """`cama demo`: load a generated site and its VMA proposals into a backend database, then serve the editor
-(and the viser 3D review beside it).
+(and the viser 3D review beside it, linked from the editor's top bar).
 
 With `--rasters <workspace>/surface/<site_id>/bev` the editor shows the reconstructed BEV rasters (the proposals
 made from them share their frame); without it, the generator's ground-truth rasters. The demo server keeps its
@@ -11,6 +11,7 @@ restarts). Three demo accounts are made on first run, one per role, with the pas
 import json
 import logging
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +29,7 @@ from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
 logger = logging.getLogger(__name__)
 DEMO_USERS = (("admin", "admin"), ("lead", "lead"), ("annotator", "annotator"))
 DEFAULT_PASSWORD = "cama-demo"
+WILDCARD_HOSTS = ("0.0.0.0", "::", "")
 
 
 def ensure_demo_users(session: Session, password: str, scrypt_n: int) -> None:
@@ -144,7 +146,15 @@ def demo_command(
     )
     if view_port:
         _start_review(site_dir, rasters, site_id, password, f"http://{host}:{port}", host, view_port)
+        # the review's site is known only once loaded; the editor's link reads these two fields per request
+        app.state.settings = replace(settings, review_url=review_url(host, view_port), review_site_id=site_id)
     uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+def review_url(host: str, port: int) -> str:
+    """The 3D review's URL for the editor's link: `:<port>` (the browser's host) when listening on every
+    address, since the browser reaches the machine by a name the server does not know."""
+    return f":{port}" if host in WILDCARD_HOSTS else f"http://{host}:{port}/"
 
 
 def _start_review(

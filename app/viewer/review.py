@@ -17,6 +17,7 @@ from app.viewer.content import (
     sparse_points,
     surface_folder,
 )
+from app.viewer.focus import focus_on_connect
 from app.viewer.scene import ReviewScene
 from app.viewer.sources import VectorSource, VectorSourceError
 
@@ -51,9 +52,15 @@ def open_review(server: viser.ViserServer, inputs: ViewInputs, source: VectorSou
         logger.info("no sparse points yet (run `cama sfm`)")
     else:
         scene.add_points(points)
+    return show_vectors(scene, source)
+
+
+def show_vectors(scene: ReviewScene, source: VectorSource) -> ReviewScene:
+    """Draw the source's vectors (with their toggle) and focus each new browser on the element its link names."""
     scene.add_vector_toggle()
     counts = scene.sync_vectors(source.load())
     logger.info("%d vectors drawn, %d without elevation", counts.added, counts.not_lifted)
+    scene.server.on_client_connect(focus_on_connect(scene))
     return scene
 
 

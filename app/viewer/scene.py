@@ -138,6 +138,11 @@ class ReviewScene:
         element = self._vectors[element_id][0]
         self._panel.content = f"**Element {element.id}**  \nclass: {element.cls}  \nstate: {element.state}  \nversion: {element.version}"
 
+    def element_centre(self, element_id: str) -> np.ndarray | None:
+        """The view-frame centre of a drawn element (its lifted vertices' mean); None when not drawn."""
+        known = self._vectors.get(element_id)
+        return None if known is None else known[1].mean(axis=0)
+
     def pick(self, ray_origin: np.ndarray, ray_direction: np.ndarray) -> str | None:
         """The drawn element nearest to a view-frame ray, if any is close enough."""
         polylines = {element_id: points for element_id, (_, points) in self._vectors.items()}

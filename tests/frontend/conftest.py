@@ -5,15 +5,22 @@ from collections.abc import Iterator
 import pytest
 from editor_browser_helpers import SeededServer, launch_chromium, seeded_server
 from playwright.sync_api import Browser, Page, ViewportSize, expect, sync_playwright
+from system_helpers import free_port
 
 VIEWPORT: ViewportSize = {"width": 1440, "height": 900}
 expect.set_options(timeout=10_000)  # the machine is shared: give slow renders room
 
 
 @pytest.fixture(scope="session")
-def seeded(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SeededServer]:
+def review_url() -> str:
+    """Where the seeded server says the 3D review is: a free loopback port a test may serve viser on."""
+    return f"http://127.0.0.1:{free_port()}/"
+
+
+@pytest.fixture(scope="session")
+def seeded(tmp_path_factory: pytest.TempPathFactory, review_url: str) -> Iterator[SeededServer]:
     """A real `cama serve` on loopback with users ann, bob (annotators), lead and the painted site."""
-    with seeded_server(tmp_path_factory.mktemp("editor-server")) as server:
+    with seeded_server(tmp_path_factory.mktemp("editor-server"), review_url) as server:
         yield server
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import cv2
 import httpx
 import numpy as np
+import pytest
 from playwright.sync_api import Browser, Page, Playwright
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend_system"))
@@ -112,6 +113,8 @@ class SeededServer:
     server: ServerProcess
     site_id: int
     headers: dict[str, dict[str, str]]
+    raster_dir: Path | None = None
+    """The painted BEV rasters the sites are registered on."""
 
     @property
     def base_url(self) -> str:
@@ -130,6 +133,25 @@ class SeededServer:
             )
         response.raise_for_status()
         return dict(response.json())
+
+    def add_site(self, name: str, proposals: list[dict[str, Any]]) -> int:
+        """Register another site on the same rasters with these proposals (as the lead), for tests that need
+        a site no other test touches; its id."""
+        site = {
+            "name": name,
+            "site_origin_xy": list(SITE_ORIGIN_XY),
+            "georeference": georeference(),
+            "raster_dir": str(self.raster_dir),
+        }
+        with self.client() as client:
+            response = client.post("/api/sites", json=site, headers=self.headers["lead"])
+            response.raise_for_status()
+            site_id = int(response.json()["id"])
+            bulk = {"elements": [{**p, "source": "proposal"} for p in proposals]}
+            client.post(
+                f"/api/sites/{site_id}/elements/bulk", json=bulk, headers=self.headers["lead"]
+            ).raise_for_status()
+        return site_id
 
     def element(self, element_id: int) -> dict[str, Any]:
         """An element's current version from the API."""
@@ -175,13 +197,16 @@ def seed(server: ServerProcess, raster_dir: Path) -> SeededServer:
         client.post(
             f"/api/sites/{site_id}/elements/bulk", json=bulk, headers=headers["lead"]
         ).raise_for_status()
-    return SeededServer(server=server, site_id=site_id, headers=headers)
+    return SeededServer(server=server, site_id=site_id, headers=headers, raster_dir=raster_dir)
 
 
 @contextmanager
-def seeded_server(data_dir: Path) -> Iterator[SeededServer]:
-    """A `cama serve` process on loopback with the seeded site; stopped afterwards."""
-    server = ServerProcess(data_dir=data_dir).start()
+def seeded_server(data_dir: Path, review_url: str = "") -> Iterator[SeededServer]:
+    """A `cama serve` process on loopback with the seeded site (its editor linking to a 3D review at
+    `review_url` when given, as `cama demo` sets it); stopped afterwards."""
+    with pytest.MonkeyPatch.context() as patch:  # the server process inherits the variable at start
+        patch.setenv("CAMA_REVIEW_URL", review_url)
+        server = ServerProcess(data_dir=data_dir).start()
     try:
         yield seed(server, data_dir / "bev")
     finally:
@@ -204,9 +229,11 @@ def log_in(page: Page, base_url: str, username: str, hash_route: str = "") -> No
     page.wait_for_selector("#logout")
 
 
-def open_editor(page: Page, seeded: SeededServer, username: str = "ann", query: str = "") -> None:
-    """Log in and open the seeded site's editor; waits until the elements are drawn."""
-    log_in(page, seeded.base_url, username, f"#/site/{seeded.site_id}{query}")
+def open_editor(
+    page: Page, seeded: SeededServer, username: str = "ann", query: str = "", site_id: int | None = None
+) -> None:
+    """Log in and open the seeded site's (or another site's) editor; waits until the elements are drawn."""
+    log_in(page, seeded.base_url, username, f"#/site/{site_id or seeded.site_id}{query}")
     page.wait_for_function("window.camaEditor && window.camaEditor.firstRenderMs !== null")
 
 

@@ -7,6 +7,7 @@ import { mountLogin } from "./login.js";
 import { mountSites } from "./sites.js";
 import { mountEditor } from "./editor/index.js";
 import { mountLead } from "./lead/index.js";
+import { ReviewLink } from "./review-link.js";
 
 /**
  * Parse the hash: "#/site/3/lead?class=divider" -> {parts: ["site","3","lead"], params}.
@@ -27,14 +28,17 @@ class App {
     this.routeCount = 0;
     this.userBox = h("div.user");
     this.nav = h("nav.tabs");
+    this.reviewLink = new ReviewLink();
     this.content = h("main.content");
     const brand = h("a.brand", { href: "#/sites", title: "Sites" }, h("span.logo", {}, "◆"), "CAMA Studio");
     replaceChildren(root, h("header.topbar", {}, brand, this.nav, this.userBox), this.content);
     window.addEventListener("hashchange", () => this.route());
     window.addEventListener("cama:logout", () => this.logout());
+    window.addEventListener("cama:selection", (event) => this.reviewLink.select(/** @type {CustomEvent} */ (event).detail.ids));
   }
 
   async start() {
+    await this.reviewLink.configure(this.api);
     if (this.api.token) {
       try {
         this.api.me = await this.api.get("/api/auth/me");
@@ -50,7 +54,7 @@ class App {
     window.location.hash = "#/login";
   }
 
-  /** Top bar: the tabs of the current site and the user with a log-out button. */
+  /** Top bar: the tabs of the current site (and its 3D review when one is served) and the user with a log-out button. */
   renderChrome(siteId, active) {
     const me = this.api.me;
     const tabs = [];
@@ -59,6 +63,7 @@ class App {
       if (me && me.role !== "annotator") {
         tabs.push(h(`a.tab${active === "lead" ? ".active" : ""}`, { href: `#/site/${siteId}/lead` }, "Lead"));
       }
+      tabs.push(this.reviewLink.forSite(siteId));
     }
     replaceChildren(this.nav, ...tabs);
     if (me) {

@@ -1,4 +1,5 @@
-"""The built browser editor (`app/frontend/dist`, made by the Vite build of the set-up step) at `/`.
+"""The built browser editor (`app/frontend/dist`, made by the Vite build of the set-up step) at `/`, and the
+small settings the page reads on start (`/api/frontend/config`: where the 3D review is served).
 
 Only `index.html` and the hashed files under `assets/` are served; the page gets a strict Content-Security-Policy
 (scripts from this origin only), so even a rendering mistake could not run injected script.
@@ -9,11 +10,13 @@ from pathlib import Path
 
 from fastapi import APIRouter
 from fastapi.responses import FileResponse
+from pydantic import BaseModel, Field
 
+from app.backend.api.deps import SettingsDep
 from app.backend.errors import NotFoundError
 
 logger = logging.getLogger(__name__)
-router = APIRouter(include_in_schema=False)
+router = APIRouter()
 
 DIST_DIR = Path(__file__).resolve().parents[3] / "frontend" / "dist"
 """Vite's output folder; built by `make` (the `frontend` target) before `demo` and `test`."""
@@ -34,14 +37,31 @@ def _index_file() -> Path:
     return index
 
 
-@router.get("/", response_class=FileResponse)
+class FrontendConfig(BaseModel):
+    """What the editor needs to know about its surroundings (no secrets: read before logging in)."""
+
+    review_url: str | None = Field(
+        description="The viser 3D review's URL, or `:<port>` on the editor's host; null when none is served."
+    )
+    review_site_id: int | None = Field(
+        description="The site the 3D review shows; null: it follows whichever site it was started on."
+    )
+
+
+@router.get("/api/frontend/config", response_model=FrontendConfig, tags=["frontend"])
+def frontend_config(settings: SettingsDep) -> FrontendConfig:
+    """Where the 3D review is served (`CAMA_REVIEW_URL`, set by `cama demo`), for the editor's link to it."""
+    return FrontendConfig(review_url=settings.review_url or None, review_site_id=settings.review_site_id)
+
+
+@router.get("/", response_class=FileResponse, include_in_schema=False)
 def editor_page() -> FileResponse:
     """The single-page editor; it routes itself by URL hash and talks to `/api`."""
     headers = {"Content-Security-Policy": CONTENT_SECURITY_POLICY, "Cache-Control": "no-cache"}
     return FileResponse(_index_file(), media_type="text/html", headers=headers)
 
 
-@router.get("/assets/{name}", response_class=FileResponse)
+@router.get("/assets/{name}", response_class=FileResponse, include_in_schema=False)
 def editor_asset(name: str) -> FileResponse:
     """A hashed script, style sheet or image of the build; names with path parts are refused."""
     assets = (DIST_DIR / "assets").resolve()

@@ -79,7 +79,7 @@ export async function mountEditor(container, api, siteId, params) {
   const tools = new Tools(m.map, m.elementLayer, store, sync);
   const ops = new Operations(tools, store, sync);
   const findings = new Findings({ api, siteId, source: m.findingSource, view: m.view, store, tools, isLead });
-  const review = new ReviewPanel({ api, siteId, view: m.view, store, tools, ops, isLead });
+  const review = new ReviewPanel({ api, siteId, view: m.view, store, tools, ops, isLead, regionSource: m.regionSource });
   const conflicts = new ConflictBanner(sync, m.draftSource);
   const overlays = [
     { title: "Vector elements", layer: m.elementLayer },
@@ -123,8 +123,10 @@ function wireStatus({ m, store, sync, tools, ops, review, statusBar, findings })
   tools.addEventListener("mode", showMode);
   showMode();
   tools.addEventListener("selection", () => {
-    statusBar.setSelection(tools.selected().length);
+    const ids = tools.selected().map((feature) => feature.getId());
+    statusBar.setSelection(ids.length);
     review.update();
+    window.dispatchEvent(new CustomEvent("cama:selection", { detail: { ids } })); // the top bar's 3D review link
   });
   const count = () => statusBar.setCount(m.elementSource.getFeatures().length);
   m.elementSource.on(["addfeature", "removefeature"], count);
@@ -163,6 +165,7 @@ function exposeTestHook({ m, siteId }) {
     frameRenderMs: [],
     pixelOf: (x, y) => m.map.getPixelFromCoordinate([x, y]),
     elementCount: () => m.elementSource.getFeatures().length,
+    regionOutlines: () => m.regionSource.getFeatures().map((feature) => feature.getGeometry().getExtent()),
     centerOn: (x, y, resolution) => {
       m.view.setCenter([x, y]);
       if (resolution) m.view.setResolution(resolution);

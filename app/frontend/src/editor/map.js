@@ -11,7 +11,7 @@ import TileGrid from "ol/tilegrid/TileGrid.js";
 import TileState from "ol/TileState.js";
 import { defaults as defaultControls, ScaleLine } from "ol/control.js";
 import { defaults as defaultInteractions } from "ol/interaction/defaults.js";
-import { elementStyle, findingStyle } from "./styles.js";
+import { elementStyle, findingStyle, regionStyle } from "./styles.js";
 
 export const LAYER_TITLES = {
   photometric: "Photometric",
@@ -116,6 +116,8 @@ export function createMap(target, api, site, layers) {
   });
   const findingSource = new VectorSource({ wrapX: false });
   const findingLayer = new VectorLayer({ source: findingSource, style: findingStyle, properties: { name: "findings" } });
+  const regionSource = new VectorSource({ wrapX: false });
+  const regionLayer = new VectorLayer({ source: regionSource, style: regionStyle, properties: { name: "region" } });
   const draftSource = new VectorSource({ wrapX: false });
   const draftLayer = new VectorLayer({ source: draftSource, properties: { name: "drafts" } });
   const span = Math.max(e.xmax - e.xmin, e.ymax - e.ymin, 1);
@@ -131,11 +133,11 @@ export function createMap(target, api, site, layers) {
   });
   const map = new Map({
     target,
-    layers: [...rasters, elementLayer, draftLayer, findingLayer],
+    layers: [...rasters, regionLayer, elementLayer, draftLayer, findingLayer],
     view,
     controls: defaultControls({ rotate: false, attribution: false }).extend([new ScaleLine({ units: "metric" })]),
     interactions: defaultInteractions({ doubleClickZoom: false, pinchRotate: false, altShiftDragRotate: false }),
     keyboardEventTarget: undefined,
   });
-  return { map, view, extent, rasters, elementSource, elementLayer, findingSource, draftSource };
+  return { map, view, extent, rasters, elementSource, elementLayer, findingSource, draftSource, regionSource };
 }

@@ -1,6 +1,7 @@
 // The review panel: what is selected (class, confidence, state, version, author), the review buttons, the
-// annotator queue's "next" (leased, centred on the map) and the class/confidence key.
+// annotator queue's "next" item (leased, centred on the map) or next region, and the class/confidence key.
 import { h, replaceChildren, toast } from "../dom.js";
+import { RegionWork } from "./region.js";
 import { CLASS_COLORS, CLASS_LABELS, HIGH_CONFIDENCE, LOW_CONFIDENCE, confidenceBucket } from "./styles.js";
 
 const NEXT_RESOLUTION_M = 0.06;
@@ -10,10 +11,12 @@ export class ReviewPanel {
   /**
    * @param {{api: import("../api.js").Api, siteId: number, view: import("ol/View.js").default,
    *   store: import("./elements.js").ElementStore, tools: import("./tools.js").Tools,
-   *   ops: import("./operations.js").Operations, isLead: boolean}} context
+   *   ops: import("./operations.js").Operations, isLead: boolean,
+   *   regionSource: import("ol/source/Vector.js").default}} context
    */
   constructor(context) {
     Object.assign(this, context);
+    this.region = new RegionWork(context);
     this.lease = null;
     this.renewTimer = 0;
     this.info = h("div.selection-info#selection-info");
@@ -26,8 +29,14 @@ export class ReviewPanel {
     this.element = h(
       "div.review-panel",
       {},
-      h("button.primary.wide#next-item", { onclick: () => this.next(), title: "Next item of my queue (N)" }, "Next item ", h("kbd", {}, "N")),
+      h(
+        "div.next-buttons",
+        {},
+        h("button.primary#next-item", { onclick: () => this.next(), title: "Next item of my queue (N)" }, "Next item ", h("kbd", {}, "N")),
+        h("button#next-region", { onclick: () => this.nextRegion(), title: "Next region of my queue: every proposal of one grid cell (⇧N)" }, "Next region ", h("kbd", {}, "⇧N")),
+      ),
       this.queueInfo,
+      this.region.element,
       this.info,
       h("div.review-buttons", {}, button("Accept", "A", "accepted", ".ok"), button("Fixed", "F", "fixed", ".fix"), button("Reject", "X", "rejected", ".bad")),
       leadButtons,
@@ -49,8 +58,9 @@ export class ReviewPanel {
     return h("div.key", {}, h("h4", {}, "Classes"), ...classes, h("h4", {}, "Confidence"), ...dashes);
   }
 
-  /** Redraw the selection summary. */
+  /** Redraw the selection summary (and the region's list, whose states may have changed). */
   update() {
+    this.region.refresh();
     const features = this.tools.selected();
     if (!features.length) {
       replaceChildren(this.info, h("p.muted", {}, "Nothing selected. Click an element, or press N for the next item."));
@@ -71,12 +81,24 @@ export class ReviewPanel {
     replaceChildren(this.info, ...rows);
   }
 
-  /** Give the current work item back (on "next" and when leaving the editor). */
+  /** Give the current work item or region back (on "next" and when leaving the editor). */
   async release() {
     clearInterval(this.renewTimer);
     const lease = this.lease;
     this.lease = null;
     if (lease) await this.api.post(`/api/leases/${lease.id}/release`, {}).catch(() => undefined);
+    await this.region.release();
+  }
+
+  /** Lease the next region of my queue (the current item or region is released first). */
+  async nextRegion() {
+    try {
+      await this.release();
+      const found = await this.region.next();
+      this.queueInfo.textContent = found ? "" : "Your queue is empty.";
+    } catch (error) {
+      toast(`Next region: ${error.message}`, "error");
+    }
   }
 
   /** Keep the lease while the annotator works on the item (the backend's lease lasts 10 minutes). */

@@ -147,3 +147,9 @@ export function findingStyle(feature) {
   const base = findingStyles[feature.get("kind")];
   return feature.get("active") ? [findingStyles.active, base] : [base];
 }
+
+/** Style of the leased region's outline: a dashed light frame, no fill, so the rasters stay readable. */
+export const regionStyle = [
+  new Style({ stroke: new Stroke({ color: "rgba(15, 23, 42, 0.8)", width: 5 }) }),
+  new Style({ stroke: new Stroke({ color: "#fde047", width: 2, lineDash: [12, 8] }) }),
+];
