@@ -86,10 +86,32 @@ def _site_truths(session: ApiSession, site_id: int, truths_global: Sequence[Poly
     return [Polyline(t.cls, np.asarray(t.points, dtype=np.float64)[:, :2] - origin) for t in truths_global]
 
 
-def _apply(session: ApiSession, site_id: int, element: dict[str, Any], decision: Decision) -> None:
-    """Send one decision: a fix is a PATCH then the `fixed` verdict; accept and reject are verdicts."""
+def _pending(session: ApiSession, site_id: int, leased: dict[str, Any]) -> list[dict[str, Any]]:
+    """The other proposals still waiting for a verdict: what the annotator sees around the leased one."""
+    elements = session.call("GET", f"/api/sites/{site_id}/elements", params={"state": "proposed"})
+    return [e for e in elements if e["id"] != leased["id"]]
+
+
+def _as_polyline(element: dict[str, Any]) -> Polyline:
+    return Polyline(element["class"], np.asarray(element["points"], float))
+
+
+def _apply(
+    session: ApiSession,
+    site_id: int,
+    element: dict[str, Any],
+    decision: Decision,
+    pending: Sequence[dict[str, Any]],
+) -> None:
+    """Send one decision: a fix deletes the pieces merged into it (as the editor's merge does), PATCHes the
+    points and gives the `fixed` verdict; accept and reject are verdicts."""
     base = f"/api/sites/{site_id}/elements/{element['id']}"
     version = int(element["version"])
+    for k in decision.merged:
+        piece = pending[k]
+        session.call(
+            "DELETE", f"/api/sites/{site_id}/elements/{piece['id']}", params={"version": piece["version"]}
+        )
     if decision.kind == "fix":
         body: dict[str, Any] = {"version": version, "points": np.asarray(decision.points).tolist()}
         if decision.relabel:
@@ -141,15 +163,18 @@ def correct_proposals(
         if lease is None:
             break
         element = lease["element"]
+        pending = _pending(session, site_id, element)
         decision = decide(
-            Polyline(element["class"], np.asarray(element["points"], float)), truths, used, config
+            _as_polyline(element), truths, used, config, [_as_polyline(e) for e in pending], costs
         )
         if decision.target is not None:
             used.add(decision.target)
-        _apply(session, site_id, element, decision)
+        _apply(session, site_id, element, decision, pending)
         log.seconds[decision.kind] += decision.seconds(costs)
         log.counts[decision.kind] += 1
         log.counts["vertices_moved"] += decision.moved
+        log.counts["pieces_merged"] += len(decision.merged)
+        log.counts["gaps_drawn"] += decision.gaps
     else:
         raise SimulationError(f"site {site_id}: queue not empty after {max_items} items")
     _book_drawing(log, session, site_id, [t for i, t in enumerate(truths) if i not in used], config, costs)

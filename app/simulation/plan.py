@@ -1,5 +1,6 @@
 """What a careful annotator does with one proposal, knowing the truth: accept it, fix it towards its true
-element (counting the vertex edits that takes), or reject it; and what drawing a missed element costs.
+element (counting the vertex edits that takes, merging the other proposals lying on the same element and
+drawing the stretches none of them covers), or reject it; and what drawing a missed element costs.
 
 Pure functions over polylines in one frame (site metres); the HTTP loop in `annotator.py` applies them.
 """
@@ -23,9 +24,12 @@ class SimulationConfig:
     """Tolerances of the scripted annotator."""
 
     match_m: float = 1.5
-    """A proposal within this Chamfer distance of a true element is about that element (the loosest AP threshold)."""
+    """A proposal whose points lie within this mean distance of a true element's line is about that element
+    (the loosest AP threshold): a correct piece of a long element counts, as it does for a person."""
     accept_m: float = 0.25
-    """Within this Chamfer distance (and the right class) a proposal is accepted unchanged."""
+    """Within this Chamfer distance (and the right class) a proposal is accepted unchanged ..."""
+    accept_max_m: float = 0.5
+    """... provided none of its points is farther than this from the true line (a visible kink gets fixed)."""
     vertex_tolerance_m: float = 0.2
     """A vertex closer than this to the true line is left where it is."""
     simplify_m: float = 0.05
@@ -36,6 +40,8 @@ class SimulationConfig:
             raise ValueError(
                 f"SimulationConfig: need 0 < accept_m <= match_m, got {self.accept_m}, {self.match_m}"
             )
+        if self.accept_max_m < self.accept_m:
+            raise ValueError(f"SimulationConfig: need accept_max_m >= accept_m, got {self.accept_max_m}")
         if self.vertex_tolerance_m <= 0 or self.simplify_m <= 0:
             raise ValueError("SimulationConfig: vertex_tolerance_m and simplify_m must be > 0")
 
@@ -63,16 +69,36 @@ class Decision:
     """The corrected points (fix)."""
     relabel: str | None = None
     moved: int = 0
-    added: int = 0
     removed: int = 0
+    merged: tuple[int, ...] = ()
+    """Indices (into the other pending proposals) of the pieces of the same element merged into this one."""
+    gap_runs: tuple[int, ...] = ()
+    """True vertices missing, per stretch of the element no proposal covers."""
+
+    @property
+    def added(self) -> int:
+        return sum(self.gap_runs)
+
+    @property
+    def gaps(self) -> int:
+        return len(self.gap_runs)
 
     def seconds(self, costs: ActionCosts) -> float:
-        """Time this decision costs, from inspecting the element to its verdict."""
+        """Time this decision costs, from inspecting the element to its verdict. A missing stretch is either
+        filled by inserting and dragging its vertices or drawn as a new piece and merged in, whichever is quicker."""
+        fill = sum(
+            min(
+                k * costs.move_vertex_s,
+                costs.draw_start_s + k * costs.add_vertex_s + costs.draw_finish_s + costs.merge_s,
+            )
+            for k in self.gap_runs
+        )
         edits = (
             self.moved * costs.move_vertex_s
-            + self.added * costs.add_vertex_s
             + self.removed * costs.delete_vertex_s
             + (costs.relabel_s if self.relabel else 0.0)
+            + len(self.merged) * costs.merge_s
+            + fill
         )
         return costs.inspect_s + edits + costs.verdict_s
 
@@ -92,41 +118,88 @@ def _chamfer(a: Polyline, b: Polyline) -> float:
     return chamfer_distance(resample(a.points, _SAMPLES), resample(b.points, _SAMPLES))
 
 
-def _vertex_edits(proposal: Polyline, target: np.ndarray, tolerance_m: float) -> tuple[int, int, int]:
-    """(moved, added, removed) vertices that turn the proposal into `target`, counted as a person edits:
-    every vertex off the true line is dragged; an end vertex on the line but short of the true end is dragged
-    out; vertices are added or deleted to match the true vertex count."""
-    true_line, proposed_line = LineString(target), LineString(proposal.points)
-    off = [true_line.distance(Point(p)) > tolerance_m for p in proposal.points]
-    removed = max(0, len(proposal.points) - len(target))
-    added = max(0, len(target) - len(proposal.points))
-    moved = min(sum(off), len(proposal.points) - removed)
+def _mean_distance_to(line: LineString, points: np.ndarray) -> float:
+    """Mean distance of a polyline's resampled points to `line`: how well it lies along it, however short."""
+    return float(np.mean([line.distance(Point(p)) for p in resample(points, _SAMPLES)]))
+
+
+def _covered(target: np.ndarray, pieces: Sequence[np.ndarray], tolerance_m: float) -> np.ndarray:
+    """Which target vertices lie within the stretch of the true line that some piece spans."""
+    true_line = LineString(target)
+    along = np.array([true_line.project(Point(p)) for p in target])
+    covered = np.zeros(len(target), dtype=bool)
+    for piece in pieces:
+        spans = [true_line.project(Point(p)) for p in piece]
+        covered |= (along >= min(spans) - tolerance_m) & (along <= max(spans) + tolerance_m)
+    return covered
+
+
+def _vertex_edits(
+    pieces: Sequence[np.ndarray], target: np.ndarray, tolerance_m: float
+) -> tuple[int, int, tuple[int, ...]]:
+    """(moved, removed, gap_runs) that turn the pieces, merged, into `target`, counted as a person edits:
+    vertices off the true line are deleted while there are more than the truth needs, the rest dragged onto
+    it (vertices on the line stay); the true vertices no piece spans are missing, per stretch (a ring's
+    missing corners are inserted one by one)."""
+    true_line = LineString(target)
+    vertices = np.concatenate(pieces)
+    off = int(sum(true_line.distance(Point(p)) > tolerance_m for p in vertices))
+    removed = min(off, max(0, len(vertices) - len(target)))
+    moved = off - removed
     closed = len(target) > 2 and bool(np.allclose(target[0], target[-1]))
-    if not closed:
-        for end in (target[0], target[-1]):
-            nearest = int(np.argmin([np.linalg.norm(proposal.points[i] - end) for i in (0, -1)]))
-            end_vertex_on_line = not off[0 if nearest == 0 else -1]
-            if proposed_line.distance(Point(end)) > tolerance_m and end_vertex_on_line:
-                moved += 1
-    return moved, added, removed
+    if closed:
+        return moved, removed, (1,) * max(0, len(target) - len(vertices))
+    missing = ~_covered(target, pieces, tolerance_m)
+    edges = np.diff(np.concatenate([[0], missing.astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return moved, removed, tuple(int(n) for n in ends - starts)
+
+
+def _nearest_truth(
+    proposal: Polyline, truths: Sequence[Polyline], used: set[int], config: SimulationConfig
+) -> int | None:
+    """The unused true element the proposal lies along (mean distance within `match_m`), nearest first."""
+    reach = [
+        (_mean_distance_to(LineString(t.points), proposal.points), i)
+        for i, t in enumerate(truths)
+        if i not in used
+    ]
+    reach = [(d, i) for d, i in reach if d <= config.match_m]
+    return min(reach)[1] if reach else None
 
 
 def decide(
-    proposal: Polyline, truths: Sequence[Polyline], used: set[int], config: SimulationConfig
+    proposal: Polyline,
+    truths: Sequence[Polyline],
+    used: set[int],
+    config: SimulationConfig,
+    pending: Sequence[Polyline] = (),
+    costs: ActionCosts | None = None,
 ) -> Decision:
-    """The decision for one proposal: the nearest unused true element within reach is what it should be."""
-    distances = [(_chamfer(proposal, t), i) for i, t in enumerate(truths) if i not in used]
-    reachable = [(d, i) for d, i in distances if d <= config.match_m]
-    if not reachable:
+    """The decision for one proposal: the unused true element it lies along is what it should become; the
+    other `pending` proposals lying along that same element (and nearer to it than to any other) are merged in.
+    A fix that would take longer than rejecting and drawing the element anew is not made: the proposal is
+    rejected and the element drawn later, as a person short of time would."""
+    costs = costs or ActionCosts()
+    index = _nearest_truth(proposal, truths, used, config)
+    if index is None:
         return Decision("reject")
-    distance, index = min(reachable)
     truth = truths[index]
     relabel = truth.cls if truth.cls != proposal.cls else None
-    if distance <= config.accept_m and relabel is None:
+    worst_m = max(LineString(truth.points).distance(Point(p)) for p in proposal.points)
+    if relabel is None and _chamfer(proposal, truth) <= config.accept_m and worst_m <= config.accept_max_m:
         return Decision("accept", target=index)
+    merged = tuple(
+        k
+        for k, other in enumerate(pending)
+        if not truth.closed and _nearest_truth(other, truths, used, config) == index
+    )
     target = clicked_vertices(truth, config)
-    moved, added, removed = _vertex_edits(proposal, target, config.vertex_tolerance_m)
-    return Decision("fix", index, target, relabel, moved, added, removed)
+    pieces = [proposal.points, *(pending[k].points for k in merged)]
+    moved, removed, gap_runs = _vertex_edits(pieces, target, config.vertex_tolerance_m)
+    fix = Decision("fix", index, target, relabel, moved, removed, merged, gap_runs)
+    redraw_s = Decision("reject").seconds(costs) + drawing_seconds(truth, config, costs)
+    return fix if fix.seconds(costs) < redraw_s else Decision("reject")
 
 
 def road_length_km(truths: Sequence[Polyline]) -> float:

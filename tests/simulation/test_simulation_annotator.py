@@ -64,14 +64,22 @@ def test_correcting_proposals_accepts_fixes_rejects_and_draws_what_is_missing(
 ) -> None:
     proposals = [
         ("boundary", TRUTH[0].points + [0.0, 0.05]),  # right: accept
-        ("divider", TRUTH[1].points + [0.0, 0.7]),  # wrong class and off: fix + relabel
-        ("divider", TRUTH[2].points + [0.0, 0.5]),  # off: fix
+        ("divider", TRUTH[1].points + [[0.0, 0.0], [0.0, 0.7]]),  # wrong class, one end off: fix + relabel
+        ("divider", TRUTH[2].points + [[0.0, 0.0], [0.0, 1.2], [0.0, 0.0]]),  # middle off: fix
         ("divider", np.array([[1010.0, 2050.0], [1090.0, 2050.0]])),  # nothing there: reject
     ]  # the crosswalk was not proposed: drawn
     site_id = _site(client, tmp_path, proposals)
     annotator = ApiSession(client, "ann", PASSWORD)
     log = correct_proposals(annotator, site_id, TRUTH)
-    assert dict(log.counts) == {"accept": 1, "fix": 2, "reject": 1, "drawn": 1, "vertices_moved": 5}
+    assert dict(log.counts) == {
+        "accept": 1,
+        "fix": 2,
+        "reject": 1,
+        "drawn": 1,
+        "vertices_moved": 2,
+        "pieces_merged": 0,
+        "gaps_drawn": 0,
+    }
     assert annotator.call("POST", f"/api/sites/{site_id}/queue/next") is None
     final = annotator.call("GET", f"/api/sites/{site_id}/elements")
     states = sorted(e["state"] for e in final)
@@ -88,6 +96,20 @@ def test_correcting_proposals_accepts_fixes_rejects_and_draws_what_is_missing(
         np.testing.assert_allclose(np.asarray(element["points"])[[0, -1]], truth.points[[0, -1]] - ORIGIN_XY)
     assert log.road_km == pytest.approx(0.08)
     assert log.total_s > 0 and log.hours_per_km() > 0
+
+
+def test_pieces_of_a_long_element_are_merged_into_one_through_the_api(
+    client: TestClient, tmp_path: Path
+) -> None:
+    left = ("boundary", np.array([[1010.0, 2010.1], [1040.0, 2010.1]]))
+    right = ("boundary", np.array([[1055.0, 2009.9], [1090.0, 2009.9]]))
+    site_id = _site(client, tmp_path, [left, right])
+    annotator = ApiSession(client, "ann", PASSWORD)
+    log = correct_proposals(annotator, site_id, TRUTH[:1])
+    assert (log.counts["fix"], log.counts["pieces_merged"], log.counts["gaps_drawn"]) == (1, 1, 0)
+    final = annotator.call("GET", f"/api/sites/{site_id}/elements")
+    assert [e["state"] for e in final] == ["fixed"]  # the merged piece is deleted, as the editor's merge does
+    np.testing.assert_allclose(final[0]["points"], TRUTH[0].points - ORIGIN_XY)
 
 
 def test_good_proposals_cost_less_than_drawing_from_scratch(client: TestClient, tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ from app.simulation.plan import Polyline, SimulationConfig, decide, drawing_seco
 
 CONFIG = SimulationConfig()
 LINE = Polyline("divider", np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]]))
+ZIGZAG = Polyline("boundary", np.array([[10.0 * i, 2.0 * (i % 2)] for i in range(11)]))
 CROSSWALK = Polyline(
     "ped_crossing", np.array([[30.0, 0.0], [34.0, 0.0], [34.0, 6.0], [30.0, 6.0], [30.0, 0.0]])
 )
@@ -19,31 +20,67 @@ def test_a_proposal_on_the_truth_is_accepted_unchanged() -> None:
 
 
 def test_an_offset_proposal_is_fixed_by_moving_its_vertices_onto_the_truth() -> None:
-    decision = decide(Polyline("divider", LINE.points + [0.0, 0.6]), [LINE], set(), CONFIG)
+    bent = ZIGZAG.points.copy()
+    bent[[3, 4]] += [0.0, 0.6]
+    decision = decide(Polyline("boundary", bent), [ZIGZAG], set(), CONFIG)
     assert decision.kind == "fix" and decision.relabel is None
-    # three vertices off a straight truth that needs two: drag two, delete one
-    assert decision.moved == 2 and decision.added == 0 and decision.removed == 1
-    np.testing.assert_allclose(decision.points, LINE.points[[0, -1]])  # the straight truth needs two clicks
+    assert (decision.moved, decision.added, decision.removed) == (2, 0, 0)
+    np.testing.assert_allclose(decision.points, ZIGZAG.points)
+
+
+def test_a_fix_dearer_than_drawing_anew_is_a_reject() -> None:
+    # three vertices off a straight truth that needs two: dragging two and deleting one takes longer than
+    # rejecting it and clicking the two true vertices
+    assert decide(Polyline("divider", LINE.points + [0.0, 0.6]), [LINE], set(), CONFIG).kind == "reject"
 
 
 def test_a_short_proposal_is_extended_and_a_wrong_class_relabelled() -> None:
     short = Polyline("boundary", np.array([[0.0, 0.0], [12.0, 0.0]]))
     decision = decide(short, [LINE], set(), CONFIG)
     assert decision.kind == "fix" and decision.relabel == "divider"
-    assert decision.moved == 1  # drag the short end out to 20 m
+    assert (decision.moved, decision.added, decision.gaps) == (0, 1, 1)  # the missing end is drawn on
+
+
+def test_pieces_of_one_long_element_are_merged_and_only_the_uncovered_stretches_drawn() -> None:
+    first = Polyline("boundary", ZIGZAG.points[0:4] + [0.0, 0.05])  # 0-30 m, on the line
+    second = Polyline("boundary", ZIGZAG.points[6:9])  # 60-80 m
+    elsewhere = Polyline("divider", np.array([[0.0, 40.0], [50.0, 40.0]]))
+    decision = decide(first, [ZIGZAG], set(), CONFIG, [elsewhere, second])
+    assert decision.kind == "fix" and decision.merged == (1,)
+    # 40-50 m and 90-100 m are nobody's: four vertices in two stretches, each drawn and merged in
+    assert (decision.moved, decision.added, decision.removed, decision.gaps) == (0, 4, 0, 2)
+    costs = ActionCosts()
+    alone = decide(first, [ZIGZAG], set(), CONFIG)
+    assert (alone.added, alone.gaps) == (7, 1)
+    assert decision.seconds(costs) == pytest.approx(
+        alone.seconds(costs)
+        - (
+            costs.draw_start_s + 7 * costs.add_vertex_s + costs.draw_finish_s + costs.merge_s
+        )  # one long stretch
+        + costs.merge_s  # the second piece
+        + 4 * costs.move_vertex_s  # two stretches of two: quicker to insert and drag than to draw
+    )
 
 
 def test_a_proposal_far_from_any_truth_or_a_duplicate_is_rejected() -> None:
     assert decide(Polyline("divider", LINE.points + [0.0, 5.0]), [LINE], set(), CONFIG).kind == "reject"
+    # a piece of a long element is about that element even when the whole element is far longer
+    assert decide(Polyline("divider", LINE.points[:2] / 4), [LINE], set(), CONFIG).kind == "fix"
     assert decide(LINE, [LINE], {0}, CONFIG).kind == "reject"
 
 
 def test_costs_grow_with_the_edits_and_drawing_counts_clicks() -> None:
     costs = ActionCosts()
-    accept = decide(LINE, [LINE], set(), CONFIG)
-    fix = decide(Polyline("divider", LINE.points + [0.0, 0.6]), [LINE], set(), CONFIG)
-    assert fix.seconds(costs) == pytest.approx(
-        accept.seconds(costs) + 2 * costs.move_vertex_s + costs.delete_vertex_s
+    accept = decide(ZIGZAG, [ZIGZAG], set(), CONFIG)
+    short_kinked = ZIGZAG.points[:-1].copy()
+    short_kinked[2] += [0.0, 0.6]
+    fix = decide(Polyline("boundary", short_kinked), [ZIGZAG], set(), CONFIG)
+    # one vertex dragged, the missing last one inserted and dragged too
+    assert fix.seconds(costs) == pytest.approx(accept.seconds(costs) + 2 * costs.move_vertex_s)
+    # dragging all ten off the line would take longer than drawing it anew
+    assert (
+        decide(Polyline("boundary", ZIGZAG.points[:-1] + [0.0, 0.6]), [ZIGZAG], set(), CONFIG).kind
+        == "reject"
     )
     assert drawing_seconds(LINE, CONFIG, costs) == pytest.approx(
         costs.draw_start_s + 2 * costs.draw_vertex_s + costs.draw_finish_s
