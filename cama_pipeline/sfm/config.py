@@ -44,6 +44,15 @@ class SfmConfig:
     """Odometry prior: sigma of each keyframe's absolute position (GNSS-like)."""
     anchor_rotation_sigma_deg: float = 2.0
     """Odometry prior: sigma of each keyframe's absolute orientation (the anchor against free roll)."""
+    anchor_gauge: bool = True
+    """After BA, move the model rigidly onto all its odometry poses at once (weighted least squares, see
+    `cama_pipeline.sfm.gauge`): WIGO's slow per-clip drift averages out instead of being inherited."""
+    gauge_position_sigma_m: float = 0.15
+    """Gauge fit: sigma of an odometry position (WIGO's reported marginal, default site: 15-20 cm)."""
+    gauge_tilt_sigma_deg: float = 0.035
+    """Gauge fit: sigma of an odometry roll / pitch (gravity-aided; WIGO reports 0.035-0.04 deg)."""
+    gauge_heading_sigma_deg: float = 0.25
+    """Gauge fit: sigma of an odometry heading (WIGO reports 0.23-0.3 deg)."""
     max_camera_shift_m: float = 2.0
     """Keyframes (images) moved further than this from their initial pose by BA are flagged and dropped."""
     max_camera_rotation_deg: float = 5.0
@@ -73,6 +82,9 @@ class SfmConfig:
             "relative_translation_sigma_m",
             "anchor_rotation_sigma_deg",
             "position_sigma_m",
+            "gauge_position_sigma_m",
+            "gauge_tilt_sigma_deg",
+            "gauge_heading_sigma_deg",
             "max_camera_shift_m",
             "max_camera_rotation_deg",
             "loss_scale_px",

@@ -7,7 +7,7 @@ Algorithm 1). The pure API the `cama sfm` stage builds on; it writes nothing out
 import logging
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -18,6 +18,7 @@ import pycolmap
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
+from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
 from cama_pipeline.sfm.iterative import iterative_bundle_adjustment, single_pass
 from cama_pipeline.sfm.model import GuidedModel, build_model, clip_label, matrix_from_rigid
 from cama_pipeline.sfm.triangulate import triangulate_all
@@ -89,12 +90,14 @@ def reconstruct_views(
     config: SfmConfig,
     *,
     progress: Progress | None = None,
+    odometry: Mapping[str, np.ndarray] | None = None,
 ) -> GuidedResult:
     """Guided SfM of these images (names as in the COLMAP database at `database_path`, poses and
     calibration from the views) from the verified matches in the database; point colours from `image_dir`.
 
-    Any subset of a site's views works, with any initial poses. Raises SfmError naming the clip when it
-    cannot be reconstructed (no matches, too few points or keyframes).
+    Any subset of a site's views works, with any initial poses. With `config.anchor_gauge` the result is
+    moved onto the `odometry` world_from_ego poses by image name (default: the views' own). Raises SfmError
+    naming the clip when it cannot be reconstructed (no matches, too few points or keyframes).
     """
     _check_inputs(views, database_path, image_dir)
     report = progress or _no_progress
@@ -116,7 +119,12 @@ def reconstruct_views(
     report("colours", 0, 1)
     model.reconstruction.extract_colors_for_all_images(str(image_dir), config.num_threads)
     seconds["colours"] = time.perf_counter() - started - sum(seconds.values())
-    summary = {**_summary(model, views, refinement), "seconds": seconds}
+    poses = _refined_poses(model, views)
+    gauge = None
+    if config.anchor_gauge:
+        reference = odometry if odometry is not None else {view.name: view.world_from_ego for view in views}
+        gauge, poses = anchor(model.reconstruction, poses, reference, config)
+    summary = {**_summary(model, views, refinement), "gauge": gauge, "seconds": seconds}
     logger.info(
         "clip %s: %d/%d images, %d points, %.2f px",
         clip_label(views),
@@ -125,9 +133,31 @@ def reconstruct_views(
         summary["points"],
         summary["mean_reprojection_error_px"],
     )
-    return GuidedResult(
-        model.reconstruction, summary, tuple(sorted(model.flagged)), _refined_poses(model, views)
+    return GuidedResult(model.reconstruction, summary, tuple(sorted(model.flagged)), poses)
+
+
+def anchor(
+    reconstruction: pycolmap.Reconstruction,
+    world_from_ego: dict[str, np.ndarray],
+    odometry: Mapping[str, np.ndarray],
+    config: SfmConfig,
+) -> tuple[dict[str, Any] | None, dict[str, np.ndarray]]:
+    """Move the model and its refined ego poses onto the odometry poses (see `cama_pipeline.sfm.gauge`);
+    the fit's report (None when too few poses are shared) and the moved poses."""
+    sigmas = GaugeSigmas(
+        config.gauge_position_sigma_m, config.gauge_tilt_sigma_deg, config.gauge_heading_sigma_deg
     )
+    fit = fit_gauge(world_from_ego, odometry, sigmas)
+    if fit is None:
+        return None, world_from_ego
+    apply_gauge(reconstruction, fit.new_from_old)
+    logger.info(
+        "gauge: moved %.3f m, turned %.4f deg onto %d odometry poses",
+        fit.shift_m,
+        fit.rotation_deg,
+        fit.poses,
+    )
+    return fit.to_json(), {name: fit.new_from_old @ pose for name, pose in world_from_ego.items()}
 
 
 def _refined_poses(model: GuidedModel, views: Sequence[CameraView]) -> dict[str, np.ndarray]:

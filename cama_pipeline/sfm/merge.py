@@ -9,6 +9,7 @@ in order of overlap to the clip with the most registered images (Prim's order ov
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
 
@@ -58,6 +59,11 @@ class ClipModel:
     scene: str
     reconstruction: pycolmap.Reconstruction
     views: tuple[CameraView, ...]
+
+    @cached_property
+    def point_ids(self) -> dict[str, np.ndarray]:
+        """Point3D id per keypoint of each registered image by name (built once: every pair reads it)."""
+        return point_id_table(self.reconstruction)
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,16 +116,15 @@ def cross_clip_matches(database_path: Path) -> list[tuple[str, str, np.ndarray]]
     return found
 
 
-def _point_ids(reconstruction: pycolmap.Reconstruction, name: str) -> np.ndarray | None:
-    """Point3D id per keypoint of the named registered image (-1 where none), None when not registered."""
-    image = reconstruction.find_image_with_name(name)
-    if image is None or not image.has_pose:
-        return None
-    ids = np.full(image.num_points2D(), -1, dtype=np.int64)
-    for index, point in enumerate(image.points2D):
-        if point.has_point3D():
-            ids[index] = point.point3D_id
-    return ids
+def point_id_table(reconstruction: pycolmap.Reconstruction) -> dict[str, np.ndarray]:
+    """Point3D id per keypoint (-1 where none) of every registered image, by image name."""
+    table = {}
+    for image in reconstruction.images.values():
+        if image.has_pose:
+            table[image.name] = np.array(
+                [p.point3D_id if p.has_point3D() else -1 for p in image.points2D], dtype=np.int64
+            )
+    return table
 
 
 def clip_correspondences(
@@ -133,7 +138,7 @@ def clip_correspondences(
             name_a, name_b, inliers = name_b, name_a, inliers[:, ::-1]
         if name_a not in scene_images[first.scene] or name_b not in scene_images[second.scene]:
             continue
-        ids_a, ids_b = _point_ids(first.reconstruction, name_a), _point_ids(second.reconstruction, name_b)
+        ids_a, ids_b = first.point_ids.get(name_a), second.point_ids.get(name_b)
         if ids_a is None or ids_b is None:
             continue
         pa = ids_a[np.minimum(inliers[:, 0], len(ids_a) - 1)]

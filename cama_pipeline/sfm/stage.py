@@ -105,6 +105,7 @@ def _summary(result: GuidedResult, images: int) -> dict[str, Any]:
         "iterations": len(iterations) if isinstance(iterations, list) else iterations,
         "stop": result.report.get("stop"),
         "flagged": len(result.flagged),
+        "gauge": result.report.get("gauge"),
     }
 
 
@@ -225,8 +226,14 @@ def merge_site(
     merged_config = replace(
         config, max_iterations=min(config.max_iterations, merge_config.global_max_iterations)
     )
+    odometry = {view.name: view.world_from_ego for task in tasks for view in task.views}
     result = reconstruct_views(
-        union, database, image_dir, merged_config, progress=_phase_reporter(progress, "merge")
+        union,
+        database,
+        image_dir,
+        merged_config,
+        progress=_phase_reporter(progress, "merge"),
+        odometry=odometry,
     )
     merge = {"groups": merge_groups(alignments), "alignments": {a.scene: a.to_json() for a in alignments}}
     return result, union, merge

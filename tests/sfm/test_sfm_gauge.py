@@ -1,0 +1,108 @@
+"""The gauge fit: a model with a perfect shape but a wrong placement is moved onto noisy odometry, so that
+the odometry's per-clip drifts average out instead of being inherited."""
+
+import numpy as np
+import pycolmap
+import pytest
+from scipy.spatial.transform import Rotation
+
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
+
+SIGMAS = GaugeSigmas(position_m=0.15, tilt_deg=0.035, heading_deg=0.25)
+
+
+def _pose(rotvec: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    pose[:3, 3] = centre
+    return pose
+
+
+def _drive(clips: int = 4, frames: int = 40) -> dict[str, np.ndarray]:
+    """True poses of a few straight clips driven in different directions across a 200 m site."""
+    poses = {}
+    for c in range(clips):
+        heading = c * np.pi / clips
+        for f in range(frames):
+            centre = np.array([np.cos(heading), np.sin(heading), 0.0]) * (f * 2.5 - 50) + [c * 20.0, 0, 0]
+            poses[f"clip{c}/{f}"] = _pose(np.array([0, 0, heading]), centre)
+    return poses
+
+
+def _moved(poses: dict[str, np.ndarray], transform: np.ndarray) -> dict[str, np.ndarray]:
+    return {name: transform @ pose for name, pose in poses.items()}
+
+
+def _errors(poses: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> tuple[float, float]:
+    """Mean position (m) and rotation (deg) errors."""
+    shifts = [np.linalg.norm(poses[n][:3, 3] - truth[n][:3, 3]) for n in truth]
+    turns = [Rotation.from_matrix(poses[n][:3, :3] @ truth[n][:3, :3].T).magnitude() for n in truth]
+    return float(np.mean(shifts)), float(np.degrees(np.mean(turns)))
+
+
+def _clip_drifts(truth: dict[str, np.ndarray], seed: int = 3) -> dict[str, np.ndarray]:
+    """Odometry: the truth with one constant 15 cm / 0.1-0.3 deg error per clip, plus small white noise."""
+    rng = np.random.default_rng(seed)
+    drift = {c: (rng.normal(0, 0.15, 3), rng.normal(0, np.radians([0.03, 0.03, 0.25]))) for c in range(4)}
+    odometry = {}
+    for name, pose in truth.items():
+        shift, turn = drift[int(name[4])]
+        noisy = pose.copy()
+        noisy[:3, :3] = Rotation.from_rotvec(turn + rng.normal(0, 1e-4, 3)).as_matrix() @ pose[:3, :3]
+        noisy[:3, 3] += shift + rng.normal(0, 0.01, 3)
+        odometry[name] = noisy
+    return odometry
+
+
+def test_fit_recovers_a_known_rigid_offset() -> None:
+    truth = _drive()
+    offset = _pose(np.radians([0.1, -0.05, 0.3]), np.array([0.4, -0.3, 0.1]))
+    fit = fit_gauge(_moved(truth, offset), truth, SIGMAS)
+    assert fit is not None and fit.poses == len(truth)
+    position, rotation = _errors(_moved(_moved(truth, offset), fit.new_from_old), truth)
+    assert position < 1e-6 and rotation < 1e-6
+
+
+def test_fit_averages_per_clip_drift_better_than_any_single_clip() -> None:
+    """The fitted placement is closer to the truth than the odometry itself, and than a placement taken
+    from one clip's odometry alone."""
+    truth = _drive()
+    odometry = _clip_drifts(truth)
+    misplaced = _moved(truth, _pose(np.radians([0.2, 0.1, 1.0]), np.array([1.0, 2.0, 0.5])))
+    fit = fit_gauge(misplaced, odometry, SIGMAS)
+    assert fit is not None
+    position, rotation = _errors(_moved(misplaced, fit.new_from_old), truth)
+    odometry_position, odometry_rotation = _errors(odometry, truth)
+    one_clip = {n: p for n, p in odometry.items() if n.startswith("clip0/")}
+    single = fit_gauge(misplaced, one_clip, SIGMAS)
+    assert single is not None
+    single_position, _ = _errors(_moved(misplaced, single.new_from_old), truth)
+    assert position < odometry_position and rotation < odometry_rotation
+    assert position < single_position
+
+
+def test_fit_needs_three_shared_poses() -> None:
+    truth = _drive(clips=1, frames=2)
+    assert fit_gauge(truth, truth, SIGMAS) is None
+    assert fit_gauge(_drive(), {"elsewhere": np.eye(4)}, SIGMAS) is None
+
+
+def test_apply_moves_points_and_frames_of_a_model() -> None:
+    model = pycolmap.Reconstruction()
+    point_id = model.add_point3D(np.array([1.0, 2.0, 3.0]), pycolmap.Track())
+    transform = _pose(np.array([0, 0, np.pi / 2]), np.array([10.0, 0, 0]))
+    apply_gauge(model, transform)
+    np.testing.assert_allclose(model.point3D(point_id).xyz, [8.0, 1.0, 3.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("field", ["position_m", "tilt_deg", "heading_deg"])
+def test_sigmas_must_be_positive(field: str) -> None:
+    values = {"position_m": 0.1, "tilt_deg": 0.1, "heading_deg": 0.1, field: 0.0}
+    with pytest.raises(ValueError, match=field):
+        GaugeSigmas(**values)
+
+
+def test_config_rejects_non_positive_gauge_sigma() -> None:
+    with pytest.raises(ValueError, match="gauge_tilt_sigma_deg"):
+        SfmConfig(gauge_tilt_sigma_deg=0)
