@@ -11,6 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 import viser
+from trimesh.visual.color import ColorVisuals
+from trimesh.visual.material import PBRMaterial
+from trimesh.visual.texture import TextureVisuals
 
 from app.viewer.content import SparsePointsView, Surface, lift_polyline
 from app.viewer.geometry import LocalFrame, pick_element, polyline_segments
@@ -34,6 +37,24 @@ class SyncCounts:
     not_lifted: int
 
 
+def matte(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A copy of a vertex-coloured mesh that viser shows in its own colours: a rough, non-metallic material
+    (a glTF mesh without one is drawn as metal, which mirrors viser's bright sky) and the sRGB colours made
+    linear, as glTF vertex colours are. A textured mesh is returned as it is."""
+    if not isinstance(mesh.visual, ColorVisuals):
+        return mesh
+    srgb = np.asarray(mesh.visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    colors = np.column_stack([np.round(linear * 255), np.full(len(srgb), 255)]).astype(np.uint8)
+    material = PBRMaterial(
+        baseColorFactor=[255, 255, 255, 255], metallicFactor=0.0, roughnessFactor=1.0, doubleSided=True
+    )
+    copy = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False)
+    copy.visual = TextureVisuals(material=material)
+    copy.visual.vertex_attributes["color"] = colors
+    return copy
+
+
 class ReviewScene:
     """The 3D review scene on a viser server."""
 
@@ -46,7 +67,7 @@ class ReviewScene:
         self.selected: str | None = None
         self._panel = server.gui.add_markdown("Click a vector to see its id and state.")
         self._toggles: dict[str, viser.GuiCheckboxHandle] = {}
-        server.scene.on_pointer_event(event_type="click")(self._on_click)
+        server.scene.on_click()(self._on_click)
 
     def _toggle(self, layer: str, nodes: Sequence[viser.SceneNodeHandle]) -> None:
         """A checkbox that shows or hides a layer's nodes."""
@@ -60,8 +81,8 @@ class ReviewScene:
         self._toggles[layer] = box
 
     def add_mesh(self, mesh: trimesh.Trimesh) -> None:
-        """The road mesh with its vertex colours."""
-        handle = self.server.scene.add_mesh_trimesh("/surface/mesh", mesh)
+        """The road mesh with its vertex colours (as a matte surface)."""
+        handle = self.server.scene.add_mesh_trimesh("/surface/mesh", matte(mesh))
         self._toggle("Road mesh", [handle])
 
     def add_cameras(self, segments: np.ndarray) -> None:
@@ -148,7 +169,5 @@ class ReviewScene:
         polylines = {element_id: points for element_id, (_, points) in self._vectors.items()}
         return pick_element(polylines, ray_origin, ray_direction, max_distance_m=PICK_DISTANCE_M)
 
-    def _on_click(self, event: viser.ScenePointerEvent) -> None:
-        if event.ray_origin is None or event.ray_direction is None:
-            return
+    def _on_click(self, event: viser.SceneClickEvent) -> None:
         self.select(self.pick(np.asarray(event.ray_origin), np.asarray(event.ray_direction)))

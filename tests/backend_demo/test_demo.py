@@ -84,3 +84,20 @@ def test_demo_shows_a_reconstructed_raster_folder_in_the_proposals_frame(
         cli, ["demo", str(site_root), "--rasters", str(tmp_path), "--data-dir", str(tmp_path / "s2")]
     )
     assert broken.exit_code == 2 and "georeference.json" in broken.output
+
+
+def test_demo_links_the_editor_to_its_3d_review(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    served: list[Settings] = []
+    monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: served.append(app.state.settings))
+    monkeypatch.setattr("app.backend.demo._start_review", lambda *args: None)
+    args = ["demo", str(site_root), "--data-dir", str(tmp_path / "server"), "--view-port", "8091"]
+    assert runner.invoke(cli, args).exit_code == 0
+    assert runner.invoke(cli, [*args, "--host", "0.0.0.0"]).exit_code == 0
+    assert runner.invoke(cli, [*args[:-1], "0"]).exit_code == 0
+    assert [(s.review_url, s.review_site_id) for s in served] == [
+        ("http://127.0.0.1:8091/", 1),
+        (":8091", 1),  # every address: the link takes the host the browser used
+        ("", None),
+    ]

@@ -67,3 +67,27 @@ def test_missing_build_says_how_to_build(
 def test_api_routes_are_unaffected(client: TestClient, dist: Path) -> None:
     assert client.get("/api/sites").status_code == 401
     assert client.get("/openapi.json").status_code == 200
+
+
+def test_frontend_config_says_where_the_review_is(tmp_path: Path) -> None:
+    settings = Settings(data_dir=tmp_path / "a", scrypt_n=2**4)
+    with TestClient(create_app(settings)) as plain:
+        assert plain.get("/api/frontend/config").json() == {"review_url": None, "review_site_id": None}
+        paths = plain.get("/openapi.json").json()["paths"]
+        assert "/api/frontend/config" in paths and "/" not in paths and "/assets/{name}" not in paths
+    settings = Settings(data_dir=tmp_path / "b", scrypt_n=2**4, review_url=":8080", review_site_id=3)
+    with TestClient(create_app(settings)) as linked:
+        assert linked.get("/api/frontend/config").json() == {"review_url": ":8080", "review_site_id": 3}
+
+
+@pytest.mark.parametrize("value", ["ftp://host/", "localhost:8080", "http://host:8080/?element=1", ":port"])
+def test_a_bad_review_url_names_the_variable(value: str) -> None:
+    with pytest.raises(ValueError, match="CAMA_REVIEW_URL"):
+        Settings.from_env({"CAMA_REVIEW_URL": value})
+
+
+def test_the_review_settings_come_from_the_environment() -> None:
+    settings = Settings.from_env({"CAMA_REVIEW_URL": "http://10.0.0.5:8080/", "CAMA_REVIEW_SITE_ID": "2"})
+    assert (settings.review_url, settings.review_site_id) == ("http://10.0.0.5:8080/", 2)
+    with pytest.raises(ValueError, match="CAMA_REVIEW_SITE_ID"):
+        Settings.from_env({"CAMA_REVIEW_SITE_ID": "0"})
