@@ -26,9 +26,11 @@ class SurfaceConfig:
     strip_spacing_m: float = 0.25
     """Sample spacing of the strip points."""
     use_sfm_points: bool = True
-    """Add the SfM points labelled road/curb/marking/crosswalk when the workspace has them."""
+    """Add the SfM points labelled road/marking/crosswalk when the workspace has them."""
     sfm_max_error_px: float = 2.0
     """SfM points with a larger mean reprojection error are left out."""
+    sfm_gate_m: float = 0.1
+    """SfM points farther than this from the surface fitted to the strip are left out (see `fit`)."""
     pe_frequencies: int = 4
     """Positional-encoding octaves of the elevation MLP; few octaves keep the surface smooth."""
     mlp_width: int = 64
@@ -37,6 +39,12 @@ class SurfaceConfig:
     """Adam steps fitting the elevation MLP to the surface points."""
     elevation_lr: float = 5e-3
     huber_m: float = 0.05
+    smoothness_weight: float = 30.0
+    """Weight (m^3) of the curvature prior: the mean thin-plate energy (m^-2) of the elevation over the
+    road region, added to the Huber point loss (m). Roads bend slowly, so away from the points the
+    surface extrapolates like a plane instead of wandering (0: no prior)."""
+    smoothness_step_m: float = 1.0
+    """Central-difference step of the curvature prior."""
     """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
     control_spacing_m: float = 1.0
     """The MLP is evaluated on a control grid this coarse and interpolated to the vertices (it is smooth)."""
@@ -45,6 +53,9 @@ class SurfaceConfig:
     min_depth_m: float = 0.5
     depth_tolerance: float = 0.03
     """Relative depth slack of the visibility (z-buffer) test, plus `resolution_m` absolute."""
+    curb_height_m: float = 0.13
+    """Height above the road at which cells not voted road are voted again between curb and background
+    (a curb's face and top smear beyond it at road level, see `labels`); 0 turns this off."""
     epochs: int = 1
     """Passes over all keyframe images optimising colour, semantics and (optionally) the elevation MLP."""
     images_per_batch: int = 16
@@ -74,8 +85,10 @@ class SurfaceConfig:
             "strip_half_width_m",
             "strip_spacing_m",
             "sfm_max_error_px",
+            "sfm_gate_m",
             "elevation_lr",
             "huber_m",
+            "smoothness_step_m",
             "control_spacing_m",
             "max_range_m",
             "min_depth_m",
@@ -97,7 +110,14 @@ class SurfaceConfig:
         for name in ("elevation_iterations", "epochs"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("depth_tolerance", "anchor_weight", "semantic_weight", "colour_lr", "semantic_lr"):
+        for name in (
+            "depth_tolerance",
+            "smoothness_weight",
+            "anchor_weight",
+            "semantic_weight",
+            "colour_lr",
+            "semantic_lr",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not self.strip_x_range_m[0] < self.strip_x_range_m[1]:

@@ -17,6 +17,11 @@ from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.grid import SurfaceGrid
 
 BATCH_POINTS = 4096
+SMOOTHNESS_SAMPLES = 256
+"""Road-region places per step where the curvature prior is evaluated."""
+_STENCIL = torch.tensor(
+    [[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=torch.float64
+)
 
 
 class ElevationMLP(nn.Module):
@@ -51,6 +56,36 @@ def huber(residual: torch.Tensor, scale: float) -> torch.Tensor:
     return F.huber_loss(residual, torch.zeros_like(residual), delta=scale)
 
 
+def curvature_energy(mlp: ElevationMLP, xy: torch.Tensor, step_m: float) -> torch.Tensor:
+    """Mean thin-plate energy z_xx^2 + 2 z_xy^2 + z_yy^2 (m^-2) of the MLP at (N, 2) places, by central
+    differences of `step_m`: zero for a plane, so it makes the surface extrapolate like one."""
+    z = mlp((xy[:, None, :] + _STENCIL.to(xy.device) * step_m).reshape(-1, 2)).reshape(len(xy), -1)
+    z_xx = (z[:, 1] + z[:, 2] - 2 * z[:, 0]) / step_m**2
+    z_yy = (z[:, 3] + z[:, 4] - 2 * z[:, 0]) / step_m**2
+    z_xy = (z[:, 5] - z[:, 6] - z[:, 7] + z[:, 8]) / (4 * step_m**2)
+    return (z_xx**2 + 2 * z_xy**2 + z_yy**2).mean()
+
+
+def surface_loss(
+    mlp: ElevationMLP,
+    points: torch.Tensor,
+    region_xy: torch.Tensor | None,
+    config: SurfaceConfig,
+    generator: torch.Generator,
+) -> torch.Tensor:
+    """Huber loss on a random batch of the points plus the weighted curvature prior on a random batch
+    of the road region (none when `region_xy` is None or the weight is 0)."""
+    batch = points
+    if len(points) > BATCH_POINTS:
+        batch = points[torch.randint(len(points), (BATCH_POINTS,), generator=generator).to(points.device)]
+    loss = huber(mlp(batch[:, :2]) - batch[:, 2].float(), config.huber_m)
+    if region_xy is not None and len(region_xy) and config.smoothness_weight > 0:
+        pick = torch.randint(len(region_xy), (SMOOTHNESS_SAMPLES,), generator=generator)
+        energy = curvature_energy(mlp, region_xy[pick.to(region_xy.device)], config.smoothness_step_m)
+        loss = loss + config.smoothness_weight * energy
+    return loss
+
+
 def new_elevation_mlp(grid: SurfaceGrid, points_z: np.ndarray, config: SurfaceConfig) -> ElevationMLP:
     """An MLP normalised to the grid's extent, its offset the points' median height."""
     extent = np.array([(grid.cols - 1), (grid.rows - 1)]) * grid.resolution_m
@@ -69,9 +104,10 @@ def fit_elevation(
     points: torch.Tensor,
     config: SurfaceConfig,
     on_step: Callable[[int, float], None] | None = None,
+    region_xy: torch.Tensor | None = None,
 ) -> list[float]:
-    """Fit `mlp` to (N, 3) points with Adam and the Huber loss (random batches of at most BATCH_POINTS);
-    the loss every 50 steps."""
+    """Fit `mlp` to (N, 3) points with Adam and `surface_loss` (the curvature prior over the (V, 2) road
+    region `region_xy` when given); the loss every 50 steps."""
     optimiser = torch.optim.Adam(mlp.parameters(), lr=config.elevation_lr)
     steps = config.elevation_iterations
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
@@ -81,10 +117,7 @@ def fit_elevation(
     losses: list[float] = []
     for step in range(steps):
         optimiser.zero_grad()
-        batch = points
-        if len(points) > BATCH_POINTS:
-            batch = points[torch.randint(len(points), (BATCH_POINTS,), generator=generator).to(points.device)]
-        loss = huber(mlp(batch[:, :2]) - batch[:, 2].float(), config.huber_m)
+        loss = surface_loss(mlp, points, region_xy, config, generator)
         loss.backward()
         optimiser.step()
         schedule.step()

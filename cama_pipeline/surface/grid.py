@@ -49,6 +49,14 @@ class SurfaceGrid:
         rows = np.round((self.origin_xy[1] - xy[:, 1]) / self.resolution_m).astype(np.int64)
         return rows, cols
 
+    def in_region(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) whether each global x, y falls on a cell of the road region."""
+        rows, cols = self.cell_of_xy(xy)
+        inside = (rows >= 0) & (rows < self.rows) & (cols >= 0) & (cols < self.cols)
+        found = np.zeros(len(xy), bool)
+        found[inside] = self.vertex_id[rows[inside], cols[inside]] >= 0
+        return found
+
     def georeference(self) -> dict[str, object]:
         """The raster georeference JSON, with the same fields as the generator's ground truth."""
         return {

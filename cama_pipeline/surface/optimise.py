@@ -1,10 +1,11 @@
 """Mesh optimisation: per-vertex colour and semantic logits (and a refined elevation MLP) from the images.
 
 First pass (`observe`): every keyframe image sees its visible vertices; their weighted mean colour and
-class frequencies initialise the mesh and the pixels that hit each cell make the observation count.
+class frequencies initialise the mesh (curb and background cells voted again at curb height, see
+`labels`) and the pixels that hit each cell make the observation count.
 Then `epochs` of Adam over image batches minimise the L1 colour error and the semantic cross-entropy of
 the vertices projected with the current elevation (differentiable `grid_sample`), weighted by the pixels
-each vertex covers and by the ground mask, with the surface-point loss holding the MLP to the points.
+each vertex covers and by the ground mask, with the surface-point loss (with the curvature prior) holding the MLP to the points.
 """
 
 from collections.abc import Callable, Iterator
@@ -19,8 +20,9 @@ from cama_pipeline.data import Dataset
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.semantics import BEV_CLASSES
 from cama_pipeline.surface.config import SurfaceConfig
-from cama_pipeline.surface.elevation import BATCH_POINTS, ControlGrid, ElevationMLP, huber
+from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, surface_loss
 from cama_pipeline.surface.grid import SurfaceGrid
+from cama_pipeline.surface.labels import fused_logits
 from cama_pipeline.surface.observe import (
     GROUND,
     Camera,
@@ -129,6 +131,7 @@ def observe(
     vertices = len(mesh.vertex_xy)
     sums = torch.zeros((vertices, 3 + len(BEV_CLASSES)), device=device)
     weights = torch.zeros(vertices, device=device)
+    raised_sums = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
     visible: list[torch.Tensor] = [torch.zeros(0, dtype=torch.int32)] * len(views)
     with torch.no_grad():
         control_z = mesh.control.heights(mesh.mlp)
@@ -144,6 +147,8 @@ def observe(
             flat_ids = batch.ids.reshape(-1)
             sums.index_add_(0, flat_ids, samples[..., :GROUND].reshape(-1, GROUND) * weight[:, None])
             weights.index_add_(0, flat_ids, weight)
+            if config.curb_height_m > 0:
+                _add_raised_votes(raised_sums, mesh, control_z, normals, cameras, id_lists, images, config)
             for i, ids in zip(indices, id_lists, strict=True):
                 visible[i] = ids.to(torch.int32).cpu()
             advance(len(indices), 0.0)
@@ -152,9 +157,28 @@ def observe(
     mesh.count = weights
     mesh.colour = torch.zeros((vertices, 3), device=device)
     mesh.colour[seen] = mean[:, :3]
+    raised = raised_sums[seen] / weights[seen, None] if config.curb_height_m > 0 else None
     mesh.logits = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
-    mesh.logits[seen] = torch.log(mean[:, 3:] + 1e-3)
+    mesh.logits[seen] = fused_logits(mean[:, 3:], raised)
     return visible
+
+
+def _add_raised_votes(
+    sums: torch.Tensor,
+    mesh: Mesh,
+    control_z: torch.Tensor,
+    normals: torch.Tensor,
+    cameras: list[Camera],
+    id_lists: list[torch.Tensor],
+    images: torch.Tensor,
+    config: SurfaceConfig,
+) -> None:
+    """Add to `sums` the weighted class votes of the batch's vertices sampled at curb height (`labels`)."""
+    batch = project_batch(mesh, control_z + config.curb_height_m, normals, cameras, id_lists)
+    samples = sample_images(images[:, 3:], batch.uv)
+    weight = (batch.weight * samples[..., -1]).reshape(-1)
+    classes = samples[..., :-1].reshape(-1, len(BEV_CLASSES))
+    sums.index_add_(0, batch.ids.reshape(-1), classes * weight[:, None])
 
 
 def _batch_loss(
@@ -242,8 +266,7 @@ def _step(
     loss = colour + config.semantic_weight * semantic
     anchor = torch.zeros((), device=device)
     if config.refine_elevation:
-        pick = torch.randint(len(points), (min(len(points), BATCH_POINTS),), generator=generator).to(device)
-        anchor = huber(mesh.mlp(points[pick, :2]) - points[pick, 2].float(), config.huber_m)
+        anchor = surface_loss(mesh.mlp, points, mesh.vertex_xy, config, generator)
         loss = loss + config.anchor_weight * anchor
     loss.backward()
     optimiser.step()

@@ -17,8 +17,9 @@ from cama_pipeline.surface.config import SurfaceConfig
 
 logger = logging.getLogger(__name__)
 
-SURFACE_LABELS = (Semantic.ROAD, Semantic.CURB, Semantic.LANE_MARKING, Semantic.CROSSWALK)
-"""SfM point labels that lie on the road surface."""
+SURFACE_LABELS = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
+"""SfM point labels that lie on the road surface (not curb: a curb stands a kerb height above the road,
+and pulls the surface up along the road edges)."""
 
 
 class NoRoadPointsError(ValueError):
@@ -54,7 +55,7 @@ def trajectory_strip(poses: np.ndarray, config: SurfaceConfig) -> np.ndarray:
 
 
 def sfm_surface_points(workspace: Path, site_id: str, config: SurfaceConfig) -> np.ndarray:
-    """(M, 3) SfM points labelled as road surface with a small reprojection error; empty without SfM."""
+    """(M, 3) SfM points labelled road, marking or crosswalk with a small reprojection error; empty without SfM."""
     if not config.use_sfm_points or not (sfm_dir(workspace, site_id) / "points.npz").is_file():
         return np.zeros((0, 3))
     points = read_points(workspace, site_id)

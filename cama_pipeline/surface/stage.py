@@ -1,6 +1,6 @@
 """The surface stage: for every site of the workspace, the RoMe-style road mesh and its BEV rasters.
 
-Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit, observation
+Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit (`fit`), observation
 (visibility, mean colour and class, ray counts), mesh optimisation, export (see `outputs` for the files).
 """
 
@@ -28,8 +28,7 @@ from cama_pipeline.site.workspace import (
     stored_fingerprint,
 )
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
-from cama_pipeline.surface.elevation import fit_elevation, new_elevation_mlp
-from cama_pipeline.surface.grid import road_grid
+from cama_pipeline.surface.fit import fit_steps, fit_surface
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
 from cama_pipeline.surface.outputs import (
     grid_mesh,
@@ -116,13 +115,9 @@ def reconstruct_site(
         points = surface_points(views, sfm_surface_points(workspace, site_id, config), config)
     except NoRoadPointsError as err:
         raise NoRoadPointsError(f"site {site_id} ({poses} poses): {err}") from None
-    grid = road_grid(points.xyz[:, :2], config.resolution_m, config.region_radius_m)
-    point_tensor = torch.as_tensor(points.xyz, device=device)
-    mlp = new_elevation_mlp(grid, points.xyz[:, 2], config).to(device)
-    with phases.phase("elevation", config.elevation_iterations) as advance:
-        elevation_losses = fit_elevation(
-            mlp, point_tensor, config, lambda step, loss: advance(50 if step else 1, loss)
-        )
+    with phases.phase("elevation", fit_steps(points, config)) as advance:
+        fitted = fit_surface(points, config, device, lambda step, loss: advance(50 if step else 1, loss))
+    grid, mlp, point_tensor = fitted.grid, fitted.mlp, fitted.points
     mesh = new_mesh(grid, mlp, config, device)
     with phases.phase("observe", len(views)) as advance:
         visible = observe(mesh, dataset, views, config, advance)
@@ -144,11 +139,11 @@ def reconstruct_site(
         "config": asdict(config),
         "device": str(device),
         "images": len(views),
-        "points": {"strip": points.strip_count, "sfm": points.sfm_count},
+        "points": {"strip": points.strip_count, "sfm": points.sfm_count, "sfm_kept": fitted.sfm_kept},
         "vertices": grid.vertex_count,
         "cells_observed": int((rasters.observation_count > 0).sum()),
         "seconds": dict(phases.seconds),
-        "losses": {"elevation": elevation_losses, "epochs": epoch_losses},
+        "losses": {"elevation": fitted.losses, "epochs": epoch_losses},
     }
 
 

@@ -50,3 +50,27 @@ def test_many_octaves_and_a_square_loss_do_follow_the_outlier() -> None:
     spike, _ = fitted_error_at(sloped_road(2.0), config)
     spike_smooth, _ = fitted_error_at(sloped_road(2.0), smooth)
     assert spike > 2 * spike_smooth
+
+
+def strip_fit_far_rmse(smoothness_weight: float) -> float:
+    """RMSE against the plane of a fit to a 4 m wide strip, over the region 8-12 m beside the strip."""
+    xs, ys = np.meshgrid(np.arange(100.0, 160.01, 0.5), np.arange(198.0, 202.01, 0.5))
+    xy = np.column_stack([xs.ravel(), ys.ravel()])
+    points = np.column_stack([xy, 3 + 0.02 * xy[:, 0] - 0.01 * xy[:, 1]])
+    torch.manual_seed(0)
+    config = SurfaceConfig(elevation_iterations=400, smoothness_weight=smoothness_weight)
+    grid = road_grid(points[:, :2], 0.5, 12.0)
+    mlp = new_elevation_mlp(grid, points[:, 2], config)
+    region = grid.vertex_xy()
+    fit_elevation(mlp, torch.as_tensor(points), config, region_xy=torch.as_tensor(region))
+    far = region[np.abs(region[:, 1] - 200.0) > 8.0]
+    with torch.no_grad():
+        z = mlp(torch.as_tensor(far)).double().numpy()
+    return float(np.sqrt(np.mean((z - (3 + 0.02 * far[:, 0] - 0.01 * far[:, 1])) ** 2)))
+
+
+def test_the_curvature_prior_extrapolates_a_plane_beside_the_points() -> None:
+    with_prior = strip_fit_far_rmse(SurfaceConfig.smoothness_weight)
+    without = strip_fit_far_rmse(0.0)
+    assert with_prior < 0.05  # 8-12 m beside a 4 m strip, within 5 cm of the plane
+    assert without > 3 * with_prior  # the check can fail: the bare MLP wanders away from the points

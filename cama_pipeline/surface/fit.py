@@ -1,0 +1,67 @@
+"""The site's road region and elevation from its surface points, the trajectory strip trusted first.
+
+The strip lies under the cameras and is road by construction; SfM road points are sparse and, beyond a
+few metres from the cameras, often triangulated decimetres to metres off. So the strip alone sets the
+road region and is fitted first; then the SfM points inside the region and within `sfm_gate_m` of that
+surface join it for a second fit. Without a strip, every point is trusted.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.surface.elevation import ElevationMLP, fit_elevation, new_elevation_mlp
+from cama_pipeline.surface.grid import SurfaceGrid, road_grid
+from cama_pipeline.surface.points import SurfacePoints
+
+
+@dataclass(frozen=True, eq=False)
+class FittedSurface:
+    """The road region, its fitted elevation MLP and the points it was fitted to."""
+
+    grid: SurfaceGrid
+    mlp: ElevationMLP
+    points: torch.Tensor
+    """(N, 3) the strip and the SfM points kept."""
+    sfm_kept: int
+    losses: list[float]
+    """The Huber + prior loss every 50 steps of both fits."""
+
+
+def fit_steps(points: SurfacePoints, config: SurfaceConfig) -> int:
+    """Adam steps `fit_surface` takes (for progress): two fits when SfM points may join the strip."""
+    fits = 2 if points.strip_count and points.sfm_count else 1
+    return fits * config.elevation_iterations
+
+
+def gate(mlp: ElevationMLP, xyz: np.ndarray, gate_m: float) -> np.ndarray:
+    """(N,) whether each point lies within `gate_m` of the MLP's surface."""
+    with torch.no_grad():
+        z = mlp(torch.as_tensor(xyz[:, :2], device=mlp.centre.device)).double().cpu().numpy()
+    return np.asarray(np.abs(z - xyz[:, 2]) <= gate_m)
+
+
+def fit_surface(
+    points: SurfacePoints,
+    config: SurfaceConfig,
+    device: torch.device,
+    on_step: Callable[[int, float], None] | None = None,
+) -> FittedSurface:
+    """Region and elevation (see the module docstring)."""
+    strip, sfm = points.xyz[: points.strip_count], points.xyz[points.strip_count :]
+    trusted = strip if len(strip) else points.xyz
+    grid = road_grid(trusted[:, :2], config.resolution_m, config.region_radius_m)
+    mlp = new_elevation_mlp(grid, trusted[:, 2], config).to(device)
+    region = torch.as_tensor(grid.vertex_xy(), device=device)
+    fitted = torch.as_tensor(trusted, device=device)
+    losses = fit_elevation(mlp, fitted, config, on_step, region)
+    kept = 0
+    if len(strip) and len(sfm):
+        inliers = sfm[grid.in_region(sfm[:, :2]) & gate(mlp, sfm, config.sfm_gate_m)]
+        kept = len(inliers)
+        fitted = torch.cat([fitted, torch.as_tensor(inliers, device=device)])
+        losses += fit_elevation(mlp, fitted, config, on_step, region)
+    return FittedSurface(grid, mlp, fitted, kept, losses)
