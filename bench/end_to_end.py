@@ -5,12 +5,14 @@
 2. Camera pose error of the coarse WIGO poses and of the SfM poses against the true poses (absolute, and
    gauge-free after the best similarity).
 3. Elevation RMSE of the reconstructed raster over cells that are road in the ground truth and observed.
-4. Chamfer-AP (0.5 / 1.0 / 1.5 m) of the VMA proposals against the true vectors, inside the reconstructed extent.
+4. Chamfer-AP (0.5 / 1.0 / 1.5 m) of the VMA proposals against the true vectors inside the reconstructed extent,
+   and against the true vectors cut to the observed cells (the clips drove only part of the generated roads).
 5. The paper's comparison table on known truth: SRE / precision / recall / F1 of lane dividers against the image
    lane masks for (a) the true 3D map with true poses, (b) the baseline 2D map with coarse poses, (c1) the
    pipeline's proposals accepted as they are and (c2) the pipeline's annotations after the simulated annotator's
    correction pass; (c) are lifted through the reconstructed elevation and projected with the SfM poses.
-6. The simulated annotator's person-hours per km: drawing from scratch vs correcting the proposals.
+6. The simulated annotator's person-hours per km: drawing from scratch vs correcting the proposals, on the true
+   vectors cut to the observed cells (nobody can draw road that no camera saw).
 
 Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-count map) go to
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json.
@@ -36,6 +38,7 @@ from surface import load_bev, truth_at  # bench/surface.py: this script's folder
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
 from app.simulation.annotator import correct_proposals, draw_from_scratch
+from app.simulation.plan import Polyline
 from app.simulation.workbench import (
     kept_map,
     load_proposals,
@@ -46,6 +49,7 @@ from app.simulation.workbench import (
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
+from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pipeline import PipelineConfig, proposals_path, surface_rasters
 from cama_pipeline.pipeline import run as run_pipeline
@@ -55,7 +59,7 @@ from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
-from models.vma.vectors import read_vectors, vectors_from_annotations
+from models.vma.vectors import Vector, read_vectors, vectors_from_annotations
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -128,13 +132,33 @@ def proposal_vectors(path: Path) -> list[Any]:
     )
 
 
+def observed_mask(rasters_folder: Path) -> ObservedMask:
+    bev = load_bev(rasters_folder)
+    return ObservedMask.from_semantic(bev["semantic"], bev["geo"]["origin_xy"], bev["geo"]["resolution"])
+
+
+def observed_truth(truths: list[Vector], mask: ObservedMask) -> list[Vector]:
+    """The true vectors cut to the observed cells."""
+    return [
+        Vector(t.cls, part)
+        for t in truths
+        for part in observed_parts(t.points, t.cls == "ped_crossing", mask)
+    ]
+
+
 def proposals_ap(site: Path, rasters_folder: Path, proposals: Path) -> dict[str, Any]:
-    """Chamfer-AP of the proposals against the true vectors inside the reconstructed extent."""
+    """Chamfer-AP of the proposals against the true vectors inside the reconstructed extent: all of them, and
+    only their observed parts."""
     extent = load_site_rasters(rasters_folder).extent()
-    result = evaluate_sites(
-        [(proposal_vectors(proposals), read_vectors(site / "ground_truth" / "vector_map.json"), extent)]
-    )
-    return {key: result[key] for key in ("mean_ap", "class_ap", "confidence_bins") if key in result}
+    truths = read_vectors(site / "ground_truth" / "vector_map.json")
+    out = {}
+    for name, truth in (
+        ("all_truth", truths),
+        ("observed_truth", observed_truth(truths, observed_mask(rasters_folder))),
+    ):
+        result = evaluate_sites([(proposal_vectors(proposals), truth, extent)])
+        out[name] = {key: result[key] for key in ("mean_ap", "class_ap", "confidence_bins") if key in result}
+    return out
 
 
 def lifted_map(vectors_xy: list[tuple[str, np.ndarray]], folder: Path) -> list[VectorElement]:
@@ -161,9 +185,17 @@ def sfm_pose_map(workspace: Path, site_id: str) -> dict[str, Pose]:
     return out
 
 
-def simulated_pass(site: Path, proposals: Path) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
-    """The scripted annotator on the proposals and on an empty site; the corrected map (global 2D)."""
-    truths = true_polylines(site)
+def simulated_pass(
+    site: Path, proposals: Path, rasters_folder: Path
+) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
+    """The scripted annotator on the proposals and on an empty site, both working towards the observed parts of
+    the true vectors; the corrected map (global 2D)."""
+    mask = observed_mask(rasters_folder)
+    truths = [
+        Polyline(t.cls, part)
+        for t in true_polylines(site)
+        for part in observed_parts(t.points, t.closed, mask)
+    ]
     with local_backend() as (admin, annotator):
         corrected_site = register_synthetic_site(admin, site, "corrected")
         load_proposals(admin, corrected_site, proposals)
@@ -282,7 +314,7 @@ def main() -> None:
     }
     figures["elevation"], error_map = elevation_figures(site, rasters)
     figures["proposals_ap"] = proposals_ap(site, rasters, proposals)
-    figures["annotator"], corrected = simulated_pass(site, proposals)
+    figures["annotator"], corrected = simulated_pass(site, proposals, rasters)
     truth = site / "ground_truth"
     sfm_poses = sfm_pose_map(workspace, site_id)
     proposal_xy = [(v.cls, v.points) for v in proposal_vectors(proposals)]
