@@ -31,6 +31,14 @@ class SiftExtractor:
         return Features(shape.reshape(-1, 6), data)
 
 
+def verification_options(config: FeaturesConfig) -> pycolmap.TwoViewGeometryOptions:
+    """COLMAP's two-view geometric verification with this project's inlier floor and RANSAC trial count."""
+    options = pycolmap.TwoViewGeometryOptions()
+    options.min_num_inliers = config.min_num_inliers
+    options.ransac.dyn_num_trials_multiplier = config.ransac_trials_multiplier
+    return options
+
+
 class ColmapMatcher:
     """COLMAP's nearest-neighbour matcher with ratio and cross check, then two-view geometric verification."""
 
@@ -40,8 +48,7 @@ class ColmapMatcher:
         self._matching = pycolmap.FeatureMatchingOptions()
         self._matching.num_threads = config.num_threads
         self._matching.sift.max_ratio = config.max_ratio
-        self._verification = pycolmap.TwoViewGeometryOptions()
-        self._verification.min_num_inliers = config.min_num_inliers
+        self._verification = verification_options(config)
 
     def match(self, database: Path, pairs_file: Path) -> None:
         """Match the listed pairs (COLMAP skips pairs the database already holds)."""

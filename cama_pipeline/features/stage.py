@@ -27,6 +27,7 @@ from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
 from cama_pipeline.features.interface import FeatureExtractor, PairMatcher
 from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
+from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.pairs.cameras import CameraView, site_views
@@ -179,13 +180,13 @@ def run(
     matcher: PairMatcher | None = None,
     overwrite: bool = False,
 ) -> list[SiteFeatures]:
-    """Features and matches for every site of the workspace (after `cama pairs`); SIFT and COLMAP's matcher
-    unless another extractor/matcher pair is given."""
+    """Features and matches for every site of the workspace (after `cama pairs`); SIFT and the matcher named by
+    the config unless another extractor/matcher pair is given."""
     workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
     index = read_sites_index(sites_index_path(workspace))
     dataset = load_dataset(Path(dataset_root))
     extractor = extractor or SiftExtractor(config)
-    matcher = matcher or ColmapMatcher(config)
+    matcher = matcher or (BlasMatcher(config) if config.matcher == "blas" else ColmapMatcher(config))
     return [
         run_site(
             dataset,
