@@ -32,7 +32,10 @@ def view_command(
     port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port.")] = 8080,
     poll_s: Annotated[float, typer.Option(min=0.2, help="Seconds between vector refreshes.")] = 2.0,
 ) -> None:
-    """Show the road mesh, lifted vectors by class and state, keyframe cameras and sparse points in 3D."""
+    """Show the road mesh, lifted vectors by class and state, keyframe cameras and sparse points in 3D.
+
+    The editor links here when the backend knows this URL (CAMA_REVIEW_URL; `cama demo` sets it), focused on
+    the selected element (see app/viewer/focus.py)."""
     import viser
 
     from app.viewer.content import ViewInputError
