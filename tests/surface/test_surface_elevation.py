@@ -74,3 +74,23 @@ def test_the_curvature_prior_extrapolates_a_plane_beside_the_points() -> None:
     without = strip_fit_far_rmse(0.0)
     assert with_prior < 0.05  # 8-12 m beside a 4 m strip, within 5 cm of the plane
     assert without > 3 * with_prior  # the check can fail: the bare MLP wanders away from the points
+
+
+def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -> None:
+    from cama_pipeline.surface.fit import fit_surface
+    from cama_pipeline.surface.points import SurfacePoints
+
+    strip = sloped_road(0.0)
+    strip = strip[np.abs(strip[:, 1] - 220.0) <= 2.0]  # a 4 m wide strip along x
+    on_road = strip[::7] + np.array([0.0, 5.0, 0.05])  # 5 m beside it, right on the plane
+    on_road[:, 2] = 3 + 0.02 * on_road[:, 0] - 0.01 * on_road[:, 1]
+    floating = on_road[::2] + np.array([0.3, 0.0, 1.0])  # a metre above the road
+    far = on_road[:5] + np.array([0.0, 40.0, 0.0])  # beyond the region around the strip
+    sfm = np.concatenate([on_road, floating, far])
+    points = SurfacePoints(np.concatenate([strip, sfm]), len(strip), len(sfm))
+    torch.manual_seed(0)
+    config = SurfaceConfig(resolution_m=0.5, elevation_iterations=150)
+    fitted = fit_surface(points, config, torch.device("cpu"))
+    assert fitted.sfm_kept == len(on_road)
+    assert len(fitted.points) == len(strip) + len(on_road)
+    assert not fitted.grid.in_region(far[:, :2]).any() and fitted.grid.in_region(on_road[:, :2]).all()
