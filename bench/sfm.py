@@ -14,11 +14,14 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
     (e) parallel      (d) per clip on a process pool, clips merged (similarity from shared points), then
                       re-triangulation and global BA of the merged model
     (f) no priors     (e) without WIGO's odometry and position priors in BA (do they help?)
-Every guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
-measured, i.e. the model's shape without the global placement it inherits from odometry.
+    (g) old merge     (e) with the merge as it was: two Algorithm 1 passes, BA run to full tolerance
+Guided models are placed in the global frame by the gauge fit to all their WIGO poses (`sfm.gauge`). Every
+guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
+measured, i.e. the model's shape without the global placement it inherits from odometry. Rows give wall
+and CPU seconds (this process and its workers): on a shared machine compare CPU seconds.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
-       [--workers 2] [--methods abcdef]
+       [--workers 2] [--methods abcdefg]
 The site's workspace must hold `cama sites` / `cama pairs` output; missing features are computed first.
 Adds the run to bench/results/sfm.json ({"runs": {"<preset>:<scenes>": {...}}}, each with its command line,
 site and scenes), so several sites measured by separate commands add up in one file.
@@ -28,6 +31,7 @@ import argparse
 import json
 import logging
 import platform
+import resource
 import sys
 import tempfile
 import time
@@ -54,6 +58,7 @@ from cama_pipeline.sfm.baseline import (
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.executor import LocalExecutor
 from cama_pipeline.sfm.guided import reconstruct_views
+from cama_pipeline.sfm.merge import MergeConfig
 from cama_pipeline.sfm.stage import copy_database, reconstruct_site, site_clips
 from cama_pipeline.site.workspace import (
     read_site_manifest,
@@ -76,6 +81,13 @@ def true_world_from_cam(site: Path, views: list[CameraView]) -> dict[str, np.nda
         @ v.ego_from_cam
         for v in views
     }
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and its finished children (the worker processes): on a shared machine the
+    wall time depends on the other jobs, the CPU time much less."""
+    usage = [resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)]
+    return sum(u.ru_utime + u.ru_stime for u in usage)
 
 
 def figures(
@@ -107,24 +119,29 @@ def gauge_free_poses(world_from_cam: dict[str, np.ndarray], truth: dict[str, np.
 
 
 def run_incremental(database: Path, image_dir: Path, views: list[CameraView], truth: dict[str, Any]) -> dict:
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), cpu_seconds()
     model = incremental_model(database, image_dir, [v.name for v in views])
-    seconds = time.perf_counter() - started
+    seconds, cpu = time.perf_counter() - started, round(cpu_seconds() - cpu, 1)
     if model is None:
-        return figures(pose_errors({}, truth), None, seconds)
+        return figures(pose_errors({}, truth), None, seconds, cpu_seconds=cpu)
     aligned = align_to_reference(model, {name: pose[:3, 3] for name, pose in truth.items()})
-    return figures(pose_errors(model_poses(model), truth), model, seconds, aligned_to_truth=aligned)
+    return figures(
+        pose_errors(model_poses(model), truth), model, seconds, cpu_seconds=cpu, aligned_to_truth=aligned
+    )
 
 
 def run_guided(preset: str, database: Path, image_dir: Path, views: list[CameraView], truth: dict) -> dict:
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), cpu_seconds()
     result = reconstruct_views(views, database, image_dir, SfmConfig.preset(preset))
-    seconds = time.perf_counter() - started
+    seconds, cpu = time.perf_counter() - started, round(cpu_seconds() - cpu, 1)
     model = result.reconstruction
     iterations = result.report.get("iterations")
     extra = {
+        "cpu_seconds": cpu,
         "iterations": len(iterations) if isinstance(iterations, list) else iterations,
         "flagged": len(result.flagged),
+        "gauge": result.report.get("gauge"),
+        "seconds_split": result.report.get("seconds"),
         "gauge_free": gauge_free(model, truth),
     }
     return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
@@ -138,12 +155,22 @@ def run_parallel(
     workers: int,
     scratch: Path,
     config: SfmConfig,
+    merge_config: MergeConfig | None = None,
 ) -> dict:
-    started = time.perf_counter()
-    site = reconstruct_site(clips, database, image_dir, config, scratch, executor=LocalExecutor(workers))
+    started, cpu = time.perf_counter(), cpu_seconds()
+    site = reconstruct_site(
+        clips,
+        database,
+        image_dir,
+        config,
+        scratch,
+        executor=LocalExecutor(workers),
+        merge_config=merge_config,
+    )
     seconds = time.perf_counter() - started
     model = site.reconstruction
     extra = {
+        "cpu_seconds": round(cpu_seconds() - cpu, 1),
         "workers": workers,
         "clips": {
             scene: {k: clip.get(k) for k in ("status", "registered_images", "seconds")}
@@ -151,6 +178,7 @@ def run_parallel(
         },
         "merge": site.report["merge"],
         "seconds_split": site.report["seconds"],
+        "gauge": site.report["merged"].get("gauge"),
         "gauge_free": gauge_free(model, truth),
     }
     return figures(pose_errors(model_poses(model), truth), model, seconds, **extra)
@@ -178,7 +206,7 @@ def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, A
 def print_table(rows: dict[str, dict[str, Any]]) -> None:
     """The figures as a table (a failed method prints its error)."""
     print(
-        f"{'method':<12}{'seconds':>9}{'pos cm':>9}{'rot deg':>9}{'reproj px':>10}{'registered':>11}{'points':>8}"
+        f"{'method':<12}{'seconds':>9}{'cpu s':>9}{'pos cm':>9}{'rot deg':>9}{'reproj px':>10}{'registered':>11}{'points':>8}"
     )
     for name, row in rows.items():
         if "error" in row:
@@ -186,7 +214,7 @@ def print_table(rows: dict[str, dict[str, Any]]) -> None:
             continue
         reprojection = row.get("reprojection_error_px")
         print(
-            f"{name:<12}{row.get('seconds', 0):>9.1f}{row['position_cm']:>9.2f}{row['rotation_deg']:>9.4f}"
+            f"{name:<12}{row.get('seconds', 0):>9.1f}{row.get('cpu_seconds') or 0:>9.1f}{row['position_cm']:>9.2f}{row['rotation_deg']:>9.4f}"
             f"{reprojection if reprojection is not None else float('nan'):>10.3f}"
             f"{row['registered_ratio']:>11.3f}{row.get('points', 0):>8}"
         )
@@ -230,11 +258,25 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
                 scratch / "f",
                 SfmConfig.preset("iterative", odometry_priors=False),
             ),
+            "g_parallel_previous_merge": lambda: run_parallel(
+                clips,
+                database,
+                image_dir,
+                truth,
+                args.workers,
+                scratch / "g",
+                SfmConfig.preset("iterative"),
+                MergeConfig(global_max_iterations=2, global_function_tolerance=0.0),
+            ),
         }
         for key, measure in methods.items():
             if key[0] in args.methods:
                 rows[key] = guarded(key, measure)
     return rows, views, manifest
+
+
+def _ratio(numerator: float | None, denominator: float | None) -> float | None:
+    return round(numerator / denominator, 2) if numerator and denominator else None
 
 
 def summarize(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -246,6 +288,10 @@ def summarize(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
         "speedup_e_over_a": round(incremental["seconds"] / parallel["seconds"], 2)
         if "seconds" in incremental
         else None,
+        "cpu_speedup_e_over_a": _ratio(incremental.get("cpu_seconds"), parallel.get("cpu_seconds")),
+        "cpu_speedup_e_over_previous_merge": _ratio(
+            rows.get("g_parallel_previous_merge", {}).get("cpu_seconds"), parallel.get("cpu_seconds")
+        ),
         "position_gain_over_wigo": round(wigo["position_cm"] / parallel["position_cm"], 2),
         "rotation_gain_over_wigo": round(wigo["rotation_deg"] / parallel["rotation_deg"], 2),
         "goal_met": parallel["position_cm"] <= 5 and parallel["rotation_deg"] <= 0.1,
@@ -278,7 +324,9 @@ def main() -> None:
     parser.add_argument("--scenes", nargs="*", help="Only the images of these scenes of the first site.")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument(
-        "--methods", default="abcdef", help="Letters of the methods to run (default all; e is always needed)."
+        "--methods",
+        default="abcdefg",
+        help="Letters of the methods to run (default all; e is always needed).",
     )
     parser.add_argument("--out", type=Path, default=RESULTS / "sfm.json")
     args = parser.parse_args()

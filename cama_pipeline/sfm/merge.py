@@ -36,9 +36,12 @@ class MergeConfig:
     """A similarity rotating the clip more than this is rejected."""
     max_scale_change: float = 0.05
     """A similarity whose scale differs from 1 by more than this is rejected (poses have metric scale)."""
-    global_max_iterations: int = 2
+    global_max_iterations: int = 1
     """Iterative BA passes of the merged model at most: its clips were refined and cleaned already, so it
     needs the re-triangulation across clips and a global adjustment, not the whole Algorithm 1 again."""
+    global_function_tolerance: float = 1e-6
+    """BA of the merged model stops once an iteration lowers the cost by less than this fraction: it starts
+    from refined clips, so the long tail of tiny steps a cold BA needs moves nothing that matters."""
 
     def __post_init__(self) -> None:
         if self.global_max_iterations < 1:
@@ -47,6 +50,10 @@ class MergeConfig:
             )
         if self.min_correspondences < 3:
             raise ValueError(f"MergeConfig.min_correspondences must be >= 3, got {self.min_correspondences}")
+        if not 0 <= self.global_function_tolerance < 1:
+            raise ValueError(
+                f"MergeConfig.global_function_tolerance must be in [0, 1), got {self.global_function_tolerance}"
+            )
         for name in ("max_error_m", "max_shift_m", "max_rotation_deg", "max_scale_change"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"MergeConfig.{name} must be > 0, got {getattr(self, name)}")

@@ -224,7 +224,9 @@ def merge_site(
         v for m, a in zip(models, alignments, strict=True) for v in aligned_views(m.views, a.world_from_clip)
     ]
     merged_config = replace(
-        config, max_iterations=min(config.max_iterations, merge_config.global_max_iterations)
+        config,
+        max_iterations=min(config.max_iterations, merge_config.global_max_iterations),
+        ba_function_tolerance=max(config.ba_function_tolerance, merge_config.global_function_tolerance),
     )
     odometry = {view.name: view.world_from_ego for task in tasks for view in task.views}
     result = reconstruct_views(

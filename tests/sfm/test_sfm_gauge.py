@@ -1,13 +1,20 @@
 """The gauge fit: a model with a perfect shape but a wrong placement is moved onto noisy odometry, so that
 the odometry's per-clip drifts average out instead of being inherited."""
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cama_pipeline.sfm.config import SfmConfig
-from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
+sys.path.insert(0, str(Path(__file__).parent))
+from sfm_fixture import SfmInputs  # noqa: E402
+
+from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
+from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge  # noqa: E402
+from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
 
 SIGMAS = GaugeSigmas(position_m=0.15, tilt_deg=0.035, heading_deg=0.25)
 
@@ -106,3 +113,21 @@ def test_sigmas_must_be_positive(field: str) -> None:
 def test_config_rejects_non_positive_gauge_sigma() -> None:
     with pytest.raises(ValueError, match="gauge_tilt_sigma_deg"):
         SfmConfig(gauge_tilt_sigma_deg=0)
+
+
+@pytest.mark.slow
+def test_reconstruction_is_placed_on_the_given_odometry(sfm_inputs: SfmInputs) -> None:
+    """`odometry=` decides where the model goes (the merge passes every clip's WIGO poses): odometry shifted
+    by 1 m moves the refined poses and the points by that metre, the shape unchanged."""
+    views = sfm_inputs.longest_drive()
+    config = SfmConfig.preset("rigid")
+    plain = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config)
+    shift = np.array([1.0, -0.5, 0.2])
+    odometry = {v.name: v.world_from_ego + np.pad(shift[:, None], ((0, 1), (3, 0))) for v in views}
+    moved = reconstruct_views(views, sfm_inputs.database, sfm_inputs.image_dir, config, odometry=odometry)
+    assert moved.report["gauge"]["shift_m"] == pytest.approx(np.linalg.norm(shift), abs=0.01)
+    offsets = np.array([moved.world_from_ego[n][:3, 3] - p[:3, 3] for n, p in plain.world_from_ego.items()])
+    np.testing.assert_allclose(offsets, np.broadcast_to(shift, offsets.shape), atol=0.01)
+    centre = np.mean([p.xyz for p in moved.reconstruction.points3D.values()], axis=0)
+    plain_centre = np.mean([p.xyz for p in plain.reconstruction.points3D.values()], axis=0)
+    np.testing.assert_allclose(centre - plain_centre, shift, atol=0.02)

@@ -47,6 +47,7 @@ def test_site_outputs_cover_every_clip_and_image(sfm_inputs: object, first_run: 
     assert len(report["clips"]) == 2  # the stationary scene rides with the moving one it was merged into
     merged = report["merged"]
     assert merged["registered_images"] >= 0.9 * merged["images"]
+    assert merged["gauge"]["poses"] >= 0.9 * merged["images"]  # placed by every clip's odometry poses
     poses = read_refined_poses(workspace, site_id, include_flagged=True)
     assert set(poses) == {v.token for v in sfm_inputs.views}  # type: ignore[attr-defined]
     points = read_points(workspace, site_id)
