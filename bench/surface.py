@@ -4,7 +4,8 @@ For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/<s
 runs into its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters are compared with the
 site's `ground_truth/bev/` at each reconstructed cell's centre (nearest ground-truth cell):
   elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking or crosswalk),
-             the median signed error (an offset of the pose frame shows there), and RMSE by distance from the site's keyframe trajectory (beyond the strip it is extrapolated);
+             the median signed error (an offset of the pose frame shows there), and RMSE by distance from
+             the site's keyframe trajectory (beyond the strip it is extrapolated);
   semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters;
   photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
