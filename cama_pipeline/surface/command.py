@@ -20,7 +20,9 @@ def surface_command(
         str, typer.Option(help="Pose source: wigo (site manifest), sfm (after `cama sfm`) or ground_truth.")
     ] = "wigo",
     resolution_m: Annotated[float, typer.Option(help="Mesh vertex spacing and raster resolution.")] = 0.1,
-    epochs: Annotated[int, typer.Option(help="Mesh optimisation passes over the keyframe images.")] = 1,
+    epochs: Annotated[
+        int, typer.Option(help="Mesh optimisation passes over the keyframe images.")
+    ] = SurfaceConfig.epochs,
     refine_elevation: Annotated[
         bool, typer.Option(help="Refine the elevation MLP through the image losses.")
     ] = True,
