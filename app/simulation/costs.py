@@ -32,6 +32,8 @@ class ActionCosts:
     """Click one vertex of a new polyline."""
     draw_finish_s: float = K_S
     """Finish the polyline (Enter / double click)."""
+    simplify_s: float = K_S
+    """Simplify the selected polyline: one key."""
     merge_s: float = P_S + B_S + K_S + K_S
     """Shift-click a second polyline to add it to the selection, press the merge key."""
     scan_per_100m_s: float = 10.0

@@ -34,6 +34,8 @@ class SimulationConfig:
     """A vertex closer than this to the true line is left where it is."""
     simplify_m: float = 0.05
     """The vertices a person clicks: the true line simplified to this tolerance."""
+    editor_simplify_m: float = 0.2
+    """Tolerance of the editor's simplify command (its default), which a person may run before fixing."""
 
     def __post_init__(self) -> None:
         if not 0 < self.accept_m <= self.match_m:
@@ -42,8 +44,10 @@ class SimulationConfig:
             )
         if self.accept_max_m < self.accept_m:
             raise ValueError(f"SimulationConfig: need accept_max_m >= accept_m, got {self.accept_max_m}")
-        if self.vertex_tolerance_m <= 0 or self.simplify_m <= 0:
-            raise ValueError("SimulationConfig: vertex_tolerance_m and simplify_m must be > 0")
+        if min(self.vertex_tolerance_m, self.simplify_m, self.editor_simplify_m) <= 0:
+            raise ValueError(
+                "SimulationConfig: vertex_tolerance_m, simplify_m and editor_simplify_m must be > 0"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +78,8 @@ class Decision:
     """Indices (into the other pending proposals) of the pieces of the same element merged into this one."""
     gap_runs: tuple[int, ...] = ()
     """True vertices missing, per stretch of the element no proposal covers."""
+    simplified: bool = False
+    """The editor's simplify was run on it first (fewer vertices to drag or delete)."""
 
     @property
     def added(self) -> int:
@@ -99,6 +105,7 @@ class Decision:
             + (costs.relabel_s if self.relabel else 0.0)
             + len(self.merged) * costs.merge_s
             + fill
+            + (costs.simplify_s if self.simplified else 0.0)
         )
         return costs.inspect_s + edits + costs.verdict_s
 
@@ -168,6 +175,25 @@ def _nearest_truth(
     return min(reach)[1] if reach else None
 
 
+def _fix(
+    index: int,
+    target: np.ndarray,
+    relabel: str | None,
+    merged: tuple[int, ...],
+    pieces: list[np.ndarray],
+    config: SimulationConfig,
+    *,
+    simplify_first: bool,
+) -> Decision:
+    """The fix that turns the pieces into `target`, optionally after the editor's simplify on them (one key)."""
+    if simplify_first and len(target) > 2 and np.allclose(target[0], target[-1]):
+        simplify_first = False  # the editor does not simplify rings
+    if simplify_first:
+        pieces = [simplify(p, config.editor_simplify_m) for p in pieces]
+    moved, removed, gap_runs = _vertex_edits(pieces, target, config.vertex_tolerance_m)
+    return Decision("fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first)
+
+
 def decide(
     proposal: Polyline,
     truths: Sequence[Polyline],
@@ -196,8 +222,13 @@ def decide(
     )
     target = clicked_vertices(truth, config)
     pieces = [proposal.points, *(pending[k].points for k in merged)]
-    moved, removed, gap_runs = _vertex_edits(pieces, target, config.vertex_tolerance_m)
-    fix = Decision("fix", index, target, relabel, moved, removed, merged, gap_runs)
+    fix = min(
+        (
+            _fix(index, target, relabel, merged, pieces, config, simplify_first=False),
+            _fix(index, target, relabel, merged, pieces, config, simplify_first=True),
+        ),
+        key=lambda d: d.seconds(costs),
+    )
     redraw_s = Decision("reject").seconds(costs) + drawing_seconds(truth, config, costs)
     return fix if fix.seconds(costs) < redraw_s else Decision("reject")
 

@@ -98,3 +98,11 @@ def test_road_length_is_half_the_boundaries_and_bad_settings_are_refused() -> No
         SimulationConfig(accept_m=2.0, match_m=1.0)
     with pytest.raises(ValueError, match="move_vertex_s"):
         ActionCosts(move_vertex_s=-1.0)
+
+
+def test_a_densely_wiggled_stretch_is_simplified_before_it_is_fixed() -> None:
+    tail = np.array([[x, 2.0 - abs(x - 90.0) / 5.0 + 0.6] for x in np.arange(80.0, 100.5, 1.0)])
+    proposal = Polyline("boundary", np.vstack([ZIGZAG.points[:8], tail]))  # last 20 m: 21 vertices, 0.6 m off
+    decision = decide(proposal, [ZIGZAG], set(), CONFIG)
+    assert decision.kind == "fix" and decision.simplified
+    assert decision.moved + decision.removed <= 4  # the simplified stretch keeps a handful of vertices
