@@ -3,39 +3,59 @@
 Each client repeats: GET an element, PATCH it with the version read; on 409 it retries with the version in the
 conflict body. The latency of one edit round-trip runs from the GET to the acknowledged PATCH (retries included).
 The server is `cama serve` (uvicorn, one process) on loopback with SQLite in a temporary folder, and also with
-PostgreSQL when a URL is given (`--postgres-url` or CAMA_BENCH_POSTGRES_URL; that database must be empty or
-already migrated by CAMA, and is written to).
+PostgreSQL: at a given URL (`--postgres-url` or CAMA_BENCH_POSTGRES_URL; that database must be empty or already
+migrated by CAMA, and is written to), else on a throwaway cluster when the PostgreSQL server programs are
+installed (the backend tests' `PostgresServer`: Unix socket, fsync off, a fresh database per server run).
 
-Two runs per database: `paced` (each client pauses a random time of mean --think-ms between edits, as an
+The load generator is lean so that it takes little of the CPU the server is measured on: one asyncio loop, one
+keep-alive HTTP/1.1 connection per client written and parsed by hand (no HTTP library per request). With
+`--client-cpus` / `--server-cpus` the two are pinned to separate cores (Linux affinity); on a shared machine
+other processes still run on both, so the load average is recorded before and after every run.
+
+Two runs per server: `paced` (each client pauses a random time of mean --think-ms between edits, as an
 annotator does; latency under realistic load) and `saturation` (no pause: the server's capacity, where latency
 is queueing by Little's law, clients / throughput).
 
-Usage: .venv/bin/python bench/api_load.py [--clients 50] [--duration-s 15] [--think-ms 1000] [--server-cpus 0,1]
-Prints the figures and writes them to bench/results/api_load.json.
+With `--baseline-ref REF` the same runs are also made, in the same conditions and interleaved, against a server
+started from the sources of git commit REF (`git archive`): a before/after comparison.
+
+Usage: .venv/bin/python bench/api_load.py [--clients 50] [--duration-s 15] [--think-ms 1000]
+       [--server-cpus 1] [--client-cpus 0] [--baseline-ref HEAD~1] [--postgres-url URL]
+Prints the figures and writes them to bench/results/api_load.json (with the command line).
 """
 
 import argparse
+import asyncio
 import json
 import os
 import platform
 import random
 import statistics
+import subprocess
 import sys
+import tarfile
 import tempfile
-import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "backend_system"))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "backend_system"))
+sys.path.insert(0, str(ROOT / "tests" / "backend"))
+from postgres_server import PostgresServer, find_bin_dir  # noqa: E402
 from system_helpers import ServerProcess, create_elements, divider_points, login, register_site  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 MAX_RETRIES = 20
-MAX_EDITS_PER_CLIENT = 5000
+IDLE_RECONNECT_S = 4.0
+"""A client idle this long opens a new connection (uvicorn closes keep-alive connections idle for 5 s)."""
+SOURCE_PACKAGES = ("app", "cama_pipeline", "annotations", "models")
+"""What a baseline server needs from its commit (the rest of the environment is shared)."""
 
 
 @dataclass
@@ -47,40 +67,90 @@ class ClientStats:
     errors: list[str] = field(default_factory=list)
 
 
-def client_loop(
-    base_url: str,
-    headers: dict[str, str],
-    site_id: int,
-    ids: list[int],
-    seed: int,
-    stop: threading.Event,
-    stats: ClientStats,
-    think_s: float = 0.0,
+class HttpConnection:
+    """A minimal keep-alive HTTP/1.1 client for JSON requests (enough for this server's responses)."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, auth: str) -> None:
+        self.reader, self.writer = reader, writer
+        self.prefix = f"Host: bench\r\nAuthorization: {auth}\r\n"
+
+    @classmethod
+    async def open(cls, port: int, auth: str) -> "HttpConnection":
+        """Connect to the server on loopback."""
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        return cls(reader, writer, auth)
+
+    async def request(self, method: str, path: str, body: Any = None) -> tuple[int, Any]:
+        """Send one request and return the status and the decoded JSON body."""
+        head = f"{method} {path} HTTP/1.1\r\n{self.prefix}"
+        if body is None:
+            self.writer.write(f"{head}\r\n".encode())
+        else:
+            payload = json.dumps(body).encode()
+            head += f"Content-Type: application/json\r\nContent-Length: {len(payload)}\r\n\r\n"
+            self.writer.write(head.encode() + payload)
+        header = await self.reader.readuntil(b"\r\n\r\n")
+        lines = header.decode("latin-1").split("\r\n")
+        length = next(
+            (int(line.split(":", 1)[1]) for line in lines if line.lower().startswith("content-length:")), 0
+        )
+        content = await self.reader.readexactly(length)
+        return int(lines[0].split(" ", 2)[1]), json.loads(content) if content else None
+
+    async def close(self) -> None:
+        """Close the connection."""
+        self.writer.close()
+        await self.writer.wait_closed()
+
+
+async def edit(connection: HttpConnection, url: str, points: list[list[float]], stats: ClientStats) -> None:
+    """One edit round-trip: GET, then PATCH with the version read, retrying with the version of each 409."""
+    status, element = await connection.request("GET", url)
+    if status != 200:
+        raise RuntimeError(f"GET {url}: {status} {element}")
+    version = element["version"]
+    for _ in range(MAX_RETRIES):
+        status, body = await connection.request("PATCH", url, {"version": version, "points": points})
+        if status == 200:
+            return
+        if status != 409:
+            raise RuntimeError(f"PATCH {url}: {status} {body}")
+        stats.conflicts += 1
+        version = body["current"]["version"]
+    raise RuntimeError(f"PATCH {url}: still conflicting after {MAX_RETRIES} retries")
+
+
+async def client_loop(
+    port: int, auth: str, urls: list[str], seed: int, deadline: float, think_s: float, stats: ClientStats
 ) -> None:
-    """Edit random elements until `stop` is set or the per-client cap is reached; between edits a client
-    thinks for an exponentially distributed time of mean `think_s` (0 = back to back, a saturation test)."""
+    """Edit random elements until `deadline`; between edits think an exponentially distributed time of mean
+    `think_s` (0 = back to back, a saturation test). The first pause is random too, so clients start spread."""
     rng = random.Random(seed)
-    with httpx.Client(base_url=base_url, headers=headers, timeout=30.0) as client:
-        while not stop.is_set() and len(stats.latencies_s) < MAX_EDITS_PER_CLIENT:
-            element_id = rng.choice(ids)
-            url = f"/api/sites/{site_id}/elements/{element_id}"
+    connection = await HttpConnection.open(port, auth)
+    last_request = time.perf_counter()
+    try:
+        if think_s > 0:
+            await asyncio.sleep(rng.uniform(0.0, think_s))
+        while time.perf_counter() < deadline:
+            if time.perf_counter() - last_request > IDLE_RECONNECT_S:  # the server drops idle connections
+                await connection.close()
+                connection = await HttpConnection.open(port, auth)
+            url = rng.choice(urls)
             points = divider_points(rng.uniform(1.0, 80.0), rng.uniform(1.0, 80.0))
             started = time.perf_counter()
             try:
-                version = client.get(url).raise_for_status().json()["version"]
-                for _ in range(MAX_RETRIES):
-                    response = client.patch(url, json={"version": version, "points": points})
-                    if response.status_code != 409:
-                        break
-                    stats.conflicts += 1
-                    version = response.json()["current"]["version"]
-                response.raise_for_status()
-            except (httpx.HTTPError, KeyError, TypeError) as error:
+                await edit(connection, url, points, stats)
+            except (OSError, asyncio.IncompleteReadError, RuntimeError, KeyError, ValueError) as error:
                 stats.errors.append(repr(error))
+                await connection.close()
+                connection = await HttpConnection.open(port, auth)
                 continue
-            stats.latencies_s.append(time.perf_counter() - started)
+            last_request = time.perf_counter()
+            stats.latencies_s.append(last_request - started)
             if think_s > 0:
-                stop.wait(rng.expovariate(1.0 / think_s))
+                await asyncio.sleep(min(rng.expovariate(1.0 / think_s), max(0.0, deadline - last_request)))
+    finally:
+        await connection.close()
 
 
 def percentile_ms(values_s: list[float], q: float) -> float:
@@ -88,29 +158,32 @@ def percentile_ms(values_s: list[float], q: float) -> float:
     return 1000.0 * statistics.quantiles(values_s, n=1000, method="inclusive")[round(q * 10) - 1]
 
 
-def run_load(
-    server: ServerProcess, *, clients: int, duration_s: float, n_elements: int, think_s: float
-) -> dict[str, Any]:
-    """Seed a site and elements, run the clients for `duration_s`, return the figures."""
+def seed_site(server: ServerProcess, n_elements: int) -> tuple[str, list[str]]:
+    """Log in, register a site and create its elements; the Authorization value and the element URLs."""
     with httpx.Client(base_url=server.base_url, timeout=30.0) as client:
         headers = login(client)
         site_id = register_site(client, headers, server.data_dir / "bev", name=f"load-{time.time_ns()}")
         ids = create_elements(client, headers, site_id, n_elements)
-    stop = threading.Event()
+    return headers["Authorization"], [f"/api/sites/{site_id}/elements/{i}" for i in ids]
+
+
+def run_load(
+    server: ServerProcess, *, clients: int, duration_s: float, n_elements: int, think_s: float
+) -> dict[str, Any]:
+    """Seed a site and elements, run the clients for `duration_s`, return the figures."""
+    auth, urls = seed_site(server, n_elements)
     stats = [ClientStats() for _ in range(clients)]
-    workers = [
-        threading.Thread(
-            target=client_loop, args=(server.base_url, headers, site_id, ids, n, stop, stats[n], think_s)
-        )
-        for n in range(clients)
-    ]
+    load_before = os.getloadavg()[0]
+    cpu_before = server_cpu_s(server)
     started = time.perf_counter()
-    for worker in workers:
-        worker.start()
-    time.sleep(duration_s)
-    stop.set()
-    for worker in workers:
-        worker.join(timeout=60)
+
+    async def all_clients() -> None:
+        deadline = time.perf_counter() + duration_s
+        await asyncio.gather(
+            *(client_loop(server.port, auth, urls, n, deadline, think_s, stats[n]) for n in range(clients))
+        )
+
+    asyncio.run(all_clients())
     elapsed_s = time.perf_counter() - started
     latencies = [value for s in stats for value in s.latencies_s]
     errors = [error for s in stats for error in s.errors]
@@ -124,31 +197,91 @@ def run_load(
         "p50_ms": round(percentile_ms(latencies, 50), 2),
         "p99_ms": round(percentile_ms(latencies, 99), 2),
         "max_ms": round(1000.0 * max(latencies), 2),
+        "server_cpu_ms_per_edit": round(1000.0 * (server_cpu_s(server) - cpu_before) / len(latencies), 2),
         "conflicts_retried": sum(s.conflicts for s in stats),
         "errors": len(errors),
         "first_errors": errors[:5],
+        "load_average_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
 
 
-def bench_backend(label: str, database_url: str | None, args: argparse.Namespace) -> dict[str, Any]:
-    """Start a server for one database, measure, stop it."""
+def server_cpu_s(server: ServerProcess) -> float:
+    """CPU seconds (user + system) the server process has used so far (Linux /proc)."""
+    assert server.process is not None
+    fields = Path(f"/proc/{server.process.pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def export_tree(ref: str, folder: Path) -> Path:
+    """The source packages of git commit `ref`, unpacked under `folder`."""
+    archive = subprocess.run(
+        ["git", "-C", str(ROOT), "archive", "--format=tar", ref, *SOURCE_PACKAGES],
+        check=True,
+        capture_output=True,
+    ).stdout
+    with tarfile.open(fileobj=BytesIO(archive)) as tar:
+        tar.extractall(folder, filter="data")
+    return folder
+
+
+def bench_server(
+    label: str,
+    database: Callable[[], str | None],
+    args: argparse.Namespace,
+    source: Path | None,
+    think_ms: float,
+) -> dict[str, Any]:
+    """Start a server (from `source` when given, else this checkout) on `database()`, run one mode, stop it."""
+    env = {"PYTHONPATH": str(source)} if source is not None else {}
     with tempfile.TemporaryDirectory(prefix=f"cama-load-{label}-") as folder:
         server = ServerProcess(
-            data_dir=Path(folder), database_url=database_url, cpus=args.server_cpus
+            data_dir=Path(folder), database_url=database(), cpus=args.server_cpus, extra_env=env
         ).start()
         try:
-            return {
-                mode: run_load(
-                    server,
-                    clients=args.clients,
-                    duration_s=args.duration_s,
-                    n_elements=args.elements,
-                    think_s=think_ms / 1000.0,
-                )
-                for mode, think_ms in (("paced", args.think_ms), ("saturation", 0.0))
-            }
+            return run_load(
+                server,
+                clients=args.clients,
+                duration_s=args.duration_s,
+                n_elements=args.elements,
+                think_s=think_ms / 1000.0,
+            )
         finally:
             server.stop()
+
+
+def bench_database(
+    label: str, database: Callable[[], str | None], args: argparse.Namespace, baseline: Path | None
+) -> dict[str, Any]:
+    """Paced and saturation runs on one database; with a baseline tree, each run is made on both servers
+    back to back (baseline first), so that the two see the same machine load."""
+    results: dict[str, Any] = {}
+    for mode, think_ms in (("paced", args.think_ms), ("saturation", 0.0)):
+        if baseline is not None:
+            results.setdefault("baseline", {})[mode] = bench_server(label, database, args, baseline, think_ms)
+        results[mode] = bench_server(label, database, args, None, think_ms)
+        print(f"{label} {mode}: {json.dumps(results)}", file=sys.stderr)
+    return results
+
+
+def bench_postgres(args: argparse.Namespace, baseline: Path | None) -> dict[str, Any]:
+    """The runs on PostgreSQL: at the given URL, else on a throwaway cluster, else skipped with the reason."""
+    if args.postgres_url:
+        return {
+            "database": "given URL",
+            **bench_database("postgresql", lambda: args.postgres_url, args, baseline),
+        }
+    if args.no_postgres:
+        return {"skipped": "--no-postgres"}
+    bin_dir = find_bin_dir()
+    if bin_dir is None:
+        return {"skipped": "no --postgres-url given and no PostgreSQL server programs installed"}
+    cluster = PostgresServer(bin_dir)
+    cluster.start()
+    try:
+        figures = bench_database("postgresql", cluster.database_url, args, baseline)
+    finally:
+        cluster.stop()
+    return {"database": "throwaway cluster: Unix socket, fsync off, fresh database per server run", **figures}
 
 
 def parse_cpus(text: str) -> tuple[int, ...] | None:
@@ -156,13 +289,19 @@ def parse_cpus(text: str) -> tuple[int, ...] | None:
     return tuple(int(part) for part in text.split(",")) if text else None
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
+    """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--clients", type=int, default=50)
     parser.add_argument("--duration-s", type=float, default=15.0)
     parser.add_argument("--elements", type=int, default=200, help="Elements the clients pick from at random.")
-    parser.add_argument("--server-cpus", type=parse_cpus, default=None, help="Pin the server, e.g. 0,1.")
+    parser.add_argument("--server-cpus", type=parse_cpus, default=None, help="Pin the server, e.g. 1.")
+    parser.add_argument(
+        "--client-cpus", type=parse_cpus, default=None, help="Pin the load generator, e.g. 0."
+    )
     parser.add_argument("--postgres-url", default=os.environ.get("CAMA_BENCH_POSTGRES_URL", ""))
+    parser.add_argument("--no-postgres", action="store_true", help="Skip PostgreSQL (no throwaway cluster).")
+    parser.add_argument("--baseline-ref", default="", help="Also measure a server from this git commit.")
     parser.add_argument(
         "--think-ms",
         type=float,
@@ -174,26 +313,34 @@ def main() -> None:
     args = parser.parse_args()
     if args.clients < 1 or args.duration_s <= 0 or args.elements < 1:
         parser.error("--clients, --duration-s and --elements must be positive")
+    return args
 
+
+def main() -> None:
+    args = parse_args()
+    if args.client_cpus:
+        os.sched_setaffinity(0, set(args.client_cpus))
     results: dict[str, Any] = {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "config": {
             "clients": args.clients,
             "duration_s": args.duration_s,
             "elements": args.elements,
             "paced_mean_think_ms": args.think_ms,
             "server_cpus": list(args.server_cpus) if args.server_cpus else "all",
+            "client_cpus": list(args.client_cpus) if args.client_cpus else "all",
+            "baseline_ref": args.baseline_ref or None,
         },
         "machine": {
             "cpus": os.cpu_count(),
             "python": platform.python_version(),
             "platform": platform.platform(),
         },
-        "sqlite": bench_backend("sqlite", None, args),
     }
-    if args.postgres_url:
-        results["postgresql"] = bench_backend("postgresql", args.postgres_url, args)
-    else:
-        results["postgresql"] = {"skipped": "no --postgres-url / CAMA_BENCH_POSTGRES_URL given"}
+    with tempfile.TemporaryDirectory(prefix="cama-load-baseline-") as folder:
+        baseline = export_tree(args.baseline_ref, Path(folder)) if args.baseline_ref else None
+        results["sqlite"] = bench_database("sqlite", lambda: None, args, baseline)
+        results["postgresql"] = bench_postgres(args, baseline)
     print(json.dumps(results, indent=2))
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=2) + "\n")

@@ -1,14 +1,17 @@
 """The FastAPI application factory: `create_app(settings)` migrates the database and mounts the API."""
 
 import logging
+import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+import anyio.to_thread
 from fastapi import FastAPI
 
 from app.backend import crud
 from app.backend.api.main import api_router
 from app.backend.api.routes import frontend
+from app.backend.auth_cache import TokenCache
 from app.backend.config import Settings
 from app.backend.db import make_engine, make_sessionmaker, upgrade
 from app.backend.errors import install_error_handlers
@@ -20,9 +23,19 @@ from app.backend.middleware import BodySizeLimit
 logger = logging.getLogger(__name__)
 
 
+WORKER_THREADS = int(os.environ.get("CAMA_WORKER_THREADS", "8"))
+"""Worker threads for the synchronous endpoints (CAMA_WORKER_THREADS; anyio's default is 40). More threads than
+the database pool has connections only queue inside the pool, and dozens of threads contending for the GIL
+slow every request."""
+
+
 @asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """Stop background jobs when the server shuts down (running ones end at their next step)."""
+    """Size the endpoint thread pool; stop background jobs when the server shuts down (running ones end at
+    their next step)."""
+    if WORKER_THREADS < 1:
+        raise ValueError(f"CAMA_WORKER_THREADS: must be >= 1, got {WORKER_THREADS}")
+    anyio.to_thread.current_default_thread_limiter().total_tokens = WORKER_THREADS
     try:
         yield
     finally:
@@ -53,6 +66,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.settings = settings
     app.state.engine = engine
     app.state.sessionmaker = sessions
+    app.state.token_cache = TokenCache()
     app.state.jobs = JobRunner(
         sessions=sessions,
         data_dir=settings.data_dir,

@@ -19,7 +19,8 @@ PASSWORD = "correct horse battery"
 ORIGIN_XY = (1000.0, 2000.0)
 GEOREFERENCE = {"origin_xy": [1000.0, 2100.0], "resolution": 0.5, "width": 200, "height": 200}
 """Site extent in site metres: x [-0.25, 99.75], y [0.25, 100.25]."""
-START_TIMEOUT_S = 30.0
+START_TIMEOUT_S = 90.0
+"""Generous: under a loaded machine the `cama` entry point alone can take tens of seconds to import."""
 
 
 def free_port() -> int:
@@ -46,6 +47,8 @@ class ServerProcess:
     database_url: str | None = None
     cpus: Sequence[int] | None = None
     """CPU cores the server may use (Linux affinity), e.g. (0, 1); None means all."""
+    extra_env: dict[str, str] = field(default_factory=dict)
+    """Environment variables added for the server (e.g. PYTHONPATH to serve other sources)."""
     process: subprocess.Popen[bytes] | None = None
 
     @property
@@ -56,7 +59,7 @@ class ServerProcess:
     def start(self) -> "ServerProcess":
         """Spawn the server with a bootstrap admin and wait until `/openapi.json` answers."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        env = {**os.environ, "CAMA_ADMIN_USERNAME": ADMIN, "CAMA_ADMIN_PASSWORD": PASSWORD}
+        env = {**os.environ, **self.extra_env, "CAMA_ADMIN_USERNAME": ADMIN, "CAMA_ADMIN_PASSWORD": PASSWORD}
         command = [str(cama_executable()), "serve", str(self.data_dir), "--port", str(self.port)]
         if self.database_url:
             command += ["--database-url", self.database_url]

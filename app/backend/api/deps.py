@@ -2,14 +2,17 @@
 
 import logging
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Coroutine
+from datetime import datetime
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
 
 from app.backend import crud
+from app.backend.auth_cache import TokenCache
 from app.backend.config import Settings
 from app.backend.crud.quality import LintCache
 from app.backend.models import User
@@ -19,14 +22,19 @@ logger = logging.getLogger(__name__)
 bearer = HTTPBearer(auto_error=False, description="Token from POST /api/auth/login.")
 
 
-def get_settings(request: Request) -> Settings:
-    """The settings the app was created with."""
+async def get_settings(request: Request) -> Settings:
+    """The settings the app was created with (async: no I/O, so no worker-thread hop)."""
     settings: Settings = request.app.state.settings
     return settings
 
 
-def get_session(request: Request) -> Iterator[Session]:
-    """One database session per request, closed afterwards."""
+async def get_session(request: Request) -> AsyncIterator[Session]:
+    """One database session per request, closed afterwards.
+
+    Async because making a session does no I/O (its connection is checked out by the first query, in the
+    endpoint's worker thread); a sync generator would cost two worker-thread hops per request. Closing returns
+    the connection to the pool (a rollback of a finished transaction: no disk, one loopback round-trip at most
+    on PostgreSQL)."""
     with request.app.state.sessionmaker() as session:
         yield session
 
@@ -40,14 +48,32 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 SessionDep = Annotated[Session, Depends(get_session)]
 
 
-def get_current_user(
-    session: SessionDep,
+def _lookup_token(sessions: sessionmaker[Session], token: str) -> tuple[User, datetime] | None:
+    """The token's user and expiry from the database (in a worker thread), detached from its session."""
+    with sessions() as session:
+        return crud.user_for_token(session=session, token=token)
+
+
+async def _user_for_token(request: Request, token: str) -> User | None:
+    """The token's user from the app's token cache, or from the database (then cached)."""
+    cache: TokenCache = request.app.state.token_cache
+    user = cache.get(token)
+    if user is None:
+        found = await run_in_threadpool(_lookup_token, request.app.state.sessionmaker, token)
+        if found is not None:
+            cache.put(token, *found)
+            user = found[0]
+    return user
+
+
+async def get_current_user(
+    request: Request,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)],
 ) -> User:
     """The user owning the bearer token; 401 when it is missing, unknown or expired."""
     user = None
     if credentials is not None and credentials.scheme.lower() == "bearer":
-        user = crud.user_for_token(session=session, token=credentials.credentials)
+        user = await _user_for_token(request, credentials.credentials)
     if user is None:
         raise HTTPException(
             status_code=status.HTTP_401_UNAUTHORIZED,
@@ -60,10 +86,10 @@ def get_current_user(
 CurrentUser = Annotated[User, Depends(get_current_user)]
 
 
-def require_role(*roles: str) -> Callable[[User], User]:
+def require_role(*roles: str) -> Callable[[User], Coroutine[None, None, User]]:
     """A dependency that lets only users with one of `roles` through (403 otherwise)."""
 
-    def check(user: CurrentUser) -> User:
+    async def check(user: CurrentUser) -> User:
         if user.role not in roles:
             raise HTTPException(
                 status_code=status.HTTP_403_FORBIDDEN,
@@ -82,7 +108,7 @@ AdminUser = Annotated[User, Depends(require_role("admin"))]
 _LINT_CACHE_LOCK = threading.Lock()
 
 
-def get_lint_cache(request: Request) -> LintCache:
+async def get_lint_cache(request: Request) -> LintCache:
     """The app's lint cache, made on first use (one per app, so tests and servers never share one)."""
     with _LINT_CACHE_LOCK:
         cache = getattr(request.app.state, "lint_cache", None)

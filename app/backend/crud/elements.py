@@ -13,11 +13,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.exc import StaleDataError
 
-from app.backend.crud.sites import get_site, site_extent
+from app.backend.crud.sites import cached_extent, get_site, site_extent
 from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import EditLog, Element, Site
-from app.backend.schemas import ElementCreate, ElementPublic, ElementUpdate, Point, check_element
+from app.backend.schemas import ElementCreate, ElementPublic, ElementUpdate, Extent, Point, check_element
 from app.backend.vma_loop import qa_sample
 
 logger = logging.getLogger(__name__)
@@ -57,7 +57,11 @@ def snapshot(element: Element) -> dict[str, Any]:
 
 def check_in_site(*, site: Site, points: Sequence[Point], margin_m: float) -> None:
     """InvalidInputError when a vertex lies more than `margin_m` outside the site's raster extent."""
-    box = site_extent(site)
+    check_in_extent(box=site_extent(site), points=points, margin_m=margin_m)
+
+
+def check_in_extent(*, box: Extent, points: Sequence[Point], margin_m: float) -> None:
+    """InvalidInputError when a vertex lies more than `margin_m` outside `box`."""
     for index, (x, y) in enumerate(points):
         if not (
             box.xmin - margin_m <= x <= box.xmax + margin_m
@@ -80,13 +84,20 @@ def _set_points(element: Element, points: Sequence[Point]) -> None:
 
 
 def log_change(
-    session: Session, element: Element, *, username: str, action: str, before: dict[str, Any] | None
+    session: Session,
+    element: Element,
+    *,
+    username: str,
+    action: str,
+    before: dict[str, Any] | None,
+    version: int | None = None,
 ) -> None:
-    """Append the log row for the element's new version (call after flush so the version is final)."""
+    """Append the log row for the element's `version` (default: its current one, so call after the flush that
+    set it)."""
     session.add(
         EditLog(
             element_id=element.id,
-            version=element.version,
+            version=element.version if version is None else version,
             username=username,
             at=element.updated_at,
             action=action,
@@ -218,11 +229,13 @@ def check_version(element: Element, version: int) -> None:
 def commit_change(
     session: Session, element: Element, *, username: str, action: str, before: dict[str, Any]
 ) -> Element:
-    """Flush the changed element (version bump, WHERE version = old), log it and commit; 409 on a lost race."""
+    """Commit the changed element (version bump, UPDATE ... WHERE version = old) with its log row in one flush;
+    409 on a lost race. The ORM's version counter adds 1, so the log row's version is known beforehand."""
     element.updated_at = utc_now()
     element.author = username
+    log_change(session, element, username=username, action=action, before=before, version=element.version + 1)
     try:
-        session.flush()
+        session.commit()
     except StaleDataError:
         session.rollback()
         current = session.get(Element, element.id)
@@ -230,8 +243,6 @@ def commit_change(
             f"version: element {element.id} was changed by someone else; reload it",
             current=None if current is None else public(current).model_dump(mode="json", by_alias=True),
         ) from None
-    log_change(session, element, username=username, action=action, before=before)
-    session.commit()
     return element
 
 
@@ -250,7 +261,7 @@ def update_element(
         check_element(cls=cls, points=points, source=element.source, confidence=confidence)
     except ValueError as error:
         raise InvalidInputError("points" if update.points is not None else "class", str(error)) from None
-    check_in_site(site=get_site(session=session, site_id=site_id), points=points, margin_m=margin_m)
+    check_in_extent(box=cached_extent(session=session, site_id=site_id), points=points, margin_m=margin_m)
     before = snapshot(element)
     element.cls, element.confidence = cls, confidence
     _set_points(element, points)

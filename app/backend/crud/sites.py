@@ -2,10 +2,12 @@
 
 import json
 import logging
+import threading
 from pathlib import Path
 from typing import Any
+from weakref import WeakKeyDictionary
 
-from sqlalchemy import func, select
+from sqlalchemy import Engine, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -18,6 +20,10 @@ from app.backend.schemas import Extent, SiteCreate
 logger = logging.getLogger(__name__)
 
 LAYER_SUFFIXES = (".png", ".npy", ".tif", ".tiff")
+_EXTENTS: "WeakKeyDictionary[Engine, dict[int, Extent]]" = WeakKeyDictionary()
+"""Site extents per database engine: a site's georeference never changes once registered, so every edit's
+extent check need not load the site again."""
+_EXTENTS_LOCK = threading.Lock()
 
 
 def _read_synthetic(folder: Path) -> tuple[tuple[float, float], dict[str, Any], Path]:
@@ -70,6 +76,18 @@ def get_site(*, session: Session, site_id: int) -> Site:
     if site is None:
         raise NotFoundError(f"site {site_id} not found")
     return site
+
+
+def cached_extent(*, session: Session, site_id: int) -> Extent:
+    """The site's extent (NotFoundError for an unknown site), loaded once per engine."""
+    engine = session.get_bind()
+    with _EXTENTS_LOCK:
+        extent = _EXTENTS.get(engine, {}).get(site_id)  # type: ignore[arg-type]
+    if extent is None:
+        extent = site_extent(get_site(session=session, site_id=site_id))
+        with _EXTENTS_LOCK:
+            _EXTENTS.setdefault(engine, {})[site_id] = extent  # type: ignore[arg-type]
+    return extent
 
 
 def list_sites(*, session: Session) -> list[Site]:

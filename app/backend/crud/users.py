@@ -74,10 +74,13 @@ def issue_token(*, session: Session, user: User, ttl_s: int) -> tuple[str, datet
     return token, expires_at
 
 
-def user_for_token(*, session: Session, token: str) -> User | None:
-    """The active user owning an unexpired token, or None."""
-    row = session.get(Token, token_digest(token))
+def user_for_token(*, session: Session, token: str) -> tuple[User, datetime] | None:
+    """The active user owning an unexpired token and the token's expiry, or None (in one query)."""
+    row = session.execute(
+        select(User, Token.expires_at)
+        .join(Token, Token.user_id == User.id)
+        .where(Token.token_hash == token_digest(token), User.is_active.is_(True))
+    ).first()
     if row is None or as_utc(row.expires_at) <= utc_now():
         return None
-    user = session.get(User, row.user_id)
-    return user if user is not None and user.is_active else None
+    return row[0], row[1]

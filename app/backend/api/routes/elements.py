@@ -4,13 +4,14 @@ import logging
 import math
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query, status
+from fastapi import APIRouter, Query, Response, status
 
 from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.crud.elements import Preaccept
 from app.backend.errors import InvalidInputError
+from app.backend.models import Element
 from app.backend.schemas import ConflictBody, ElementCreate, ElementPublic, ElementUpdate, ProposalBulk
 
 logger = logging.getLogger(__name__)
@@ -18,6 +19,13 @@ router = APIRouter(prefix="/sites/{site_id}/elements", tags=["elements"])
 CONFLICT: dict[int | str, dict[str, Any]] = {
     409: {"model": ConflictBody, "description": "Stale version: the body holds the current element."}
 }
+
+
+def element_response(element: Element, status_code: int = status.HTTP_200_OK) -> Response:
+    """The element as JSON, serialised once: a returned model would be validated a second time against the
+    response model (in another worker-thread hop) before being serialised."""
+    body = crud.public(element).model_dump_json(by_alias=True)
+    return Response(body, status_code=status_code, media_type="application/json")
 
 
 def parse_bbox(bbox: str | None) -> tuple[float, float, float, float] | None:
@@ -62,7 +70,7 @@ def list_elements(
 @router.post("", response_model=ElementPublic, status_code=status.HTTP_201_CREATED)
 def create_element(
     site_id: IdPath, element_in: ElementCreate, session: SessionDep, settings: SettingsDep, user: CurrentUser
-) -> ElementPublic:
+) -> Response:
     """Draw a new element (version 1, state `proposed`)."""
     (element,) = crud.create_elements(
         session=session,
@@ -71,7 +79,7 @@ def create_element(
         username=user.username,
         margin_m=settings.extent_margin_m,
     )
-    return crud.public(element)
+    return element_response(element, status.HTTP_201_CREATED)
 
 
 @router.post("/bulk", response_model=list[ElementPublic], status_code=status.HTTP_201_CREATED)
@@ -95,11 +103,9 @@ def bulk_proposals(
 
 
 @router.get("/{element_id}", response_model=ElementPublic)
-def read_element(
-    site_id: IdPath, element_id: IdPath, session: SessionDep, _user: CurrentUser
-) -> ElementPublic:
+def read_element(site_id: IdPath, element_id: IdPath, session: SessionDep, _user: CurrentUser) -> Response:
     """One element's current version (deleted ones too, flagged)."""
-    return crud.public(crud.get_element(session=session, site_id=site_id, element_id=element_id))
+    return element_response(crud.get_element(session=session, site_id=site_id, element_id=element_id))
 
 
 @router.patch("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
@@ -110,7 +116,7 @@ def update_element(
     session: SessionDep,
     settings: SettingsDep,
     user: CurrentUser,
-) -> ElementPublic:
+) -> Response:
     """Change class, points or confidence; 409 with the current element when `version` is stale."""
     element = crud.update_element(
         session=session,
@@ -120,7 +126,7 @@ def update_element(
         username=user.username,
         margin_m=settings.extent_margin_m,
     )
-    return crud.public(element)
+    return element_response(element)
 
 
 @router.delete("/{element_id}", response_model=ElementPublic, responses=CONFLICT)
@@ -130,9 +136,9 @@ def delete_element(
     version: Annotated[int, Query(ge=1, le=MAX_ID, description="The version last read.")],
     session: SessionDep,
     user: CurrentUser,
-) -> ElementPublic:
+) -> Response:
     """Soft delete (kept and logged; restore an earlier version to undo)."""
     element = crud.delete_element(
         session=session, site_id=site_id, element_id=element_id, version=version, username=user.username
     )
-    return crud.public(element)
+    return element_response(element)
