@@ -63,10 +63,10 @@ class SfmConfig:
     """Scale of the robust loss."""
     ba_max_iterations: int = 100
     """Solver iterations per BA at most."""
-    ba_function_tolerance: float = 0.0
-    """BA stops once an iteration lowers the cost by less than this fraction; 0 (COLMAP's) runs to the
-    gradient tolerance or the iteration limit. Tiny site, rigid + priors: 1e-6 halves the iterations but
-    leaves 0.13 deg instead of 0.09 deg rotation error."""
+    ba_function_tolerance: float = 1e-6
+    """BA stops once an iteration lowers the cost by less than this fraction (0 runs to COLMAP's gradient
+    tolerance or the iteration limit). Tiny site, Algorithm 1 with priors and the gauge fit: 1e-6 halves
+    the CPU time (solver steps 37/22/6 instead of 101/76/71) for the same errors to 0.01 cm / 0.0001 deg."""
     min_points: int = 20
     """Fewer triangulated points than this raises SfmError (clip cannot be reconstructed)."""
     min_registered_frames: int = 2
