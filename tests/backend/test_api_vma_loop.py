@@ -2,6 +2,7 @@
 retraining behind the gate with a tiny model, its cancellation, and auto-retrain after enough corrections."""
 
 import json
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,10 @@ def submit(client: TestClient, headers: Headers, site_id: int, kind: str, **para
     )
     assert response.status_code == 202, response.text
     return dict(response.json())
+
+
+def job_now(client: TestClient, headers: Headers, job_id: int) -> dict[str, Any]:
+    return dict(client.get(f"/api/jobs/{job_id}", headers=headers["lead"]).json())
 
 
 def wait_for(client: TestClient, headers: Headers, job_id: int, states: set[str], timeout_s: float) -> dict:
@@ -200,16 +205,19 @@ def test_retrain_without_labels_fails_clearly(client: TestClient, headers: Heade
     assert done["state"] == "failed" and "no accepted, fixed or approved elements" in done["message"]
 
 
-def test_retrain_is_cancellable(client: TestClient, headers: Headers, site_id: int) -> None:
+def test_retrain_reports_its_steps_and_is_cancellable(
+    client: TestClient, headers: Headers, site_id: int
+) -> None:
     element = bulk(client, headers, site_id, [proposal(20.0, 0.5)])[0]
     review(client, headers, site_id, element, "accepted", "annotator")
     job = submit(client, headers, site_id, "retrain", steps=100_000)
     deadline = time.monotonic() + RETRAIN_S
-    while (
-        "fine-tuning" not in client.get(f"/api/jobs/{job['id']}", headers=headers["lead"]).json()["message"]
+    while not re.search(
+        r"step \d+/100000, loss \d", (running := job_now(client, headers, job["id"]))["message"]
     ):
-        assert time.monotonic() < deadline
+        assert time.monotonic() < deadline, running["message"]
         time.sleep(0.1)
+    assert 0.1 <= running["progress"] < 0.9  # the training steps' share of the job
     assert client.post(f"/api/jobs/{job['id']}/cancel", headers=headers["lead"]).status_code == 200
     done = wait_for(client, headers, job["id"], {"cancelled", "failed", "succeeded"}, 10.0)
     assert done["state"] == "cancelled"

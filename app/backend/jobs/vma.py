@@ -2,8 +2,12 @@
 `refresh_proposals` (re-run the proposer and replace proposals nobody has touched).
 
 Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
-`models.vma.retrain.retrain_from_corrections` is one long call: the job polls the child, reports the time
-spent, and terminates it when the job is cancelled or the server stops. The child writes `retrain.json` in the
+`models.vma.retrain.retrain_from_corrections` is one long call: the job polls the child, reports its progress,
+and terminates it when the job is cancelled or the server stops. The child turns the trainer's step log records
+(`step i/n loss x`, written by `models.vma.train.fit` at its first step, every 50 steps and its last) into
+`retrain_progress.json` ({"step", "total", "loss"}) in the job folder; the job's progress field follows them
+(0.1 to 0.9 over the steps; the evaluations of the current model before and of the candidate after take the
+rest), and its message names the step and the loss. The child writes `retrain.json` in the
 job folder: {"candidate", "promoted", "labels", "negatives", "current_metrics", "candidate_metrics"} or
 {"error"}. Checkpoint versions are written atomically by `models.vma.checkpoint`, so a killed child leaves at
 most an unpromoted staging folder. `models.vma` (torch) is imported inside the functions that need it, so that
@@ -35,6 +39,11 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 RETRAIN_FILE = "retrain.json"
+PROGRESS_FILE = "retrain_progress.json"
+TRAIN_LOGGER = "models.vma.train"
+"""The logger whose `step %d/%d loss %.4f ...` records report the training steps."""
+FIT_SPAN = (0.1, 0.9)
+"""Job progress at the first and the last training step."""
 PROPOSALS_FILE = "proposals.json"
 POLL_S = 0.5
 LOOP_USER = "vma-loop"
@@ -76,13 +85,54 @@ def training_view(annotations: AnnotationSet) -> AnnotationSet:
     return annotations.model_copy(update={"elements": elements})
 
 
+class StepReporter(logging.Handler):
+    """Writes the trainer's step records (`step i/n loss x`) to a JSON file the parent process polls."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(level=logging.INFO)
+        self.path = path
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Record step, total and loss of a step record; other records are ignored."""
+        args = record.args if isinstance(record.args, tuple) else ()
+        if not str(record.msg).startswith("step ") or len(args) < 3:
+            return
+        try:
+            step = {"step": int(args[0]), "total": int(args[1]), "loss": float(args[2])}  # type: ignore[call-overload, arg-type]
+        except (TypeError, ValueError):
+            return
+        atomic_write_json(self.path, step)
+
+
+def read_step(path: Path) -> dict[str, Any] | None:
+    """The last step the child reported, or None (none yet, or unreadable)."""
+    try:
+        step: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+        return step if {"step", "total", "loss"} <= step.keys() else None
+    except (OSError, ValueError):
+        return None
+
+
+def step_progress(step: dict[str, Any] | None, elapsed_s: float) -> tuple[float, str]:
+    """The job's progress and message for the child's last reported step."""
+    if step is None:
+        return FIT_SPAN[0], f"fine-tuning: preparing and evaluating the current model ({elapsed_s:.0f} s)"
+    done, total = int(step["step"]), max(int(step["total"]), 1)
+    progress = FIT_SPAN[0] + (FIT_SPAN[1] - FIT_SPAN[0]) * min(done / total, 1.0)
+    message = f"fine-tuning: step {done}/{total}, loss {float(step['loss']):.4f} ({elapsed_s:.0f} s)"
+    if done >= total:
+        message += "; evaluating the candidate"
+    return progress, message
+
+
 def _retrain_child(
     registry: Path, corrections: "Corrections", validation: list[Path], config: "RetrainConfig", out: Path
 ) -> None:
-    """Child process body: retrain and write the outcome (or the error) to `out`."""
+    """Child process body: retrain and write the outcome (or the error) to `out`, the steps beside it."""
     from models.vma.retrain import retrain_from_corrections
 
     logging.basicConfig(level=logging.INFO)
+    logging.getLogger(TRAIN_LOGGER).addHandler(StepReporter(out.parent / PROGRESS_FILE))
     try:
         result = retrain_from_corrections(registry, [corrections], validation, config, show_progress=False)
         payload: dict[str, Any] = {
@@ -99,7 +149,9 @@ def _retrain_child(
 
 
 def _run_child(context: JobContext, args: tuple[Any, ...], out: Path) -> dict[str, Any]:
-    """Run `_retrain_child` in a spawned process, reporting while it runs; terminate it on cancel."""
+    """Run `_retrain_child` in a spawned process, reporting its steps while it runs; terminate it on cancel."""
+    progress_file = out.parent / PROGRESS_FILE
+    progress_file.unlink(missing_ok=True)
     process = multiprocessing.get_context("spawn").Process(
         target=_retrain_child, args=(*args, out), daemon=True
     )
@@ -108,7 +160,7 @@ def _run_child(context: JobContext, args: tuple[Any, ...], out: Path) -> dict[st
     try:
         while process.is_alive():
             process.join(POLL_S)
-            context.report(0.1, f"fine-tuning and evaluating: {time.monotonic() - started:.0f} s")
+            context.report(*step_progress(read_step(progress_file), time.monotonic() - started))
     except JobCancelled:
         process.terminate()
         process.join()

@@ -1,0 +1,46 @@
+"""Retrain progress: the child's step log records become a progress file, and the job's progress and message."""
+
+import logging
+from pathlib import Path
+
+from app.backend.jobs.vma import FIT_SPAN, StepReporter, read_step, step_progress
+
+
+def emit_step(logger: logging.Logger, step: int, total: int, loss: float) -> None:
+    """A record as `models.vma.train.fit` logs it."""
+    logger.info("step %d/%d loss %.4f %s", step, total, loss, {"class": 0.1})
+
+
+def test_step_records_become_the_progress_file(tmp_path: Path) -> None:
+    path = tmp_path / "progress.json"
+    logger = logging.getLogger("test.retrain.steps")
+    logger.setLevel(logging.INFO)
+    handler = StepReporter(path)
+    logger.addHandler(handler)
+    try:
+        logger.info("starting %s", "now")  # not a step record: ignored
+        assert read_step(path) is None
+        emit_step(logger, 51, 300, 0.4125)
+        assert read_step(path) == {"step": 51, "total": 300, "loss": 0.4125}
+        emit_step(logger, 101, 300, 0.25)
+        assert read_step(path) == {"step": 101, "total": 300, "loss": 0.25}
+    finally:
+        logger.removeHandler(handler)
+
+
+def test_progress_follows_the_steps() -> None:
+    progress, message = step_progress(None, 3.0)
+    assert progress == FIT_SPAN[0] and "evaluating the current model" in message
+    progress, message = step_progress({"step": 150, "total": 300, "loss": 0.5}, 12.0)
+    assert progress == (FIT_SPAN[0] + FIT_SPAN[1]) / 2
+    assert "step 150/300, loss 0.5000" in message and "candidate" not in message
+    progress, message = step_progress({"step": 300, "total": 300, "loss": 0.2}, 20.0)
+    assert progress == FIT_SPAN[1] and message.endswith("evaluating the candidate")
+
+
+def test_unreadable_progress_file_reads_as_no_step(tmp_path: Path) -> None:
+    path = tmp_path / "progress.json"
+    path.write_text("{not json")
+    assert read_step(path) is None
+    path.write_text('{"step": 3}')
+    assert read_step(path) is None
