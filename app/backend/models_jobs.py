@@ -8,7 +8,7 @@ import logging
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import JSON, Boolean, Float, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, String, Text, text
 from sqlalchemy.orm import Mapped, mapped_column
 
 from app.backend.models import Base, UtcDateTime
@@ -17,16 +17,28 @@ logger = logging.getLogger(__name__)
 
 JOB_STATES = ("queued", "running", "succeeded", "failed", "cancelled")
 FINISHED_STATES = frozenset({"succeeded", "failed", "cancelled"})
+ACTIVE_RETRAIN = text("kind = 'retrain' AND state IN ('queued', 'running')")
+"""Rows of the partial unique index `uq_jobs_one_active_retrain` (migration 0006)."""
 
 
 class Job(Base):
-    """One background job of a site: queued -> running -> succeeded | failed | cancelled.
+    """One background job of a site: queued -> running -> succeeded | failed | cancelled. At most one retrain
+    per site is queued or running at a time, whichever process submits it (a partial unique index).
 
     `cancel_requested` is the cooperative cancel flag: the worker reads it between steps and stops there, so a
     cancel works whichever server process runs the job. `result_path` is the downloadable file, once succeeded.
     """
 
     __tablename__ = "jobs"
+    __table_args__ = (
+        Index(
+            "uq_jobs_one_active_retrain",
+            "site_id",
+            unique=True,
+            sqlite_where=ACTIVE_RETRAIN,
+            postgresql_where=ACTIVE_RETRAIN,
+        ),
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     site_id: Mapped[int] = mapped_column(ForeignKey("sites.id", ondelete="CASCADE"), index=True)

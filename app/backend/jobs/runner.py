@@ -17,9 +17,11 @@ from typing import Any
 
 from pydantic import BaseModel
 from sqlalchemy import select, update
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.backend.crud.users import utc_now
+from app.backend.errors import ConflictError
 from app.backend.models_jobs import Job
 
 logger = logging.getLogger(__name__)
@@ -135,7 +137,8 @@ class JobRunner:
     def enqueue(
         self, session: Session, *, site_id: int, kind: str, params: dict[str, Any], username: str
     ) -> Job:
-        """Store a job with already validated params as queued, commit, and submit it."""
+        """Store a job with already validated params as queued, commit, and submit it; ConflictError when the
+        database refuses it (a second queued or running retrain of the site, from this process or another)."""
         now = utc_now()
         job = Job(
             site_id=site_id,
@@ -150,7 +153,13 @@ class JobRunner:
             updated_at=now,
         )
         session.add(job)
-        session.commit()
+        try:
+            session.commit()
+        except IntegrityError:  # the partial unique index: one active retrain per site
+            session.rollback()
+            raise ConflictError(
+                f"kind: a {kind} job of site {site_id} is already queued or running; wait for it or cancel it"
+            ) from None
         self.submit(job.id)
         logger.info("job %d (%s) of site %d submitted by %s", job.id, kind, site_id, username)
         return job

@@ -15,6 +15,9 @@ logger = logging.getLogger(__name__)
 router = APIRouter(tags=["jobs"])
 CONFLICT: dict[int | str, dict[str, Any]] = {409: {"description": "The job has already finished."}}
 STILL_RUNNING: dict[int | str, dict[str, Any]] = {409: {"description": "The job is queued or running."}}
+ONE_RETRAIN: dict[int | str, dict[str, Any]] = {
+    409: {"description": "A retrain of this site is already queued or running."}
+}
 DOWNLOAD: dict[int | str, dict[str, Any]] = {
     200: {"content": {"application/octet-stream": {}}, "description": "The job's result file."},
     404: {"description": "Unknown job, or no result yet (not succeeded)."},
@@ -26,7 +29,12 @@ def _runner(request: Request) -> JobRunner:
     return runner
 
 
-@router.post("/sites/{site_id}/jobs", response_model=JobPublic, status_code=status.HTTP_202_ACCEPTED)
+@router.post(
+    "/sites/{site_id}/jobs",
+    response_model=JobPublic,
+    status_code=status.HTTP_202_ACCEPTED,
+    responses=ONE_RETRAIN,
+)
 def create_job(
     site_id: IdPath, job_in: JobCreate, request: Request, session: SessionDep, user: LeadUser
 ) -> JobPublic:
