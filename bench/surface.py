@@ -139,7 +139,7 @@ def compare(ours: dict[str, Any], truth: dict[str, Any], trajectory_xy: np.ndarr
 
 def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
     """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
-    workspace = scratch / f"{poses}-{config.epochs}-{config.colour_lr}"
+    workspace = scratch / f"{len(list(scratch.iterdir()))}-{poses}"
     workspace.mkdir(parents=True)
     for shared in ("sites", "sfm"):
         if (site / "workspace" / shared).exists():
