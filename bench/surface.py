@@ -1,9 +1,9 @@
 """Road surface benchmark: the reconstructed BEV rasters of a synthetic site against its ground truth.
 
-For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/<site>/poses.json`), `cama surface`
-runs into its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters are compared with the
-site's `ground_truth/bev/` at each reconstructed cell's centre (nearest ground-truth cell):
-  elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking or crosswalk),
+For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/<site>/poses.json`),
+`cama surface` runs into its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters
+are compared with the site's `ground_truth/bev/` at each reconstructed cell's centre (nearest true cell):
+  elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking, crosswalk),
              the median signed error (an offset of the pose frame shows there), and RMSE by distance from
              the site's keyframe trajectory (beyond the strip it is extrapolated);
   semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters;

@@ -39,13 +39,13 @@ class SurfaceConfig:
     """Adam steps fitting the elevation MLP to the surface points."""
     elevation_lr: float = 5e-3
     huber_m: float = 0.05
+    """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
     smoothness_weight: float = 30.0
     """Weight (m^3) of the curvature prior: the mean thin-plate energy (m^-2) of the elevation over the
     road region, added to the Huber point loss (m). Roads bend slowly, so away from the points the
     surface extrapolates like a plane instead of wandering (0: no prior)."""
     smoothness_step_m: float = 1.0
     """Central-difference step of the curvature prior."""
-    """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
     control_spacing_m: float = 1.0
     """The MLP is evaluated on a control grid this coarse and interpolated to the vertices (it is smooth)."""
     max_range_m: float = 25.0

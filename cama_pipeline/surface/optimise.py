@@ -5,7 +5,8 @@ class frequencies initialise the mesh (curb and background cells voted again at 
 `labels`) and the pixels that hit each cell make the observation count.
 Then `epochs` of Adam over image batches minimise the L1 colour error and the semantic cross-entropy of
 the vertices projected with the current elevation (differentiable `grid_sample`), weighted by the pixels
-each vertex covers and by the ground mask, with the surface-point loss (with the curvature prior) holding the MLP to the points.
+each vertex covers and by the ground mask, with the surface-point loss (and the curvature prior) holding
+the MLP to the points.
 """
 
 from collections.abc import Callable, Iterator

@@ -11,8 +11,9 @@
     georeference.json      {"origin_xy" (pixel (0, 0) centre, global m), "resolution" m/px, "width",
                             "height", "frame": "global", "row_axis": "-y", "col_axis": "+x"}
 <workspace>/surface/<site_id>/report.json   schema "cama.surface/1", written last (marks completion):
-    {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images", "points": {"strip", "sfm", "sfm_kept"},
-     "vertices", "cells_observed", "seconds": {phase: s}, "losses": {"elevation": [huber + prior every 50 steps],
+    {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images",
+     "points": {"strip", "sfm", "sfm_kept" (SfM points past the gate, see `fit`)}, "vertices",
+     "cells_observed", "seconds": {phase: s}, "losses": {"elevation": [huber + prior every 50 steps],
      "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}}
 """
 

@@ -55,7 +55,8 @@ def trajectory_strip(poses: np.ndarray, config: SurfaceConfig) -> np.ndarray:
 
 
 def sfm_surface_points(workspace: Path, site_id: str, config: SurfaceConfig) -> np.ndarray:
-    """(M, 3) SfM points labelled road, marking or crosswalk with a small reprojection error; empty without SfM."""
+    """(M, 3) SfM points labelled road, marking or crosswalk with a small reprojection error; empty
+    without SfM."""
     if not config.use_sfm_points or not (sfm_dir(workspace, site_id) / "points.npz").is_file():
         return np.zeros((0, 3))
     points = read_points(workspace, site_id)
