@@ -6,6 +6,8 @@ from urllib.parse import parse_qs
 
 from fastapi import APIRouter, HTTPException, Request, status
 from pydantic import ValidationError
+from sqlalchemy.orm import Session
+from starlette.concurrency import run_in_threadpool
 
 from app.backend import crud
 from app.backend.api.deps import CurrentUser, SessionDep, SettingsDep
@@ -43,15 +45,25 @@ async def _read_credentials(request: Request) -> LoginRequest:
         ) from None
 
 
-@router.post("/login", response_model=TokenPublic, openapi_extra=LOGIN_BODY)
-async def login(request: Request, session: SessionDep, settings: SettingsDep) -> TokenPublic:
-    """Check the credentials and issue a token valid for the configured time."""
-    credentials = await _read_credentials(request)
+def _issue(session: Session, credentials: LoginRequest, ttl_s: int) -> TokenPublic | None:
+    """A new token for valid credentials, else None (scrypt and the database: run in a worker thread)."""
     user = crud.authenticate(session=session, username=credentials.username, password=credentials.password)
     if user is None:
-        raise HTTPException(status_code=status.HTTP_401_UNAUTHORIZED, detail="wrong username or password")
-    token, expires_at = crud.issue_token(session=session, user=user, ttl_s=settings.token_ttl_s)
+        return None
+    token, expires_at = crud.issue_token(session=session, user=user, ttl_s=ttl_s)
     return TokenPublic(access_token=token, expires_at=expires_at)
+
+
+@router.post("/login", response_model=TokenPublic, openapi_extra=LOGIN_BODY)
+async def login(request: Request, session: SessionDep, settings: SettingsDep) -> TokenPublic:
+    """Check the credentials and issue a token valid for the configured time. The password hash is checked
+    in a worker thread: scrypt takes tens of milliseconds, which would stall every other request on the
+    event loop."""
+    credentials = await _read_credentials(request)
+    issued = await run_in_threadpool(_issue, session, credentials, settings.token_ttl_s)
+    if issued is None:
+        raise HTTPException(status_code=status.HTTP_401_UNAUTHORIZED, detail="wrong username or password")
+    return issued
 
 
 @router.get("/me", response_model=UserPublic)
