@@ -96,6 +96,7 @@ def _stage_calls(
 def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool) -> dict[str, Path]:
     """VMA proposals for every site from its reconstructed rasters."""
     from models.vma.propose import propose
+    from models.vma.rule_based import RuleConfig
 
     out: dict[str, Path] = {}
     for site in read_sites_index(sites_index_path(workspace))["sites"]:
@@ -105,6 +106,7 @@ def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool) -> 
             proposals_path(workspace, site_id),
             proposer=config.proposer,
             checkpoint=config.checkpoint if config.proposer == "learned" else None,
+            rule=RuleConfig(boundary_source="road_edge"),  # reconstructed rasters: curb labels are smeared
             overwrite=overwrite,
         )
         out[site_id] = result.out

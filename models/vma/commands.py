@@ -18,7 +18,7 @@ from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.propose import propose
 from models.vma.retrain import Corrections, RetrainConfig, gate_checkpoint, retrain_from_corrections
-from models.vma.rule_based import propose_rule_based
+from models.vma.rule_based import RuleConfig, propose_rule_based
 from models.vma.split import SplitConfig, split_dataset
 from models.vma.train import train
 
@@ -55,18 +55,25 @@ def propose_command(
         Path, typer.Option(help="Checkpoint version folder or registry.")
     ] = DEFAULT_REGISTRY,
     min_confidence: Annotated[float, typer.Option(help="Drop proposals scoring lower.")] = 0.1,
+    boundary_source: Annotated[
+        str,
+        typer.Option(help="curb (generator rasters) or road_edge (reconstructed rasters, smeared curbs)."),
+    ] = "curb",
     overwrite: Annotated[bool, typer.Option(help="Propose again even if the output is up to date.")] = False,
 ) -> None:
     """Propose map vectors with confidence for a whole site from its BEV rasters."""
     try:
         if proposer not in ("learned", "rule"):
             raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
+        if boundary_source not in ("curb", "road_edge"):
+            raise ValueError(f"--boundary-source must be 'curb' or 'road_edge', got {boundary_source!r}")
         result = propose(
             site,
             out,
             proposer="rule" if proposer == "rule" else "learned",
             checkpoint=checkpoint,
             min_confidence=min_confidence,
+            rule=RuleConfig(boundary_source="road_edge" if boundary_source == "road_edge" else "curb"),
             overwrite=overwrite,
         )
     except _ERRORS as err:

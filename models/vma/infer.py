@@ -21,7 +21,7 @@ from models.vma.merge import MergeConfig, clip_to_core, core_bounds, merge_windo
 from models.vma.model import VmaNet
 from models.vma.patches import MIN_TARGET_LENGTH_PX, SiteGrid, site_grid
 from models.vma.rasters import SiteRasters
-from models.vma.rule_based import propose_rule_based
+from models.vma.rule_based import RuleConfig, propose_rule_based
 from models.vma.vectors import CLASSES, Vector
 
 logger = logging.getLogger(__name__)
@@ -37,6 +37,8 @@ class InferenceConfig:
     """Predictions scoring lower are dropped before merging."""
     batch_size: int = 8
     merge: MergeConfig = MergeConfig()
+    rule: RuleConfig = RuleConfig()
+    """How an anchored model's candidates are proposed (the rule-based proposer's settings)."""
     anchored_output: str = "rescored"
     """Anchored models: 'rescored' keeps each rule-based candidate's full-resolution geometry with the model's
     score (length-weighted mean over windows of its class probability), 'refined' outputs the model's points."""
@@ -70,7 +72,7 @@ def predict_site(
     grid = site_grid(rasters, model.config)
     windows = _windows(grid, model.config, config.overlap_px)
     device = next(model.parameters()).device
-    rule = propose_rule_based(rasters) if model.config.anchored else []
+    rule = propose_rule_based(rasters, config.rule) if model.config.anchored else []
     candidates = (
         [Vector(v.cls, grid.pixel_from_global(v.points), v.score) for v in rule]
         if model.config.anchored

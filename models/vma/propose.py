@@ -8,7 +8,7 @@ checkpoint does nothing unless `overwrite`.
 import json
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -59,7 +59,8 @@ def propose(
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> ProposeResult:
-    """Propose vectors for a site with the learned model (needs `checkpoint`) or the rule-based proposer."""
+    """Propose vectors for a site with the learned model (needs `checkpoint`) or the rule-based proposer;
+    `rule` sets the rule-based proposer, and the learned model's candidates when it is anchored."""
     site, out = Path(site), Path(out)
     if proposer == "learned" and checkpoint is None:
         raise ValueError("propose: the learned proposer needs a checkpoint (a version folder or a registry)")
@@ -78,6 +79,8 @@ def propose(
     vectors: list[Vector]
     if proposer == "learned" and checkpoint is not None:
         loaded = load_checkpoint(Path(checkpoint), device=str(device_for()))
+        if rule is not None:
+            inference = replace(inference or InferenceConfig(), rule=rule)
         vectors = predict_site(loaded.model, rasters, inference, show_progress=show_progress)
         author = f"vma-{loaded.path.name}"
     else:

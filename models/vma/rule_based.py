@@ -2,12 +2,16 @@
 
 The cold-start proposer of the paper and the baseline the learned model must beat. Lane markings give
 dividers (double lines closed into one, dashes joined along their direction), curbs give boundaries, and
-crosswalk stripes closed into blocks give `ped_crossing` rectangles. Confidence is mask support: the share of
+crosswalk stripes closed into blocks give `ped_crossing` rectangles. Boundaries come from the curb label's
+skeleton, or (`boundary_source="road_edge"`, for reconstructed rasters) from the edge of the road (road, marking
+or crosswalk cells) where a curb label is near: on reconstructed rasters the curb's vertical face smears its
+label over the sidewalk and hides a thin strip beside it, while the road's edge stays sharp. Confidence is mask support: the share of
 a vector's length with its mask nearby (bridged dash gaps lower it), damped for short vectors.
 """
 
 import logging
 from dataclasses import dataclass
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -38,6 +42,13 @@ class RuleConfig:
     """Largest gap joined between boundary pieces (curbs have no dashes; this bridges noise breaks)."""
     min_length_m: float = 2.0
     """Shorter polylines are dropped."""
+    boundary_source: Literal["curb", "road_edge"] = "curb"
+    """Boundaries along the curb label ('curb': generator rasters, where it is one sharp band) or along the
+    road's edge near a curb label ('road_edge': reconstructed rasters, where the curb label is smeared)."""
+    curb_reach_m: float = 1.0
+    """'road_edge': the road's edge is a boundary where a curb label lies within this distance of it."""
+    road_hole_m2: float = 4.0
+    """Non-road pieces inside the road smaller than this are label noise, not islands with a boundary."""
     min_crosswalk_area_m2: float = 4.0
     min_blob_m2: float = 0.1
     """Mask pieces smaller than this are noise and removed before skeletonising."""
@@ -51,8 +62,12 @@ class RuleConfig:
     """Vectors at least this long keep their full support as confidence; shorter ones are damped."""
 
     def __post_init__(self) -> None:
+        if self.boundary_source not in ("curb", "road_edge"):
+            raise ValueError(
+                f"RuleConfig.boundary_source must be 'curb' or 'road_edge', got {self.boundary_source!r}"
+            )
         for name, value in self.__dict__.items():
-            if not value > 0:
+            if name != "boundary_source" and not value > 0:
                 raise ValueError(f"RuleConfig.{name} must be > 0, got {value}")
 
 
@@ -63,7 +78,11 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
     vectors = [
         *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m),
         *_line_vectors(
-            rasters, semantic == int(Semantic.CURB), "boundary", config, config.join_boundary_gap_m
+            rasters,
+            road_edge(semantic, rasters.resolution_m, config),
+            "boundary",
+            config,
+            config.join_boundary_gap_m,
         ),
         *_crosswalks(rasters, semantic == int(Semantic.CROSSWALK), config),
     ]
@@ -96,6 +115,28 @@ def _line_vectors(
         points = np.asarray(line.coords)
         out.append(Vector(cls, points, _confidence(rasters, support, points, config)))
     return out
+
+
+_ROAD_IDS = [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
+
+
+def _boundary_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+    if config.boundary_source == "road_edge":
+        return road_edge(semantic, resolution_m, config)
+    return semantic == int(Semantic.CURB)
+
+
+def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+    """Cells just outside the road with a curb label within `curb_reach_m`: the road's boundary as a 1-cell
+    band, at the road's sharp edge rather than along the curb label smeared over the sidewalk, and bridging the
+    thin unobserved strip a curb's face hides. A road that ends without a curb (a cut-off arm) has none."""
+    road = np.isin(semantic, _ROAD_IDS).astype(np.uint8)
+    holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
+    road |= holes
+    curb = (semantic == int(Semantic.CURB)).astype(np.uint8)
+    near_curb = cv2.dilate(curb, _disk(config.curb_reach_m / resolution_m)) > 0
+    rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)
+    return rim & near_curb
 
 
 def remove_small_blobs(mask: np.ndarray, min_pixels: int) -> np.ndarray:

@@ -2,9 +2,12 @@
 
 from pathlib import Path
 
+import numpy as np
+import pytest
 from shapely.geometry import LineString, Polygon
-from vma_test_sites import global_xy
+from vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 
+from cama_pipeline.semantics import Semantic
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import load_site_rasters
 from models.vma.rule_based import RuleConfig, propose_rule_based
@@ -43,3 +46,30 @@ def test_rule_based_is_near_perfect_on_its_drawing(drawn_site: Path) -> None:
     assert (
         sum(b["count"] for b in report["confidence_bins"]) >= report["num_predictions"]
     )  # tile-clipped pieces
+
+
+def test_road_edge_boundaries_follow_the_road_past_a_smeared_curb_and_stop_where_nothing_was_seen(
+    tmp_path: Path,
+) -> None:
+    semantic, vectors = drawn_semantic()
+    top = pixel(0, 12)[1]
+    semantic[pixel(0, 10.5)[1] : top + 1] = int(Semantic.CURB)  # a curb label smeared 1.5 m over the sidewalk
+    semantic[top - 2 : top + 1] = int(Semantic.UNOBSERVED)  # and its face hid a thin strip
+    semantic[: top + 1, pixel(40, 0)[0] :] = int(Semantic.UNOBSERVED)  # the roadside beyond x = 40 m unseen
+    vectors_out = propose_rule_based(
+        load_site_rasters(write_raster_site(tmp_path / "smeared", semantic, vectors))
+    )
+    north = [LineString(v.points) for v in vectors_out if v.cls == "boundary" and v.points[:, 1].mean() > 785]
+    assert len(north) == 1
+    coords = np.asarray(north[0].coords)
+    np.testing.assert_allclose(
+        coords[:, 1], global_xy(0, 12)[1], atol=0.2
+    )  # on the road's edge, not the smear
+    assert coords[:, 0].min() < 500.5 and coords[:, 0].max() < 500 + 41.1, (
+        "no boundary along the unseen roadside"
+    )
+
+
+def test_an_unknown_boundary_source_is_refused() -> None:
+    with pytest.raises(ValueError, match="boundary_source"):
+        RuleConfig(boundary_source="kerb")  # type: ignore[arg-type]
