@@ -37,6 +37,8 @@ class SurfaceConfig:
     """Hidden units per layer of the elevation MLP (two hidden layers)."""
     elevation_iterations: int = 800
     """Adam steps fitting the elevation MLP to the surface points."""
+    refit_iterations: int = 400
+    """Adam steps of the second fit, the strip and the gated SfM points, from the first (see `fit`)."""
     elevation_lr: float = 5e-3
     huber_m: float = 0.05
     """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
@@ -109,7 +111,7 @@ class SurfaceConfig:
         for name in at_least_one:
             if getattr(self, name) < 1:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("elevation_iterations", "epochs"):
+        for name in ("elevation_iterations", "refit_iterations", "epochs"):
             if getattr(self, name) < 0:
                 raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
         for name in (

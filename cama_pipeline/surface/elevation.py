@@ -105,11 +105,12 @@ def fit_elevation(
     config: SurfaceConfig,
     on_step: Callable[[int, float], None] | None = None,
     region_xy: torch.Tensor | None = None,
+    steps: int | None = None,
 ) -> list[float]:
     """Fit `mlp` to (N, 3) points with Adam and `surface_loss` (the curvature prior over the (V, 2) road
-    region `region_xy` when given); the loss every 50 steps."""
+    region `region_xy` when given) for `steps` (default `elevation_iterations`); the loss every 50 steps."""
     optimiser = torch.optim.Adam(mlp.parameters(), lr=config.elevation_lr)
-    steps = config.elevation_iterations
+    steps = config.elevation_iterations if steps is None else steps
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
         optimiser, max(steps, 1), eta_min=config.elevation_lr / 20
     )

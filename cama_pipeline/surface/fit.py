@@ -3,7 +3,8 @@
 The strip lies under the cameras and is road by construction; SfM road points are sparse and, beyond a
 few metres from the cameras, often triangulated decimetres to metres off. So the strip alone sets the
 road region and is fitted first; then the SfM points inside the region and within `sfm_gate_m` of that
-surface join it for a second fit. Without a strip, every point is trusted.
+surface join it for a second, shorter fit warm-started from the first. Without a strip, every point is
+trusted.
 """
 
 from collections.abc import Callable
@@ -33,8 +34,8 @@ class FittedSurface:
 
 def fit_steps(points: SurfacePoints, config: SurfaceConfig) -> int:
     """Adam steps `fit_surface` takes (for progress): two fits when SfM points may join the strip."""
-    fits = 2 if points.strip_count and points.sfm_count else 1
-    return fits * config.elevation_iterations
+    refit = config.refit_iterations if points.strip_count and points.sfm_count else 0
+    return config.elevation_iterations + refit
 
 
 def gate(mlp: ElevationMLP, xyz: np.ndarray, gate_m: float) -> np.ndarray:
@@ -63,5 +64,5 @@ def fit_surface(
         inliers = sfm[grid.in_region(sfm[:, :2]) & gate(mlp, sfm, config.sfm_gate_m)]
         kept = len(inliers)
         fitted = torch.cat([fitted, torch.as_tensor(inliers, device=device)])
-        losses += fit_elevation(mlp, fitted, config, on_step, region)
+        losses += fit_elevation(mlp, fitted, config, on_step, region, config.refit_iterations)
     return FittedSurface(grid, mlp, fitted, kept, losses)

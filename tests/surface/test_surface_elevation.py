@@ -89,7 +89,7 @@ def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -
     sfm = np.concatenate([on_road, floating, far])
     points = SurfacePoints(np.concatenate([strip, sfm]), len(strip), len(sfm))
     torch.manual_seed(0)
-    config = SurfaceConfig(resolution_m=0.5, elevation_iterations=150)
+    config = SurfaceConfig(resolution_m=0.5, elevation_iterations=150, refit_iterations=100)
     fitted = fit_surface(points, config, torch.device("cpu"))
     assert fitted.sfm_kept == len(on_road)
     assert len(fitted.points) == len(strip) + len(on_road)
