@@ -1,5 +1,6 @@
 """`cama serve`: run the backend with uvicorn."""
 
+import gc
 import logging
 import os
 from pathlib import Path
@@ -56,4 +57,7 @@ def serve_command(
     except ValueError as error:
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(code=2) from error
-    uvicorn.run(create_app(settings), host=host, port=port, log_level="info", access_log=ACCESS_LOG)
+    app = create_app(settings)
+    gc.collect()
+    gc.freeze()  # start-up objects live as long as the server: keep full collections (GIL held) off them
+    uvicorn.run(app, host=host, port=port, log_level="info", access_log=ACCESS_LOG)
