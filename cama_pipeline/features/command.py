@@ -20,12 +20,21 @@ def features_command(
         int, typer.Option(help="Growth of the vehicle / ego-body masks, pixels.")
     ] = 9,
     threads: Annotated[int, typer.Option(help="Extraction and matching threads.")] = 2,
+    matcher: Annotated[
+        str,
+        typer.Option(
+            help="Descriptor matcher: blas (matrix products, fast) or colmap (COLMAP's CPU matcher)."
+        ),
+    ] = "blas",
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Extract masked SIFT into each site's COLMAP database and match the pairs from `cama pairs`."""
     try:
         config = FeaturesConfig(
-            max_num_features=max_features, mask_dilation_px=mask_dilation_px, num_threads=threads
+            max_num_features=max_features,
+            mask_dilation_px=mask_dilation_px,
+            num_threads=threads,
+            matcher=matcher,  # type: ignore[arg-type]  # checked by FeaturesConfig
         )
         sites = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:

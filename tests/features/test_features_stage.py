@@ -129,6 +129,10 @@ def test_cli_reports_and_names_missing_pairs(dataset_root: Path, workspace: Path
     shutil.copytree(workspace / "sites", tmp_path / "sites")
     missing = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(tmp_path)])
     assert missing.exit_code == 2 and "cama pairs" in missing.output
+    unknown = runner.invoke(
+        app, ["features", str(dataset_root), "--workspace", str(workspace), "--matcher", "x"]
+    )
+    assert unknown.exit_code == 2 and "matcher" in unknown.output
     assert pycolmap is not None
 
 
