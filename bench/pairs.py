@@ -6,12 +6,16 @@ For the keyframe images of each site (after wigo -> keyframes -> sites, run here
              raster, `cama_pipeline/evaluate/covisibility.py`): C[a, b] = share of camera a's ground within 25 m
              that camera b sees. Strongly co-visible: min(C[a, b], C[b, a]) >= 0.5 (each sees half the other's
              ground); also reported for >= 0.3 and for max(C) >= 0.5;
-  matching   SIFT on the images of a random sample of each strategy's pairs, then COLMAP matching and geometric
-             verification of that sample: seconds per pair (so the estimated total for every pair of the strategy,
-             exhaustive included, which is too slow to run whole) and the share of sampled pairs that verify.
-Ratios (HSP / exhaustive pairs and matching time) come from the same run.
+  matching   SIFT on the images of a random sample of each strategy's pairs, then matching and geometric
+             verification of that sample with each matcher ("blas": the default, one matrix product per pair;
+             "colmap": COLMAP's CPU matcher, the baseline): seconds per pair (so the estimated total for every pair
+             of the strategy, exhaustive included, which is too slow to run whole), CPU seconds per pair (the
+             machine may be shared) and the share of sampled pairs that verify.
+Ratios (HSP / exhaustive pairs and matching time, blas / colmap matching time) come from the same run.
 
-Usage: .venv/bin/python bench/pairs.py [--site data/synthetic/default] [--sample 150]
+Usage: .venv/bin/python bench/pairs.py [--site data/synthetic/default] [--workspace W] [--sample 150]
+With --workspace, the site's existing wigo -> keyframes -> sites outputs are read (never written) instead of
+being recomputed into a temporary workspace.
 Prints the figures and writes them to bench/results/pairs.json (one entry per site folder given).
 """
 
@@ -20,6 +24,8 @@ import json
 import logging
 import platform
 import random
+import shutil
+import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -33,6 +39,8 @@ from cama_pipeline.evaluate.covisibility import ElevationSurface, covisibility_m
 from cama_pipeline.evaluate.inputs import load_true_poses
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
+from cama_pipeline.features.interface import PairMatcher
+from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.features.stage import extract_missing
 from cama_pipeline.keyframes import KeyframeConfig
@@ -78,42 +86,53 @@ def strong_sets(covisibility: np.ndarray) -> dict[str, set[Pair]]:
 
 def time_matching(
     dataset: Any, views: list[CameraView], pairs: list[Pair], folder: Path, config: FeaturesConfig
-) -> dict[str, float]:
-    """Extract the sampled pairs' images and match the sample; seconds per image and per pair, verified share."""
+) -> dict[str, Any]:
+    """Extract the sampled pairs' images, then match the sample with each matcher on its own copy of the
+    database: seconds (wall and CPU) per image and per pair, verified share and median inliers."""
     used = [views[i] for i in sorted({i for pair in pairs for i in pair})]
-    matcher = ColmapMatcher(config)
-    database = folder / "database.db"
+    extracted_db = folder / "extracted.db"
     started = time.perf_counter()
-    with open_database(database) as db:
+    with open_database(extracted_db) as db:
         extract_missing(dataset, used, FeatureStore(db), SiftExtractor(config), config)
-    extracted = time.perf_counter()
+    out: dict[str, Any] = {
+        "sampled_pairs": len(pairs),
+        "seconds_per_image": (time.perf_counter() - started) / max(len(used), 1),
+    }
     pairs_file = folder / "pairs.txt"
     pairs_file.write_text("".join(f"{views[i].name} {views[j].name}\n" for i, j in pairs))
-    matcher.match(database, pairs_file)
-    matched = time.perf_counter()
-    with open_database(database) as db:
-        verified = verified_pairs(db)
-    return {
-        "sampled_pairs": len(pairs),
-        "seconds_per_image": (extracted - started) / max(len(used), 1),
-        "seconds_per_pair": (matched - extracted) / max(len(pairs), 1),
-        "verified_share": len(verified) / max(len(pairs), 1),
-    }
+    matchers: dict[str, PairMatcher] = {"blas": BlasMatcher(config), "colmap": ColmapMatcher(config)}
+    for name, matcher in matchers.items():
+        database = folder / f"{name}.db"
+        shutil.copy(extracted_db, database)
+        wall, cpu = time.perf_counter(), time.process_time()
+        matcher.match(database, pairs_file)
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        with open_database(database) as db:
+            verified = verified_pairs(db)
+        out[name] = {
+            "seconds_per_pair": wall / max(len(pairs), 1),
+            "cpu_seconds_per_pair": cpu / max(len(pairs), 1),
+            "verified_share": len(verified) / max(len(pairs), 1),
+            "median_inliers": float(np.median(list(verified.values()))) if verified else 0.0,
+        }
+    return out
 
 
-def bench_site(site: Path, sample: int, seed: int) -> dict[str, Any]:
-    """All figures of one generated site."""
+def bench_site(site: Path, sample: int, seed: int, sites_from: Path | None) -> dict[str, Any]:
+    """All figures of one generated site (its sites read from `sites_from` when given, else computed)."""
     dataset_root = site / "nuscenes"
     dataset = load_dataset(dataset_root)
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="cama-bench-pairs-") as tmp:
         workspace = Path(tmp)
-        run_wigo(WigoConfig(), dataset_root, workspace, show_progress=False)
-        run_keyframes(KeyframeConfig(), dataset_root, workspace)
-        run_sites(SiteConfig(), dataset_root, workspace, dataset=dataset)
-        for entry in read_sites_index(workspace / "sites" / "index.json")["sites"]:
+        if sites_from is None:
+            run_wigo(WigoConfig(), dataset_root, workspace, show_progress=False)
+            run_keyframes(KeyframeConfig(), dataset_root, workspace)
+            run_sites(SiteConfig(), dataset_root, workspace, dataset=dataset)
+        source = sites_from or workspace
+        for entry in read_sites_index(source / "sites" / "index.json")["sites"]:
             site_id = entry["site_id"]
-            views = site_views(dataset, read_site_manifest(workspace / "sites" / site_id / "manifest.json"))
+            views = site_views(dataset, read_site_manifest(source / "sites" / site_id / "manifest.json"))
             out[site_id] = bench_views(dataset, site, views, workspace / site_id, sample, seed)
     return out
 
@@ -158,14 +177,20 @@ def bench_views(
             "share_of_exhaustive": count / exhaustive_count,
             "recall": recall,
             "matching": timing,
-            "estimated_matching_seconds": timing["seconds_per_pair"] * count,
+            "estimated_matching_seconds": {
+                matcher: timing[matcher]["seconds_per_pair"] * count for matcher in ("blas", "colmap")
+            },
         }
-        logger.info("%s: %d pairs, recall %s, %.3f s/pair", name, count, recall, timing["seconds_per_pair"])
+        logger.info("%s: %d pairs, recall %s, matching %s", name, count, recall, timing)
     hsp, full = report["sequential+hsp"], report["exhaustive"]
     report["ratios"] = {
         "pairs_hsp_over_exhaustive": hsp["pairs"] / full["pairs"],
-        "matching_time_hsp_over_exhaustive": hsp["estimated_matching_seconds"]
-        / full["estimated_matching_seconds"],
+        "matching_time_hsp_over_exhaustive": hsp["estimated_matching_seconds"]["blas"]
+        / full["estimated_matching_seconds"]["blas"],
+        "matching_cpu_blas_over_colmap": hsp["matching"]["blas"]["cpu_seconds_per_pair"]
+        / hsp["matching"]["colmap"]["cpu_seconds_per_pair"],
+        "matching_wall_blas_over_colmap": hsp["matching"]["blas"]["seconds_per_pair"]
+        / hsp["matching"]["colmap"]["seconds_per_pair"],
     }
     return report
 
@@ -177,17 +202,26 @@ def main() -> None:
         "--sample", type=int, default=150, help="Pairs matched per strategy to time matching."
     )
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--workspace", type=Path, help="Read the sites of this workspace (one site folder only)."
+    )
     parser.add_argument("--output", type=Path, default=RESULTS / "pairs.json")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     sites = args.site or [Path("data/synthetic/default")]
+    if args.workspace is not None and len(sites) != 1:
+        parser.error("--workspace goes with exactly one --site")
     results: dict[str, Any] = {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "config": {"pairs": PairsConfig().__dict__, "sample": args.sample, "strong": STRONG},
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
-        "sites": {str(site): bench_site(site, args.sample, args.seed) for site in sites},
+        "sites": {str(site): bench_site(site, args.sample, args.seed, args.workspace) for site in sites},
     }
     if not any("large" in str(site) for site in sites):
-        results["large"] = "not run: the large preset was not generated in this session"
+        results["large"] = (
+            "not run: the large preset was never generated (about an hour of rendering on 2 cores) and "
+            "`cama synth` cannot write only the tables, CAN and ground truth without rendering images"
+        )
     print(json.dumps(results, indent=2, default=str))
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=2, default=str) + "\n")
