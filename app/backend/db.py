@@ -53,8 +53,8 @@ class SqliteWriteTurns:
     """One writing session at a time per process, queued on a Python lock.
 
     SQLite lets one transaction write at a time; a second writer waits in SQLite's busy handler, which sleeps
-    in steps of up to 100 ms and so wakes late. Under many concurrent edits those sleeps made the slow tail of
-    the latency. Here a session takes the lock before its first write (a flush or an ORM DML statement) and
+    in steps of up to 100 ms and so wakes late: under many concurrent edits those sleeps add to the slow tail
+    of the latency. Here a session takes the lock before its first write (a flush or an ORM DML statement) and
     hands it on when its transaction ends (commit, rollback or close), so a waiting writer wakes as soon as
     the previous one is done. Writers of other processes are still arbitrated by SQLite's busy timeout, and
     so is a writer that waited here longer than that timeout (a safety net, never expected).
