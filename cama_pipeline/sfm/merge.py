@@ -41,7 +41,10 @@ class MergeConfig:
     needs the re-triangulation across clips and a global adjustment, not the whole Algorithm 1 again."""
     global_function_tolerance: float = 1e-6
     """BA of the merged model stops once an iteration lowers the cost by less than this fraction: it starts
-    from refined clips, so the long tail of tiny steps a cold BA needs moves nothing that matters."""
+    from refined clips, so the long tail of tiny steps a cold BA needs moves nothing that matters. Default
+    site, clips scene-0002 + scene-0003 (438 images, 218k observations): one pass at 1e-6 takes 49 CPU s
+    against 146 for two passes to full tolerance (56 solver steps instead of 2 x 101), same errors
+    (gauge-free 1.05 cm / 0.036 deg)."""
 
     def __post_init__(self) -> None:
         if self.global_max_iterations < 1:
