@@ -40,6 +40,10 @@ def serve_command(
             help="Held-out site folder for the retrain gate; repeat for several (CAMA_VMA_VALIDATION_SITES)."
         ),
     ] = None,
+    review_url: Annotated[
+        str | None,
+        typer.Option(help="The viser 3D review's URL (or :<port>) for the editor's link (CAMA_REVIEW_URL)."),
+    ] = None,
 ) -> None:
     """Serve the annotation API (OpenAPI at /docs); settings from CAMA_* variables, options win."""
     import uvicorn
@@ -53,6 +57,7 @@ def serve_command(
             admin_username=admin_username,
             vma_registry=vma_registry,
             vma_validation_sites=tuple(validation_site) if validation_site else None,
+            review_url=review_url,
         )
     except ValueError as error:
         typer.echo(f"error: {error}", err=True)

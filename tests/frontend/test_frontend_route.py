@@ -91,3 +91,13 @@ def test_the_review_settings_come_from_the_environment() -> None:
     assert (settings.review_url, settings.review_site_id) == ("http://10.0.0.5:8080/", 2)
     with pytest.raises(ValueError, match="CAMA_REVIEW_SITE_ID"):
         Settings.from_env({"CAMA_REVIEW_SITE_ID": "0"})
+
+
+def test_cama_serve_refuses_a_bad_review_url_before_serving(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from cama_pipeline.cli import app
+
+    result = CliRunner().invoke(app, ["serve", str(tmp_path / "data"), "--review-url", "localhost:8080"])
+    assert result.exit_code == 2
+    assert "CAMA_REVIEW_URL" in result.output
