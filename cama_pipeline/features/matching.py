@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from threadpoolctl import threadpool_limits
 
-from cama_pipeline.features.blas import single_threaded_blas
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import open_database
 from cama_pipeline.features.sift import verification_options
@@ -126,7 +126,7 @@ class BlasMatcher:
         descriptors = {i: np.asarray(db.read_descriptors(i).data) for i in used}
         columns = (TextColumn("matching"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with (
-            single_threaded_blas(),
+            threadpool_limits(limits=1, user_api="blas"),  # our threads run the pairs: BLAS on one each
             ThreadPoolExecutor(self._config.num_threads) as pool,
             Progress(*columns, transient=True) as progress,
         ):

@@ -6,7 +6,6 @@ import numpy as np
 import pycolmap
 import pytest
 
-from cama_pipeline.features.blas import _openblas, single_threaded_blas
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.matching import BlasMatcher, cosines, mutual_ratio_matches
 
@@ -41,17 +40,6 @@ def test_cosines_normalise_uint8_descriptors() -> None:
     data = np.array([[3, 4, 0], [0, 0, 0]], dtype=np.uint8)
     out = cosines(data, data)
     assert out[0, 0] == pytest.approx(1.0) and out[1, 1] == 0.0
-
-
-def test_single_threaded_blas_restores_the_thread_count() -> None:
-    found = _openblas()
-    if found is None:
-        pytest.skip("numpy has no bundled OpenBLAS here")
-    setter, getter = found
-    before = getter()
-    with single_threaded_blas():
-        assert getter() == 1
-    assert getter() == before
 
 
 def synthetic_database(path: Path, rng: np.random.Generator) -> tuple[list[str], np.ndarray]:
