@@ -5,7 +5,7 @@ import re
 from typing import Any
 
 import pytest
-from editor_browser_helpers import SeededServer, log_in, page_xy, polyline, screenshot
+from editor_browser_helpers import SeededServer, log_in, polyline, screenshot
 from playwright.sync_api import Page, expect
 
 pytestmark = pytest.mark.slow  # a few seconds each; the shared server and browser start once
@@ -61,8 +61,12 @@ def test_next_region_frames_lists_and_completes_the_cell(page: Page, seeded: See
     assert page.evaluate("window.camaEditor.regionOutlines()") == [[0, 0, 50, 50]]
     box = page.locator("#map").bounding_box()
     assert box is not None
-    cx, cy = page_xy(page, 25.0, 25.0)
-    assert abs(cx - (box["x"] + box["width"] / 2)) < 30 and abs(cy - (box["y"] + box["height"] / 2)) < 30
+    page.wait_for_function(  # the map flies to the cell (a 250 ms animation): wait for it to arrive
+        """([w, h]) => { const [px, py] = window.camaEditor.pixelOf(25, 25);
+                         return Math.abs(px - w / 2) < 30 && Math.abs(py - h / 2) < 30; }""",
+        arg=[box["width"], box["height"]],
+        timeout=5000,
+    )
     assert (_next_for_bob(seeded, site_id) or {}).get("id") == beside, (
         "the cell's proposals are leased to ann"
     )
