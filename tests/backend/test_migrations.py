@@ -16,12 +16,7 @@ def test_old_bbox_column_names_are_renamed_with_the_data_kept(tmp_path: Path) ->
     with engine.begin() as connection:  # make it look like the first release of 0001 made it
         for name in ("xmin", "ymin", "xmax", "ymax"):
             connection.execute(sa.text(f"ALTER TABLE elements RENAME COLUMN bbox_{name} TO {name}"))
-        connection.execute(
-            sa.text(
-                "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
-                "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
-            )
-        )
+        _insert_site(connection)
         connection.execute(
             sa.text(
                 "INSERT INTO elements (id, site_id, class, points, xmin, ymin, xmax, ymax, source, state, "
@@ -40,17 +35,22 @@ def test_old_bbox_column_names_are_renamed_with_the_data_kept(tmp_path: Path) ->
     assert "ix_elements_site_bbox" in indexes
 
 
+def _insert_site(connection: sa.Connection) -> None:
+    """Site 1, as the schema of an earlier migration stores it."""
+    connection.execute(
+        sa.text(
+            "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
+            "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
+        )
+    )
+
+
 def test_preaccept_flags_are_added_false_for_existing_elements(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'before.db'}"
     upgrade(url, "0004")
     engine = make_engine(url)
     with engine.begin() as connection:
-        connection.execute(
-            sa.text(
-                "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
-                "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
-            )
-        )
+        _insert_site(connection)
         connection.execute(
             sa.text(
                 "INSERT INTO elements (id, site_id, class, points, bbox_xmin, bbox_ymin, bbox_xmax, bbox_ymax, "
@@ -70,12 +70,7 @@ def test_one_active_retrain_index_keeps_the_first_of_duplicate_active_retrains(t
     upgrade(url, "0005")
     engine = make_engine(url)
     with engine.begin() as connection:
-        connection.execute(
-            sa.text(
-                "INSERT INTO sites (id, name, site_origin_x, site_origin_y, georeference, raster_dir, created_at) "
-                "VALUES (1, 's', 0, 0, '{}', '/r', '2026-11-23')"
-            )
-        )
+        _insert_site(connection)
         for job_id, kind, state in (
             (1, "retrain", "running"),
             (2, "retrain", "queued"),
