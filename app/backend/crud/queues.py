@@ -185,11 +185,27 @@ def _candidates(
     return [*session.scalars(returned), *session.scalars(unowned), *session.scalars(proposed)]
 
 
-def next_work_item(
-    *, session: Session, site_id: int, username: str, lease_s: int, flagged_ids: Collection[int] = ()
-) -> Lease | None:
-    """Lease the next work item to `username` for `lease_s` seconds (proposals in `flagged_ids`, those with
-    lint errors, before the others); None when there is no work left."""
+def _new_lease(site_id: int, element: Element, username: str, now: datetime, lease_s: int) -> Lease:
+    return Lease(
+        site_id=site_id,
+        element_id=element.id,
+        active_element_id=element.id,
+        username=username,
+        acquired_at=now,
+        expires_at=now + timedelta(seconds=lease_s),
+    )
+
+
+def _lease_next(
+    session: Session,
+    *,
+    site_id: int,
+    username: str,
+    flagged_ids: Collection[int],
+    leases_for: Callable[[Element, datetime], list[Lease]],
+) -> tuple[Element, list[Lease]] | None:
+    """Lease what `leases_for` makes of the first candidate in one transaction, looking again when another
+    request took one of its elements first; (that candidate, the leases), None when there is no work left."""
     get_site(session=session, site_id=site_id)
     for _attempt in range(MAX_ATTEMPTS):
         now = clock()
@@ -198,24 +214,34 @@ def next_work_item(
         if not candidates:
             session.commit()
             return None
-        element = candidates[0]
-        lease = Lease(
-            site_id=site_id,
-            element_id=element.id,
-            active_element_id=element.id,
-            username=username,
-            acquired_at=now,
-            expires_at=now + timedelta(seconds=lease_s),
-        )
-        session.add(lease)
+        leases = leases_for(candidates[0], now)
+        session.add_all(leases)
         try:
             session.commit()
         except IntegrityError:
-            session.rollback()  # another request leased it first: look again
+            session.rollback()  # another request leased one of them first: look again
             continue
-        logger.info("leased element %s to %s until %s", element.id, username, lease.expires_at)
-        return lease
+        return candidates[0], leases
     raise ConflictError("queue: too many concurrent requests for work items; try again")
+
+
+def next_work_item(
+    *, session: Session, site_id: int, username: str, lease_s: int, flagged_ids: Collection[int] = ()
+) -> Lease | None:
+    """Lease the next work item to `username` for `lease_s` seconds (proposals in `flagged_ids`, those with
+    lint errors, before the others); None when there is no work left."""
+    found = _lease_next(
+        session,
+        site_id=site_id,
+        username=username,
+        flagged_ids=flagged_ids,
+        leases_for=lambda element, now: [_new_lease(site_id, element, username, now, lease_s)],
+    )
+    if found is None:
+        return None
+    lease = found[1][0]
+    logger.info("leased element %s to %s until %s", lease.element_id, username, lease.expires_at)
+    return lease
 
 
 def _region_members(session: Session, site_id: int, seed: Element, cell: Box) -> list[Element]:
@@ -254,35 +280,20 @@ def next_region(
 ) -> tuple[Box, list[Lease]] | None:
     """Lease the next region work item to `username` (see the module docstring): its cell and one lease per
     element; None when there is no work left."""
-    get_site(session=session, site_id=site_id)
-    for _attempt in range(MAX_ATTEMPTS):
-        now = clock()
-        _reclaim_expired(session, site_id=site_id, now=now)
-        candidates = _candidates(session, site_id=site_id, username=username, flagged_ids=flagged_ids)
-        if not candidates:
-            session.commit()
-            return None
-        cell = _cell_of(candidates[0], cell_m)
-        leases = [
-            Lease(
-                site_id=site_id,
-                element_id=element.id,
-                active_element_id=element.id,
-                username=username,
-                acquired_at=now,
-                expires_at=now + timedelta(seconds=lease_s),
-            )
-            for element in _region_members(session, site_id, candidates[0], cell)
-        ]
-        session.add_all(leases)
-        try:
-            session.commit()
-        except IntegrityError:
-            session.rollback()  # another request leased one of them first: look again
-            continue
-        logger.info("leased region %s (%d elements) to %s", cell, len(leases), username)
-        return cell, leases
-    raise ConflictError("queue: too many concurrent requests for work items; try again")
+
+    def leases_for(seed: Element, now: datetime) -> list[Lease]:
+        members = _region_members(session, site_id, seed, _cell_of(seed, cell_m))
+        return [_new_lease(site_id, element, username, now, lease_s) for element in members]
+
+    found = _lease_next(
+        session, site_id=site_id, username=username, flagged_ids=flagged_ids, leases_for=leases_for
+    )
+    if found is None:
+        return None
+    seed, leases = found
+    cell = _cell_of(seed, cell_m)
+    logger.info("leased region %s (%d elements) to %s", cell, len(leases), username)
+    return cell, leases
 
 
 def get_lease(*, session: Session, lease_id: int) -> Lease:
