@@ -236,6 +236,18 @@ def cropped(image: np.ndarray) -> np.ndarray:
     return image[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1]
 
 
+def raster_plot(name: str, image: np.ndarray, title: str, label: str, **style: Any) -> str:
+    """One raster (cropped to its finite cells) with a colour bar, saved under PLOTS; its file name."""
+    fig, ax = plt.subplots(figsize=(6, 5))
+    shown = ax.imshow(cropped(image), **style)
+    fig.colorbar(shown, ax=ax, label=label)
+    ax.set_title(title)
+    ax.set_axis_off()
+    fig.tight_layout()
+    fig.savefig(PLOTS / name, dpi=110)
+    return name
+
+
 def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) -> list[str]:
     PLOTS.mkdir(parents=True, exist_ok=True)
     written = []
@@ -262,23 +274,27 @@ def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) 
     fig.tight_layout()
     fig.savefig(PLOTS / "sre_f1.png", dpi=110)
     written.append("sre_f1.png")
-    fig, ax = plt.subplots(figsize=(6, 5))
-    image = ax.imshow(cropped(error_map * 100), cmap="coolwarm", vmin=-10, vmax=10)
-    fig.colorbar(image, ax=ax, label="reconstructed - true elevation (cm)")
-    ax.set_title("Elevation error on road cells")
-    ax.set_axis_off()
-    fig.tight_layout()
-    fig.savefig(PLOTS / "elevation_error.png", dpi=110)
-    written.append("elevation_error.png")
+    written.append(
+        raster_plot(
+            "elevation_error.png",
+            error_map * 100,
+            "Elevation error on road cells",
+            "reconstructed - true elevation (cm)",
+            cmap="coolwarm",
+            vmin=-10,
+            vmax=10,
+        )
+    )
     counts = cv2.imread(str(rasters_folder / "observation_count.png"), cv2.IMREAD_UNCHANGED).astype(float)
-    fig, ax = plt.subplots(figsize=(6, 5))
-    image = ax.imshow(cropped(np.where(counts > 0, counts, np.nan)), cmap="viridis")
-    fig.colorbar(image, ax=ax, label="camera rays per cell")
-    ax.set_title("Observation count")
-    ax.set_axis_off()
-    fig.tight_layout()
-    fig.savefig(PLOTS / "observation_count.png", dpi=110)
-    written.append("observation_count.png")
+    written.append(
+        raster_plot(
+            "observation_count.png",
+            np.where(counts > 0, counts, np.nan),
+            "Observation count",
+            "camera rays per cell",
+            cmap="viridis",
+        )
+    )
     plt.close("all")
     return written
 
