@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from annotations.geometry import densify
 from cama_pipeline.semantics import Semantic
 
 
@@ -43,15 +44,6 @@ class ObservedMask:
         return hit
 
 
-def _densified(points: np.ndarray, step_m: float) -> np.ndarray:
-    """The polyline with extra vertices so that no segment is longer than `step_m` (original vertices kept)."""
-    parts = [points[:1]]
-    for a, b in zip(points[:-1], points[1:], strict=True):
-        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step_m)))
-        parts.append(a + (b - a) * (np.arange(1, n + 1)[:, None] / n))
-    return np.concatenate(parts)
-
-
 def _length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
@@ -67,7 +59,7 @@ def observed_parts(
 ) -> list[np.ndarray]:
     """The observed pieces of one 2D polyline (global metres): stretches at least `min_length_m` long, or the
     whole ring when at least `min_ring_share` of it lies on observed cells."""
-    dense = _densified(np.asarray(points, dtype=np.float64)[:, :2], step_m)
+    dense = densify(np.asarray(points, dtype=np.float64)[:, :2], step_m)
     seen = mask.contains(dense)
     if closed:
         return [np.asarray(points, dtype=np.float64)[:, :2]] if seen.mean() >= min_ring_share else []
