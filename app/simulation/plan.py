@@ -142,7 +142,7 @@ def _covered(target: np.ndarray, pieces: Sequence[np.ndarray], tolerance_m: floa
 
 
 def _vertex_edits(
-    pieces: Sequence[np.ndarray], target: np.ndarray, tolerance_m: float
+    pieces: Sequence[np.ndarray], target: np.ndarray, closed: bool, tolerance_m: float
 ) -> tuple[int, int, tuple[int, ...]]:
     """(moved, removed, gap_runs) that turn the pieces, merged, into `target`, counted as a person edits:
     vertices off the true line are deleted while there are more than the truth needs, the rest dragged onto
@@ -153,7 +153,6 @@ def _vertex_edits(
     off = int(sum(true_line.distance(Point(p)) > tolerance_m for p in vertices))
     removed = min(off, max(0, len(vertices) - len(target)))
     moved = off - removed
-    closed = len(target) > 2 and bool(np.allclose(target[0], target[-1]))
     if closed:
         return moved, removed, (1,) * max(0, len(target) - len(vertices))
     missing = ~_covered(target, pieces, tolerance_m)
@@ -177,7 +176,7 @@ def _nearest_truth(
 
 def _fix(
     index: int,
-    target: np.ndarray,
+    truth: Polyline,
     relabel: str | None,
     merged: tuple[int, ...],
     pieces: list[np.ndarray],
@@ -185,12 +184,12 @@ def _fix(
     *,
     simplify_first: bool,
 ) -> Decision:
-    """The fix that turns the pieces into `target`, optionally after the editor's simplify on them (one key)."""
-    if simplify_first and len(target) > 2 and np.allclose(target[0], target[-1]):
-        simplify_first = False  # the editor does not simplify rings
+    """The fix that turns the pieces into the truth's clicked vertices, optionally after the editor's simplify
+    on them (one key)."""
+    target = clicked_vertices(truth, config)
     if simplify_first:
         pieces = [simplify(p, config.editor_simplify_m) for p in pieces]
-    moved, removed, gap_runs = _vertex_edits(pieces, target, config.vertex_tolerance_m)
+    moved, removed, gap_runs = _vertex_edits(pieces, target, truth.closed, config.vertex_tolerance_m)
     return Decision("fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first)
 
 
@@ -220,13 +219,10 @@ def decide(
         for k, other in enumerate(pending)
         if not truth.closed and _nearest_truth(other, truths, used, config) == index
     )
-    target = clicked_vertices(truth, config)
     pieces = [proposal.points, *(pending[k].points for k in merged)]
+    simplify_options = (False,) if truth.closed else (False, True)  # the editor does not simplify rings
     fix = min(
-        (
-            _fix(index, target, relabel, merged, pieces, config, simplify_first=False),
-            _fix(index, target, relabel, merged, pieces, config, simplify_first=True),
-        ),
+        (_fix(index, truth, relabel, merged, pieces, config, simplify_first=o) for o in simplify_options),
         key=lambda d: d.seconds(costs),
     )
     redraw_s = Decision("reject").seconds(costs) + drawing_seconds(truth, config, costs)
