@@ -79,7 +79,7 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
         *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m),
         *_line_vectors(
             rasters,
-            road_edge(semantic, rasters.resolution_m, config),
+            _boundary_mask(semantic, rasters.resolution_m, config),
             "boundary",
             config,
             config.join_boundary_gap_m,

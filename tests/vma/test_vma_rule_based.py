@@ -56,17 +56,24 @@ def test_road_edge_boundaries_follow_the_road_past_a_smeared_curb_and_stop_where
     semantic[pixel(0, 10.5)[1] : top + 1] = int(Semantic.CURB)  # a curb label smeared 1.5 m over the sidewalk
     semantic[top - 2 : top + 1] = int(Semantic.UNOBSERVED)  # and its face hid a thin strip
     semantic[: top + 1, pixel(40, 0)[0] :] = int(Semantic.UNOBSERVED)  # the roadside beyond x = 40 m unseen
-    vectors_out = propose_rule_based(
-        load_site_rasters(write_raster_site(tmp_path / "smeared", semantic, vectors))
-    )
-    north = [LineString(v.points) for v in vectors_out if v.cls == "boundary" and v.points[:, 1].mean() > 785]
-    assert len(north) == 1
-    coords = np.asarray(north[0].coords)
-    np.testing.assert_allclose(
-        coords[:, 1], global_xy(0, 12)[1], atol=0.2
-    )  # on the road's edge, not the smear
-    assert coords[:, 0].min() < 500.5 and coords[:, 0].max() < 500 + 41.1, (
+    rasters = load_site_rasters(write_raster_site(tmp_path / "smeared", semantic, vectors))
+
+    def north(config: RuleConfig) -> list[np.ndarray]:
+        return [
+            v.points
+            for v in propose_rule_based(rasters, config)
+            if v.cls == "boundary" and v.points[:, 1].mean() > 785
+        ]
+
+    edge = north(RuleConfig(boundary_source="road_edge"))
+    assert len(edge) == 1
+    np.testing.assert_allclose(edge[0][:, 1], global_xy(0, 12)[1], atol=0.2)  # on the road's edge
+    assert edge[0][:, 0].min() < 500.5 and edge[0][:, 0].max() < 500 + 41.1, (
         "no boundary along the unseen roadside"
+    )
+    curb = north(RuleConfig(boundary_source="curb"))
+    assert curb and all(abs(p[:, 1].mean() - global_xy(0, 11.25)[1]) < 0.3 for p in curb), (
+        "the curb source follows the middle of the (smeared) curb label"
     )
 
 
