@@ -12,16 +12,23 @@ SIFT_DIMENSIONS = 128
 
 
 class SiftExtractor:
-    """COLMAP SIFT with this project's options."""
+    """COLMAP SIFT with this project's options; pickles as its config, so extraction processes rebuild it."""
 
     name = "colmap-sift"
 
     def __init__(self, config: FeaturesConfig) -> None:
+        self._config = config
         options = pycolmap.FeatureExtractionOptions()
         options.num_threads = config.num_threads
         options.sift.max_num_features = config.max_num_features
         options.sift.first_octave = config.first_octave
         self._extractor = pycolmap.FeatureExtractor.create(options, device=pycolmap.Device.cpu)
+
+    def __getstate__(self) -> FeaturesConfig:
+        return self._config
+
+    def __setstate__(self, config: FeaturesConfig) -> None:
+        self.__init__(config)  # type: ignore[misc]
 
     def extract(self, gray: np.ndarray) -> Features:
         """SIFT keypoints (with affine shape) and uint8 descriptors of a grey image."""

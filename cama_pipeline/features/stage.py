@@ -13,8 +13,11 @@ extracted again and matched pairs are not matched again. A change of extractor n
 """
 
 import logging
+import multiprocessing
 import statistics
 import time
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +28,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
-from cama_pipeline.features.interface import FeatureExtractor, PairMatcher
+from cama_pipeline.features.interface import FeatureExtractor, Features, PairMatcher
 from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
 from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
@@ -64,7 +67,7 @@ def features_dir(workspace: Path, site_id: str) -> Path:
 
 def image_features(
     dataset: Dataset, view: CameraView, extractor: FeatureExtractor, config: FeaturesConfig
-) -> tuple[Any, int]:
+) -> tuple[Features, int]:
     """The view's features with those on the ego body and vehicles removed, and how many were removed."""
     image = dataset.image(view.token)
     gray = cv2.cvtColor(image.load_rgb(), cv2.COLOR_RGB2GRAY)
@@ -77,6 +80,39 @@ def image_features(
     return features.subset(keep), int((~keep).sum())
 
 
+MIN_IMAGES_PER_PROCESS = 16
+"""Extraction runs in worker processes only when each gets at least this many images (a process takes about a
+second to start and import pycolmap)."""
+_worker_state: tuple[Dataset, FeatureExtractor, FeaturesConfig] | None = None
+
+
+def _start_worker(root: Path, version: str, extractor: FeatureExtractor, config: FeaturesConfig) -> None:
+    """Worker-process set-up: its own data set tables and extractor (unpickled from the parent's)."""
+    global _worker_state
+    _worker_state = (load_dataset(root, version, check_files=False), extractor, config)
+
+
+def _extract_in_worker(view: CameraView) -> tuple[Features, int]:
+    if _worker_state is None:
+        raise RuntimeError("extraction worker used before _start_worker")
+    return image_features(_worker_state[0], view, _worker_state[1], _worker_state[2])
+
+
+def _extracted(
+    dataset: Dataset, todo: list[CameraView], extractor: FeatureExtractor, config: FeaturesConfig
+) -> Iterator[tuple[Features, int]]:
+    """Masked features of `todo` in order: in `config.num_threads` processes when there are enough images
+    (pycolmap's SIFT holds the GIL, so threads do not help), else here."""
+    workers = min(config.num_threads, len(todo) // MIN_IMAGES_PER_PROCESS)
+    if workers < 2:
+        yield from (image_features(dataset, view, extractor, config) for view in todo)
+        return
+    setup = (dataset.root, dataset.version, extractor, config)
+    context = multiprocessing.get_context("spawn")  # forking a process that may hold threads is unsafe
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=setup) as pool:
+        yield from pool.map(_extract_in_worker, todo, chunksize=4)
+
+
 def extract_missing(
     dataset: Dataset,
     views: list[CameraView],
@@ -84,15 +120,17 @@ def extract_missing(
     extractor: FeatureExtractor,
     config: FeaturesConfig,
 ) -> dict[str, dict[str, int]]:
-    """Extract the views the database lacks into it, with a progress bar; counts per newly extracted image."""
+    """Extract the views the database lacks into it, with a progress bar; counts per newly extracted image.
+    A multi-process run needs a picklable extractor."""
     counts: dict[str, dict[str, int]] = {}
     todo = [view for view in views if not store.has(view.name)]
     columns = (TextColumn("features"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, transient=True) as progress:
-        for view in progress.track(todo, description="features"):
-            features, masked = image_features(dataset, view, extractor, config)
+        task = progress.add_task("features", total=len(todo))
+        for view, (features, masked) in zip(todo, _extracted(dataset, todo, extractor, config), strict=True):
             store.add(view, features)
             counts[view.name] = {"features": len(features.keypoints), "masked": masked}
+            progress.advance(task)
     return counts
 
 

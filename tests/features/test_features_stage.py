@@ -1,6 +1,7 @@
 """`cama features` on a few keyframes of the tiny site: masked SIFT into COLMAP's database, matched pairs."""
 
 import json
+import pickle
 import shutil
 import sys
 from pathlib import Path
@@ -15,10 +16,11 @@ from site_workspace import build_site_workspace  # noqa: E402
 
 from cama_pipeline.cli import app  # noqa: E402
 from cama_pipeline.data import load_dataset  # noqa: E402
+from cama_pipeline.features import stage  # noqa: E402
 from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs  # noqa: E402
 from cama_pipeline.features.sift import SiftExtractor  # noqa: E402
-from cama_pipeline.features.stage import features_dir, run  # noqa: E402
+from cama_pipeline.features.stage import extract_missing, features_dir, run  # noqa: E402
 from cama_pipeline.pairs.cameras import site_views  # noqa: E402
 from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
 from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
@@ -148,3 +150,23 @@ def test_night_images_yield_fewer_features_than_day_images(dataset_root: Path) -
         return len(extractor.extract(gray).keypoints)
 
     assert count(night) < 0.75 * count(day)
+
+
+def test_extraction_processes_store_what_one_process_stores(
+    dataset_root: Path, workspace: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    extractor = SiftExtractor(FeaturesConfig())
+    gray = load_dataset(dataset_root).scenes[0].images["CAM_FRONT"][0].load_rgb()[..., 1]
+    rebuilt = pickle.loads(pickle.dumps(extractor))
+    assert np.array_equal(rebuilt.extract(gray).descriptors, extractor.extract(gray).descriptors)
+    dataset = load_dataset(dataset_root)
+    views = site_views(dataset, read_site_manifest(workspace / "sites" / "site-001" / "manifest.json"))
+    monkeypatch.setattr(stage, "MIN_IMAGES_PER_PROCESS", 1)
+    stored = {}
+    for workers in (1, 2):
+        config = FeaturesConfig(num_threads=workers)
+        with open_database(tmp_path / f"{workers}.db") as db:
+            counts = extract_missing(dataset, views, FeatureStore(db), SiftExtractor(config), config)
+            stored[workers] = (counts, [db.read_keypoints(i + 1).tobytes() for i in range(len(views))])
+    assert len(stored[1][0]) == len(views)
+    assert stored[1] == stored[2]
