@@ -4,8 +4,11 @@ The cold-start proposer of the paper and the baseline the learned model must bea
 dividers (double lines closed into one, dashes joined along their direction), curbs give boundaries, and
 crosswalk stripes closed into blocks give `ped_crossing` rectangles. Boundaries come from the curb label's
 skeleton, or (`boundary_source="road_edge"`, for reconstructed rasters) from the edge of the road (road, marking
-or crosswalk cells) where a curb label is near: on reconstructed rasters the curb's vertical face smears its
-label over the sidewalk and hides a thin strip beside it, while the road's edge stays sharp. Confidence is mask support: the share of
+or crosswalk cells) where observed off-road ground (curb or background) is near: on reconstructed rasters the
+curb's vertical face smears its label over the sidewalk, leaves it out in places (the road meets the sidewalk
+directly) and hides a thin strip beside it, while the road's edge stays sharp. Where the road runs into
+unobserved cells (the end of what the cameras saw) there is no boundary; the short hook a boundary's skeleton
+takes round that corner is cut off. Confidence is mask support: the share of
 a vector's length with its mask nearby (bridged dash gaps lower it), damped for short vectors.
 """
 
@@ -44,9 +47,15 @@ class RuleConfig:
     """Shorter polylines are dropped."""
     boundary_source: Literal["curb", "road_edge"] = "curb"
     """Boundaries along the curb label ('curb': generator rasters, where it is one sharp band) or along the
-    road's edge near a curb label ('road_edge': reconstructed rasters, where the curb label is smeared)."""
+    road's edge next to observed off-road ground ('road_edge': reconstructed rasters, where the curb label is
+    smeared or missing)."""
     curb_reach_m: float = 1.0
-    """'road_edge': the road's edge is a boundary where a curb label lies within this distance of it."""
+    """'road_edge': the road's edge is a boundary where a curb or background cell lies within this distance of
+    it (bridging the thin unobserved strip beside a curb)."""
+    hook_m: float = 1.5
+    """'road_edge': an end stretch up to this long that turns away by more than `hook_angle_deg` is cut off
+    (the road's edge rounding the corner into unobserved cells; real curbs turn with a radius of metres)."""
+    hook_angle_deg: float = 45.0
     road_hole_m2: float = 4.0
     """Non-road pieces inside the road smaller than this are label noise, not islands with a boundary."""
     min_crosswalk_area_m2: float = 4.0
@@ -109,10 +118,12 @@ def _line_vectors(
     support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
     out = []
     for path in paths:
-        line = LineString(path).simplify(config.simplify_m)
+        points = np.asarray(LineString(path).simplify(config.simplify_m).coords)
+        if cls == "boundary" and config.boundary_source == "road_edge":
+            points = trim_hooks(points, config.hook_m, config.hook_angle_deg)
+        line = LineString(points)
         if line.length < config.min_length_m:
             continue
-        points = np.asarray(line.coords)
         out.append(Vector(cls, points, _confidence(rasters, support, points, config)))
     return out
 
@@ -127,16 +138,41 @@ def _boundary_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig
 
 
 def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
-    """Cells just outside the road with a curb label within `curb_reach_m`: the road's boundary as a 1-cell
-    band, at the road's sharp edge rather than along the curb label smeared over the sidewalk, and bridging the
-    thin unobserved strip a curb's face hides. A road that ends without a curb (a cut-off arm) has none."""
+    """Cells just outside the road with observed off-road ground (curb or background) within `curb_reach_m`:
+    the road's boundary as a 1-cell band, at the road's sharp edge rather than along the curb label smeared
+    over the sidewalk (or missing), bridging the thin unobserved strip a curb's face hides. Where the road
+    runs into unobserved cells (a cut-off arm) there is none."""
     road = np.isin(semantic, _ROAD_IDS).astype(np.uint8)
     holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
     road |= holes
-    curb = (semantic == int(Semantic.CURB)).astype(np.uint8)
-    near_curb = cv2.dilate(curb, _disk(config.curb_reach_m / resolution_m)) > 0
+    off_road = np.isin(semantic, [int(Semantic.CURB), int(Semantic.BACKGROUND)]).astype(np.uint8)
+    near_off_road = cv2.dilate(off_road, _disk(config.curb_reach_m / resolution_m)) > 0
     rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)
-    return rim & near_curb
+    return rim & near_off_road
+
+
+def trim_hooks(points: np.ndarray, hook_m: float, angle_deg: float) -> np.ndarray:
+    """`points` without an end stretch (at most `hook_m` long) that turns away from the line's direction over
+    the next `2 * hook_m` by more than `angle_deg`: cut at the vertex where the turn starts."""
+    for _ in range(2):
+        points = _trim_tail(points, hook_m, np.cos(np.radians(angle_deg)))[::-1]
+    return points
+
+
+def _trim_tail(points: np.ndarray, hook_m: float, cos_limit: float) -> np.ndarray:
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    total = along[-1]
+    if total < 3 * hook_m:
+        return points
+    for k in range(len(points) - 2, 0, -1):  # candidate turn vertices, nearest the end first
+        if total - along[k] > hook_m:
+            break
+        before = points[k] - points[int(np.searchsorted(along, along[k] - 2 * hook_m, side="right")) - 1]
+        after = points[-1] - points[k]
+        norms = float(np.linalg.norm(before) * np.linalg.norm(after))
+        if norms > 0 and before @ after / norms < cos_limit:
+            return points[: k + 1]
+    return points
 
 
 def remove_small_blobs(mask: np.ndarray, min_pixels: int) -> np.ndarray:

@@ -10,7 +10,7 @@ from vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 from cama_pipeline.semantics import Semantic
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import load_site_rasters
-from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.rule_based import RuleConfig, propose_rule_based, trim_hooks
 
 
 def test_drawn_site_gives_the_drawn_vectors(drawn_site: Path) -> None:
@@ -80,3 +80,27 @@ def test_road_edge_boundaries_follow_the_road_past_a_smeared_curb_and_stop_where
 def test_an_unknown_boundary_source_is_refused() -> None:
     with pytest.raises(ValueError, match="boundary_source"):
         RuleConfig(boundary_source="kerb")  # type: ignore[arg-type]
+
+
+def test_road_edge_boundaries_run_on_where_the_road_meets_the_sidewalk_without_a_curb_label(
+    tmp_path: Path,
+) -> None:
+    semantic, vectors = drawn_semantic()
+    row = pixel(0, 28)[1]
+    semantic[row - 1 : row + 1, pixel(10, 0)[0] : pixel(45, 0)[0]] = int(Semantic.BACKGROUND)  # no curb seen
+    rasters = load_site_rasters(write_raster_site(tmp_path / "no_curb", semantic, vectors))
+    south = [
+        v.points
+        for v in propose_rule_based(rasters, RuleConfig(boundary_source="road_edge"))
+        if v.cls == "boundary" and v.points[:, 1].mean() < 785
+    ]
+    assert len(south) == 1, "one boundary along the whole road edge"
+    assert south[0][:, 0].min() < 501 and south[0][:, 0].max() > 558
+    np.testing.assert_allclose(south[0][:, 1], global_xy(0, 28)[1], atol=0.2)
+
+
+def test_a_boundary_loses_the_hook_round_the_corner_into_unseen_cells() -> None:
+    line = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 0.8]])
+    np.testing.assert_allclose(trim_hooks(line, 1.5, 45.0), line[:2])
+    bend = np.array([[0.0, 0.0], [10.0, 0.0], [14.0, 4.0]])  # a real turn, longer than a hook
+    np.testing.assert_allclose(trim_hooks(bend, 1.5, 45.0), bend)
