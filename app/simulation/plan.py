@@ -29,7 +29,8 @@ class SimulationConfig:
     accept_m: float = 0.25
     """Within this Chamfer distance (and the right class) a proposal is accepted unchanged ..."""
     accept_max_m: float = 0.5
-    """... provided none of its points is farther than this from the true line (a visible kink gets fixed)."""
+    """... provided no point of either is farther than this from the other (a visible kink, or a true corner
+    cut or fallen short of, gets fixed)."""
     vertex_tolerance_m: float = 0.2
     """A vertex closer than this to the true line is left where it is."""
     simplify_m: float = 0.05
@@ -125,6 +126,17 @@ def _chamfer(a: Polyline, b: Polyline) -> float:
     return chamfer_distance(resample(a.points, _SAMPLES), resample(b.points, _SAMPLES))
 
 
+def _worst(a: Polyline, b: Polyline) -> float:
+    """The largest gap between the two shapes either way (vertices and resampled points): a kink of one, or a
+    corner of the other that it cuts or falls short of."""
+
+    def one_way(src: Polyline, dst: Polyline) -> float:
+        line = LineString(dst.points)
+        return max(line.distance(Point(p)) for p in np.vstack([src.points, resample(src.points, _SAMPLES)]))
+
+    return max(one_way(a, b), one_way(b, a))
+
+
 def _mean_distance_to(line: LineString, points: np.ndarray) -> float:
     """Mean distance of a polyline's resampled points to `line`: how well it lies along it, however short."""
     return float(np.mean([line.distance(Point(p)) for p in resample(points, _SAMPLES)]))
@@ -146,17 +158,26 @@ def _vertex_edits(
 ) -> tuple[int, int, tuple[int, ...]]:
     """(moved, removed, gap_runs) that turn the pieces, merged, into `target`, counted as a person edits:
     vertices off the true line are deleted while there are more than the truth needs, the rest dragged onto
-    it (vertices on the line stay); the true vertices no piece spans are missing, per stretch (a ring's
-    missing corners are inserted one by one)."""
+    it (vertices on the line stay); a true vertex (a corner) the pieces pass by farther than the tolerance is
+    made by dragging one of those off vertices onto it, or else the piece's segment (the editor inserts a
+    vertex where a segment is dragged); the true vertices no piece spans are missing, per stretch."""
     true_line = LineString(target)
     vertices = np.concatenate(pieces)
     off = int(sum(true_line.distance(Point(p)) > tolerance_m for p in vertices))
     removed = min(off, max(0, len(vertices) - len(target)))
     moved = off - removed
+    corners = target[:-1] if closed else target
+    spanned = np.ones(len(corners), bool) if closed else _covered(target, pieces, tolerance_m)
+    lines = [LineString(p) for p in pieces]
+    missed = sum(
+        min(line.distance(Point(c)) for line in lines) > tolerance_m
+        for c, inside in zip(corners, spanned, strict=True)
+        if inside
+    )
+    moved += max(0, missed - moved)
     if closed:
-        return moved, removed, (1,) * max(0, len(target) - len(vertices))
-    missing = ~_covered(target, pieces, tolerance_m)
-    edges = np.diff(np.concatenate([[0], missing.astype(int), [0]]))
+        return moved, removed, ()
+    edges = np.diff(np.concatenate([[0], (~spanned).astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     return moved, removed, tuple(int(n) for n in ends - starts)
 
@@ -211,8 +232,11 @@ def decide(
         return Decision("reject")
     truth = truths[index]
     relabel = truth.cls if truth.cls != proposal.cls else None
-    worst_m = max(LineString(truth.points).distance(Point(p)) for p in proposal.points)
-    if relabel is None and _chamfer(proposal, truth) <= config.accept_m and worst_m <= config.accept_max_m:
+    if (
+        relabel is None
+        and _chamfer(proposal, truth) <= config.accept_m
+        and _worst(proposal, truth) <= config.accept_max_m
+    ):
         return Decision("accept", target=index)
     merged = tuple(
         k

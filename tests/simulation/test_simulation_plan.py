@@ -106,3 +106,13 @@ def test_a_densely_wiggled_stretch_is_simplified_before_it_is_fixed() -> None:
     decision = decide(proposal, [ZIGZAG], set(), CONFIG)
     assert decision.kind == "fix" and decision.simplified
     assert decision.moved + decision.removed <= 4  # the simplified stretch keeps a handful of vertices
+
+
+def test_corners_a_proposal_misses_are_dragged_even_when_its_vertices_lie_on_the_true_lines() -> None:
+    short = CROSSWALK.points.copy()
+    short[[2, 3], 1] -= 0.8  # the far side 0.8 m short: its corners still lie on the long sides
+    decision = decide(Polyline("ped_crossing", short), [CROSSWALK], set(), CONFIG)
+    assert (decision.kind, decision.moved, decision.added) == ("fix", 2, 0)
+    corner = Polyline("boundary", np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]]))
+    cut = Polyline("boundary", np.array([[0.0, 0.0], [19.0, 0.0], [20.0, 1.0], [20.0, 20.0]]))
+    assert decide(cut, [corner], set(), CONFIG).moved == 1  # the cut corner is dragged out
