@@ -36,6 +36,10 @@ def synth(
     seed: Annotated[int | None, typer.Option(help="Random seed; the preset's when omitted.")] = None,
     workers: Annotated[int, typer.Option(min=1, help="Render processes.")] = 2,
     overwrite: Annotated[bool, typer.Option(help="Regenerate even if the site is up to date.")] = False,
+    images: Annotated[
+        bool,
+        typer.Option(help="Render camera images and masks; --no-images writes tables and ground truth only."),
+    ] = True,
     degrade_masks: Annotated[
         bool | None,
         typer.Option(
@@ -55,7 +59,7 @@ def synth(
         overrides["masks"] = MaskNoiseConfig(2, 0.05) if degrade_masks else MaskNoiseConfig()
     try:
         cfg = make_preset(preset, **overrides)
-        result = run(cfg, out, overwrite=overwrite, workers=workers)
+        result = run(cfg, out, images=images, overwrite=overwrite, workers=workers)
     except (ValueError, FileExistsError) as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(code=2) from err
@@ -65,7 +69,12 @@ def synth(
     console.print(f"  ground truth:               {result.ground_truth_dir}")
     kinds = ", ".join(f"{name} ({kind})" for name, kind in result.scenes.items())
     console.print(f"  {len(result.scenes)} scenes: {kinds}")
-    console.print(f"  {result.images} camera images with semantic and lane-instance masks")
+    if result.images_rendered:
+        console.print(f"  {result.images} camera images with semantic and lane-instance masks")
+    else:
+        console.print(
+            f"  {result.images} camera images listed, NOT rendered (--no-images): no image or mask files"
+        )
 
 
 def _register_stage_commands() -> None:

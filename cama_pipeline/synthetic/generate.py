@@ -7,7 +7,11 @@ Output (`out_dir`):
         baseline_map.json     a flawed 2D map (the paper's baseline)
         poses.json            true ego pose of every sample_data token
         bev/{semantic.png, photometric.png, elevation.npy, observation_count.png, georeference.json}
-    manifest.json             config, fingerprint and counts; written last, so its presence means complete
+    manifest.json             config, fingerprint and counts; written last, so its presence means complete;
+                              `images_rendered` false marks a site made with `images=False` (`cama synth
+                              --no-images`): every table, CAN file and ground-truth file is written, byte for byte
+                              as a normal run would, but no camera image and no mask file (the tables still list
+                              them, so a stage that reads images fails naming the missing file)
 
 The whole tree is built in a sibling staging folder and renamed into place, so an interrupted run never
 leaves a half-written site; a rerun with the same config finds the manifest and does nothing.
@@ -62,23 +66,41 @@ class SynthResult:
     scenes: dict[str, str]
     """scene name -> kind (moving / stationary / night)."""
     images: int
+    """Camera images the tables list (rendered or not)."""
     seconds: float
     skipped: bool
+    images_rendered: bool = True
+    """False for a site generated with `images=False`: its image and mask files do not exist."""
 
 
-def fingerprint(cfg: SynthConfig) -> str:
-    """Hash of everything that determines the output."""
-    payload = json.dumps({"config": dataclasses.asdict(cfg), "generator": GENERATOR_VERSION}, sort_keys=True)
+def fingerprint(cfg: SynthConfig, *, images: bool = True) -> str:
+    """Hash of everything that determines the output; a site without images hashes apart from the full one,
+    so that a later full run over it is never skipped as up to date."""
+    content: dict[str, object] = {"config": dataclasses.asdict(cfg), "generator": GENERATOR_VERSION}
+    if not images:
+        content["images"] = False
+    payload = json.dumps(content, sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
 
 def run(
-    cfg: SynthConfig, out_dir: Path, *, overwrite: bool = False, workers: int = 2, show_progress: bool = True
+    cfg: SynthConfig,
+    out_dir: Path,
+    *,
+    images: bool = True,
+    overwrite: bool = False,
+    workers: int = 2,
+    show_progress: bool = True,
 ) -> SynthResult:
-    """Generate the site of `cfg` into `out_dir`, or do nothing if it is already there and up to date."""
+    """Generate the site of `cfg` into `out_dir`, or do nothing if it is already there and up to date.
+
+    `images=False` skips rendering (most of the time on big presets): tables, CAN and ground truth only, for
+    work that needs poses but no pixels (the pairs benchmark); the manifest records it.
+    """
     out_dir = Path(out_dir)
     existing = _read_manifest(out_dir)
-    if existing is not None and existing.get("fingerprint") == fingerprint(cfg) and not overwrite:
+    digest = fingerprint(cfg, images=images)
+    if existing is not None and existing.get("fingerprint") == digest and not overwrite:
         logger.info("%s is up to date; nothing to do", out_dir)
         return _result_from_manifest(out_dir, existing, skipped=True)
     if out_dir.exists() and any(out_dir.iterdir()) and existing is None and not overwrite:
@@ -93,17 +115,22 @@ def run(
     site = build_synthetic_site(cfg)
     dataset_root = staging / DATASET_DIR
     true_poses = _write_tables_and_can(site, dataset_root)
-    n_images = _render_all(site, dataset_root, workers, show_progress)
+    n_images = sum(len(site.schedules[clip.index].shots) for clip in site.clips)
+    if images:
+        _render_all(site, dataset_root, workers, show_progress)
+    else:
+        logger.info("images not rendered (images=False): %d image files listed but absent", n_images)
     _write_ground_truth(site, staging / GROUND_TRUTH_DIR, true_poses, dataset_root, show_progress)
     scenes = {clip.name: clip.kind for clip in site.clips}
     manifest = {
-        "fingerprint": fingerprint(cfg),
+        "fingerprint": digest,
         "preset": cfg.preset,
         "seed": cfg.seed,
         "version": cfg.version,
         "config": dataclasses.asdict(cfg),
         "scenes": scenes,
         "images": n_images,
+        "images_rendered": images,
         "seconds": round(time.perf_counter() - started, 2),
     }
     atomic_write_json(staging / MANIFEST, manifest, indent=2)
@@ -131,6 +158,7 @@ def _result_from_manifest(out_dir: Path, manifest: dict, *, skipped: bool) -> Sy
         manifest["images"],
         manifest["seconds"],
         skipped,
+        bool(manifest.get("images_rendered", True)),
     )
 
 
@@ -249,7 +277,7 @@ def _tasks(site: SyntheticSite, dataset_root: Path) -> Iterator[tuple[int, int, 
             yield clip.index, shot_index, str(dataset_root)
 
 
-def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_progress: bool) -> int:
+def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_progress: bool) -> None:
     """Render every shot of every clip, in `workers` processes (1 = in this process)."""
     tasks = list(_tasks(site, dataset_root))
     columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
@@ -264,7 +292,6 @@ def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_prog
             with context.Pool(workers, initializer=_init_worker, initargs=(site.config,)) as pool:
                 for _ in pool.imap_unordered(_render_task, tasks, chunksize=4):
                     progress.advance(bar)
-    return len(tasks)
 
 
 # ---- ground truth ----------------------------------------------------------------------------------

@@ -1,48 +1,23 @@
 """Same seed, same bytes; different seed, different site; and the `cama synth` command."""
 
-import hashlib
-from dataclasses import replace
-from pathlib import Path
-
+from synth_helpers import file_digests, micro_config
 from typer.testing import CliRunner
 
 from cama_pipeline.cli import app
-from cama_pipeline.synthetic.config import ClipConfig, preset
 from cama_pipeline.synthetic.generate import run
 
 
-def _micro(seed: int = 7):
-    """The tiny preset cut to one short moving clip (plus the stationary and night clips)."""
-    cfg = preset("tiny", seed=seed)
-    clips = ClipConfig(
-        moving_duration_s=1.1,
-        stationary_duration_s=0.6,
-        night_duration_s=0.6,
-        routes=("east",),
-        moving_vehicles_per_clip=2,
-    )
-    return replace(cfg, clips=clips)
-
-
-def _digest(root: Path) -> dict[str, str]:
-    return {
-        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(root.rglob("*"))
-        if p.is_file() and p.name != "manifest.json"
-    }
-
-
 def test_same_seed_gives_identical_files_whatever_the_worker_count(tmp_path):
-    a = run(_micro(), tmp_path / "a", workers=1, show_progress=False)
-    b = run(_micro(), tmp_path / "b", workers=2, show_progress=False)
-    digest_a, digest_b = _digest(a.out_dir), _digest(b.out_dir)
+    a = run(micro_config(), tmp_path / "a", workers=1, show_progress=False)
+    b = run(micro_config(), tmp_path / "b", workers=2, show_progress=False)
+    digest_a, digest_b = file_digests(a.out_dir), file_digests(b.out_dir)
     assert len(digest_a) > 100
     assert digest_a == digest_b
 
 
 def test_other_seed_gives_another_site(tmp_path):
-    a = _digest(run(_micro(1), tmp_path / "a", workers=1, show_progress=False).out_dir)
-    b = _digest(run(_micro(2), tmp_path / "b", workers=1, show_progress=False).out_dir)
+    a = file_digests(run(micro_config(1), tmp_path / "a", workers=1, show_progress=False).out_dir)
+    b = file_digests(run(micro_config(2), tmp_path / "b", workers=1, show_progress=False).out_dir)
     assert a.keys() == b.keys()
     assert sum(a[k] != b[k] for k in a) > len(a) // 2
 
