@@ -43,6 +43,10 @@ class RuleConfig:
     """Largest direction change across a joined gap."""
     join_boundary_gap_m: float = 1.5
     """Largest gap joined between boundary pieces (curbs have no dashes; this bridges noise breaks)."""
+    extend_to_unseen_m: float = 7.0
+    """A divider whose paint stops this close to unobserved cells, over road all the way, runs on to them:
+    beyond the last dash the cameras read, a lane line goes on to the edge of what they saw (the dash gap
+    `join_gap_m` bridges between pieces)."""
     min_length_m: float = 2.0
     """Shorter polylines are dropped."""
     boundary_source: Literal["curb", "road_edge"] = "curb"
@@ -121,6 +125,8 @@ def _line_vectors(
         points = np.asarray(LineString(path).simplify(config.simplify_m).coords)
         if cls == "boundary" and config.boundary_source == "road_edge":
             points = trim_hooks(points, config.hook_m, config.hook_angle_deg)
+        if cls == "divider":
+            points = extend_to_unseen(points, rasters, config.extend_to_unseen_m)
         line = LineString(points)
         if line.length < config.min_length_m:
             continue
@@ -173,6 +179,55 @@ def _trim_tail(points: np.ndarray, hook_m: float, cos_limit: float) -> np.ndarra
         if norms > 0 and before @ after / norms < cos_limit:
             return points[: k + 1]
     return points
+
+
+_ALONG_ROAD_IDS = [int(Semantic.ROAD), int(Semantic.LANE_MARKING)]
+_UNSEEN_RUN_M = 1.0
+"""Unobserved cells count as the edge of what was seen when they go on for this long (not a speck)."""
+
+
+def extend_to_unseen(points: np.ndarray, rasters: SiteRasters, max_m: float) -> np.ndarray:
+    """`points` with each end carried on along its direction to the first unobserved cells, when those begin
+    within `max_m` and every cell on the way is road or lane marking (not a crossing, curb or off-road)."""
+    for _ in range(2):
+        points = points[::-1]
+        end, back = points[-1], points[max(0, len(points) - 2)]
+        along = points[-1] - _point_back(points, 1.0)
+        norm = float(np.linalg.norm(along))
+        if norm == 0 or np.allclose(end, back):
+            continue
+        stations = np.arange(rasters.resolution_m, max_m + _UNSEEN_RUN_M, rasters.resolution_m)
+        samples = end + np.outer(stations, along / norm)
+        labels = _labels_at(rasters, samples)
+        unseen = labels == int(Semantic.UNOBSERVED)
+        run = round(_UNSEEN_RUN_M / rasters.resolution_m)
+        for k in np.flatnonzero(unseen[: round(max_m / rasters.resolution_m)]):
+            if not np.isin(labels[:k], _ALONG_ROAD_IDS).all():
+                break
+            if unseen[k : k + run].mean() >= 0.8:
+                if k > 0:
+                    points = np.vstack([points, samples[k - 1]])
+                break
+    return points
+
+
+def _point_back(points: np.ndarray, distance_m: float) -> np.ndarray:
+    """The vertex at least `distance_m` back from the last one along the polyline (the first if none)."""
+    gaps = np.linalg.norm(points[-1] - points[::-1], axis=1)
+    far = np.flatnonzero(gaps >= distance_m)
+    return points[::-1][far[0]] if far.size else points[0]
+
+
+def _labels_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
+    """Semantic ids at global points. Outside the raster: unobserved when the raster marks unobserved cells (a
+    reconstruction's raster spans what was seen), else -1 (a map raster that simply ends there)."""
+    colrow = np.rint(rasters.pixel_from_global(xy)).astype(int)
+    h, w = rasters.shape
+    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    unseen_outside = bool((rasters.semantic == int(Semantic.UNOBSERVED)).any())
+    labels = np.full(len(xy), int(Semantic.UNOBSERVED) if unseen_outside else -1, np.int64)
+    labels[inside] = rasters.semantic[colrow[inside, 1], colrow[inside, 0]]
+    return labels
 
 
 def remove_small_blobs(mask: np.ndarray, min_pixels: int) -> np.ndarray:

@@ -104,3 +104,17 @@ def test_a_boundary_loses_the_hook_round_the_corner_into_unseen_cells() -> None:
     np.testing.assert_allclose(trim_hooks(line, 1.5, 45.0), line[:2])
     bend = np.array([[0.0, 0.0], [10.0, 0.0], [14.0, 4.0]])  # a real turn, longer than a hook
     np.testing.assert_allclose(trim_hooks(bend, 1.5, 45.0), bend)
+
+
+def test_a_divider_runs_on_to_the_edge_of_what_was_seen_but_not_into_a_crossing(tmp_path: Path) -> None:
+    semantic, vectors = drawn_semantic()
+    semantic[:, pixel(52, 0)[0] :] = int(Semantic.UNOBSERVED)  # nothing seen beyond x = 52 m
+    rasters = load_site_rasters(write_raster_site(tmp_path / "cut", semantic, vectors))
+    east = [
+        v.points for v in propose_rule_based(rasters) if v.cls == "divider" and v.points[:, 0].min() > 530
+    ]
+    assert len(east) == 1
+    assert east[0][:, 0].max() == pytest.approx(500 + 51.9, abs=0.15), "last dash at 49 m carried on to 52 m"
+    assert east[0][:, 0].min() == pytest.approx(500 + 37, abs=0.3), "not carried into the crossing"
+    unchanged = propose_rule_based(rasters, RuleConfig(extend_to_unseen_m=1.0))
+    assert max(v.points[:, 0].max() for v in unchanged if v.cls == "divider") < 500 + 49.5
