@@ -163,10 +163,12 @@ def _vertex_edits(
     vertex where a segment is dragged); the true vertices no piece spans are missing, per stretch."""
     true_line = LineString(target)
     vertices = np.concatenate(pieces)
+    if closed and len(vertices) > 1 and np.allclose(vertices[0], vertices[-1]):
+        vertices = vertices[:-1]  # a ring's closing vertex is its first one
     off = int(sum(true_line.distance(Point(p)) > tolerance_m for p in vertices))
-    removed = min(off, max(0, len(vertices) - len(target)))
-    moved = off - removed
     corners = target[:-1] if closed else target
+    removed = min(off, max(0, len(vertices) - len(corners)))
+    moved = off - removed
     spanned = np.ones(len(corners), bool) if closed else _covered(target, pieces, tolerance_m)
     lines = [LineString(p) for p in pieces]
     missed = sum(

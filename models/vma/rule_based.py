@@ -22,6 +22,7 @@ from shapely.geometry import LineString
 
 from cama_pipeline.semantics import Semantic
 from models.vma.merge import join_polylines
+from models.vma.raster_rays import extend_to_unseen, road_left
 from models.vma.rasters import SiteRasters
 from models.vma.skeleton_paths import skeleton_paths
 from models.vma.vectors import Vector
@@ -63,6 +64,9 @@ class RuleConfig:
     road_hole_m2: float = 4.0
     """Non-road pieces inside the road smaller than this are label noise, not islands with a boundary."""
     min_crosswalk_area_m2: float = 4.0
+    crosswalk_reach_m: float = 1.5
+    """A crossing runs from kerb to kerb while its outer stripes stop up to a stripe period short: its block
+    is carried on across the road to the road's edge when that lies within this distance."""
     min_blob_m2: float = 0.1
     """Mask pieces smaller than this are noise and removed before skeletonising."""
     min_piece_m: float = 0.5
@@ -181,55 +185,6 @@ def _trim_tail(points: np.ndarray, hook_m: float, cos_limit: float) -> np.ndarra
     return points
 
 
-_ALONG_ROAD_IDS = [int(Semantic.ROAD), int(Semantic.LANE_MARKING)]
-_UNSEEN_RUN_M = 1.0
-"""Unobserved cells count as the edge of what was seen when they go on for this long (not a speck)."""
-
-
-def extend_to_unseen(points: np.ndarray, rasters: SiteRasters, max_m: float) -> np.ndarray:
-    """`points` with each end carried on along its direction to the first unobserved cells, when those begin
-    within `max_m` and every cell on the way is road or lane marking (not a crossing, curb or off-road)."""
-    for _ in range(2):
-        points = points[::-1]
-        end, back = points[-1], points[max(0, len(points) - 2)]
-        along = points[-1] - _point_back(points, 1.0)
-        norm = float(np.linalg.norm(along))
-        if norm == 0 or np.allclose(end, back):
-            continue
-        stations = np.arange(rasters.resolution_m, max_m + _UNSEEN_RUN_M, rasters.resolution_m)
-        samples = end + np.outer(stations, along / norm)
-        labels = _labels_at(rasters, samples)
-        unseen = labels == int(Semantic.UNOBSERVED)
-        run = round(_UNSEEN_RUN_M / rasters.resolution_m)
-        for k in np.flatnonzero(unseen[: round(max_m / rasters.resolution_m)]):
-            if not np.isin(labels[:k], _ALONG_ROAD_IDS).all():
-                break
-            if unseen[k : k + run].mean() >= 0.8:
-                if k > 0:
-                    points = np.vstack([points, samples[k - 1]])
-                break
-    return points
-
-
-def _point_back(points: np.ndarray, distance_m: float) -> np.ndarray:
-    """The vertex at least `distance_m` back from the last one along the polyline (the first if none)."""
-    gaps = np.linalg.norm(points[-1] - points[::-1], axis=1)
-    far = np.flatnonzero(gaps >= distance_m)
-    return points[::-1][far[0]] if far.size else points[0]
-
-
-def _labels_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
-    """Semantic ids at global points. Outside the raster: unobserved when the raster marks unobserved cells (a
-    reconstruction's raster spans what was seen), else -1 (a map raster that simply ends there)."""
-    colrow = np.rint(rasters.pixel_from_global(xy)).astype(int)
-    h, w = rasters.shape
-    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
-    unseen_outside = bool((rasters.semantic == int(Semantic.UNOBSERVED)).any())
-    labels = np.full(len(xy), int(Semantic.UNOBSERVED) if unseen_outside else -1, np.int64)
-    labels[inside] = rasters.semantic[colrow[inside, 1], colrow[inside, 0]]
-    return labels
-
-
 def remove_small_blobs(mask: np.ndarray, min_pixels: int) -> np.ndarray:
     """`mask` (uint8) without the 8-connected pieces of fewer than `min_pixels` cells."""
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
@@ -264,9 +219,61 @@ def _crosswalks(rasters: SiteRasters, mask: np.ndarray, config: RuleConfig) -> l
         if rows.size * res**2 < config.min_crosswalk_area_m2:
             continue
         rect = cv2.minAreaRect(np.column_stack([cols, rows]).astype(np.float32))
-        corners = rasters.global_from_pixel(cv2.boxPoints(rect))
+        corners = span_to_kerbs(rasters.global_from_pixel(cv2.boxPoints(rect)), mask, rasters, config)
         ring = np.vstack([corners, corners[:1]])
         block_fill = rows.size / max(1.0, rect[1][0] * rect[1][1])
         stripe_share = mask[rows, cols].mean() / 0.5  # zebra stripes cover about half of a block
         out.append(Vector("ped_crossing", ring, float(np.clip(min(block_fill, stripe_share), 0, 1))))
     return out
+
+
+def span_to_kerbs(
+    corners: np.ndarray, stripes: np.ndarray, rasters: SiteRasters, config: RuleConfig
+) -> np.ndarray:
+    """A crossing's rectangle (4 corners, global) carried on along its stripe-spacing axis (the one its stripes
+    alternate along) to the road's edge at either end, where `road_left` finds one within reach."""
+    centre = corners.mean(axis=0)
+    axes = [corners[1] - corners[0], corners[2] - corners[1]]
+    lengths = [float(np.linalg.norm(a)) for a in axes]
+    if min(lengths) == 0:
+        return corners
+    units = [a / n for a, n in zip(axes, lengths, strict=True)]
+    changes = [_alternations(stripes, rasters, centre, u, n) for u, n in zip(units, lengths, strict=True)]
+    k = int(np.argmax(changes))
+    across, side = units[k], units[1 - k]
+    ends = []
+    for sign in (1.0, -1.0):
+        found = [
+            road_left(
+                rasters,
+                centre + sign * across * lengths[k] / 2 + side * offset * lengths[1 - k],
+                sign * across,
+                config.crosswalk_reach_m,
+                config.curb_reach_m,
+            )
+            for offset in (-0.25, 0.0, 0.25)
+        ]
+        known = [f for f in found if f is not None]
+        ends.append(float(np.median(known)) if len(known) >= 2 else 0.0)
+    centre = centre + across * (ends[0] - ends[1]) / 2
+    half = [across * (lengths[k] + sum(ends)) / 2, side * lengths[1 - k] / 2]
+    return np.array(
+        [
+            centre - half[0] - half[1],
+            centre + half[0] - half[1],
+            centre + half[0] + half[1],
+            centre - half[0] + half[1],
+        ]
+    )
+
+
+def _alternations(
+    stripes: np.ndarray, rasters: SiteRasters, centre: np.ndarray, unit: np.ndarray, length: float
+) -> int:
+    """How often the stripe mask switches on or off along a line through `centre`."""
+    stations = np.arange(-length / 2, length / 2, rasters.resolution_m)
+    colrow = np.rint(rasters.pixel_from_global(centre + np.outer(stations, unit))).astype(int)
+    h, w = stripes.shape
+    colrow = colrow[(colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)]
+    values = stripes[colrow[:, 1], colrow[:, 0]].astype(np.int8)
+    return int(np.abs(np.diff(values)).sum())

@@ -116,3 +116,10 @@ def test_corners_a_proposal_misses_are_dragged_even_when_its_vertices_lie_on_the
     corner = Polyline("boundary", np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]]))
     cut = Polyline("boundary", np.array([[0.0, 0.0], [19.0, 0.0], [20.0, 1.0], [20.0, 20.0]]))
     assert decide(cut, [corner], set(), CONFIG).moved == 1  # the cut corner is dragged out
+
+
+def test_a_ring_with_one_corner_off_costs_one_drag_not_two_for_its_closing_vertex() -> None:
+    ring = CROSSWALK.points.copy()
+    ring[[0, -1]] += [0.0, -0.6]  # the first corner, repeated as the closing vertex
+    decision = decide(Polyline("ped_crossing", ring), [CROSSWALK], set(), CONFIG)
+    assert (decision.kind, decision.moved, decision.removed) == ("fix", 1, 0)

@@ -118,3 +118,14 @@ def test_a_divider_runs_on_to_the_edge_of_what_was_seen_but_not_into_a_crossing(
     assert east[0][:, 0].min() == pytest.approx(500 + 37, abs=0.3), "not carried into the crossing"
     unchanged = propose_rule_based(rasters, RuleConfig(extend_to_unseen_m=1.0))
     assert max(v.points[:, 0].max() for v in unchanged if v.cls == "divider") < 500 + 49.5
+
+
+def test_a_crossing_runs_from_kerb_to_kerb_past_its_outer_stripes(drawn_site: Path) -> None:
+    # the drawn stripes span y 12.5-27.5 m between curbs at y 12 and 28 m, and x 30-34 m along the road
+    (ring,) = [v.points for v in propose_rule_based(load_site_rasters(drawn_site)) if v.cls == "ped_crossing"]
+    ys, xs = ring[:, 1], ring[:, 0]
+    assert ys.max() == pytest.approx(global_xy(0, 12)[1], abs=0.2)
+    assert ys.min() == pytest.approx(global_xy(0, 28)[1], abs=0.2)
+    assert xs.min() == pytest.approx(530, abs=0.2) and xs.max() == pytest.approx(534, abs=0.2), (
+        "not along the road"
+    )
