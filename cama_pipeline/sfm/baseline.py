@@ -37,9 +37,17 @@ class PoseErrors:
 
 
 def incremental_model(
-    database: Path, image_dir: Path, image_names: list[str], *, num_threads: int = 1
+    database: Path,
+    image_dir: Path,
+    image_names: list[str],
+    *,
+    num_threads: int = 1,
+    max_seconds: int | None = None,
 ) -> pycolmap.Reconstruction | None:
-    """The largest model of incremental mapping over `image_names` (a copy of the database is used)."""
+    """The largest model of incremental mapping over `image_names` (a copy of the database is used);
+    with `max_seconds` COLMAP stops mapping after that long and the model is what it had registered."""
+    if max_seconds is not None and max_seconds < 1:
+        raise ValueError(f"incremental_model: max_seconds must be >= 1, got {max_seconds}")
     with tempfile.TemporaryDirectory(prefix="cama-incremental-") as scratch:
         copy = Path(scratch) / "database.db"
         shutil.copyfile(database, copy)
@@ -47,6 +55,7 @@ def incremental_model(
         options.image_names = list(image_names)
         options.num_threads = num_threads
         options.random_seed = 0
+        options.max_runtime_seconds = max_seconds if max_seconds is not None else -1
         models = pycolmap.incremental_mapping(copy, image_dir, Path(scratch) / "out", options=options)
     if not models:
         logger.warning("incremental mapping registered no model")

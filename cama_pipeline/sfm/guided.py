@@ -21,7 +21,7 @@ from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
 from cama_pipeline.sfm.iterative import iterative_bundle_adjustment, single_pass
 from cama_pipeline.sfm.model import GuidedModel, build_model, clip_label, matrix_from_rigid
-from cama_pipeline.sfm.triangulate import triangulate_all
+from cama_pipeline.sfm.triangulate import SeedPoints, seed_points, triangulate_all
 
 logger = logging.getLogger(__name__)
 Progress = Callable[[str, int, int], None]
@@ -91,12 +91,15 @@ def reconstruct_views(
     *,
     progress: Progress | None = None,
     odometry: Mapping[str, np.ndarray] | None = None,
+    seeds: Sequence[SeedPoints] = (),
 ) -> GuidedResult:
     """Guided SfM of these images (names as in the COLMAP database at `database_path`, poses and
     calibration from the views) from the verified matches in the database; point colours from `image_dir`.
 
     Any subset of a site's views works, with any initial poses. With `config.anchor_gauge` the result is
-    moved onto the `odometry` world_from_ego poses by image name (default: the views' own). Raises SfmError
+    moved onto the `odometry` world_from_ego poses by image name (default: the views' own). With `seeds`
+    (the merge: points its clips triangulated and refined) those points start the model instead of a
+    triangulation of every match from scratch. Raises SfmError
     naming the clip when it cannot be reconstructed (no matches, too few points or keyframes).
     """
     _check_inputs(views, database_path, image_dir)
@@ -108,7 +111,10 @@ def reconstruct_views(
         model = build_model(views, Path(database_path), Path(work_dir), config)
         seconds["model"] = time.perf_counter() - started
         report("triangulate", 0, 1)
-        triangulate_all(model, config)
+        if seeds:
+            seed_points(model, seeds, config)
+        else:
+            triangulate_all(model, config)
         _check_model(model, views, config, "triangulation")
         seconds["triangulate"] = time.perf_counter() - started - sum(seconds.values())
         refine = iterative_bundle_adjustment if config.iterative else single_pass

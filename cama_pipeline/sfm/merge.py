@@ -46,7 +46,20 @@ class MergeConfig:
     against 146 for two passes to full tolerance (56 solver steps instead of 2 x 101), same errors
     (gauge-free 1.05 cm / 0.036 deg)."""
 
+    seed_from_clips: bool = True
+    """Start the merged model from the clips' refined points (moved by their alignments; tracks then
+    completed and merged across clips through the matches) instead of triangulating every match again.
+    Default site (912 images, 3 clips), same clips, with `num_threads=2`: merge 82 s wall / 75 CPU s
+    against 642 s / 343 CPU s for a fresh triangulation on one thread (which took 440 s, its first BA
+    190 s over 448k observations); errors 6.25 cm / 0.080 deg (gauge-free 0.57 cm / 0.021 deg) against
+    6.35 cm / 0.079 deg (0.59 cm / 0.021 deg)."""
+    num_threads: int = 2
+    """Solver threads of the merged BA: it runs alone once the clips are done (COLMAP uses one thread
+    below 50k residuals whatever this says)."""
+
     def __post_init__(self) -> None:
+        if self.num_threads < 1:
+            raise ValueError(f"MergeConfig.num_threads must be >= 1, got {self.num_threads}")
         if self.global_max_iterations < 1:
             raise ValueError(
                 f"MergeConfig.global_max_iterations must be >= 1, got {self.global_max_iterations}"

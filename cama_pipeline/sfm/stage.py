@@ -46,6 +46,7 @@ from cama_pipeline.sfm.merge import (
     cross_clip_matches,
     merge_groups,
 )
+from cama_pipeline.sfm.triangulate import model_seeds
 from cama_pipeline.site.workspace import (
     default_workspace,
     file_stats,
@@ -227,8 +228,14 @@ def merge_site(
         config,
         max_iterations=min(config.max_iterations, merge_config.global_max_iterations),
         ba_function_tolerance=max(config.ba_function_tolerance, merge_config.global_function_tolerance),
+        num_threads=merge_config.num_threads,
     )
     odometry = {view.name: view.world_from_ego for task in tasks for view in task.views}
+    seeds = (
+        [model_seeds(m.reconstruction, a.world_from_clip) for m, a in zip(models, alignments, strict=True)]
+        if merge_config.seed_from_clips
+        else []
+    )
     result = reconstruct_views(
         union,
         database,
@@ -236,6 +243,7 @@ def merge_site(
         merged_config,
         progress=_phase_reporter(progress, "merge"),
         odometry=odometry,
+        seeds=seeds,
     )
     merge = {"groups": merge_groups(alignments), "alignments": {a.scene: a.to_json() for a in alignments}}
     return result, union, merge

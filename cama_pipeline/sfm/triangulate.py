@@ -1,7 +1,10 @@
-"""Points from known poses: triangulate every verified match, retriangulate, and filter points, through
-COLMAP's incremental mapper on the model's working database (no incremental registration)."""
+"""Points from known poses: triangulate every verified match (or start from points already known, such as
+the merged clips'), retriangulate, and filter points, through COLMAP's incremental mapper on the model's
+working database (no incremental registration)."""
 
 import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pycolmap
@@ -31,6 +34,51 @@ def triangulate_all(model: GuidedModel, config: SfmConfig) -> int:
         model.mapper.triangulate_image(options, image_id)
     model.mapper.complete_and_merge_tracks(options)
     return int(model.reconstruction.compute_num_observations() - before)
+
+
+@dataclass(frozen=True, eq=False)
+class SeedPoints:
+    """Points known before triangulation (a refined clip's, moved into the merged frame)."""
+
+    xyz: np.ndarray
+    """(N, 3) positions, global metres."""
+    tracks: tuple[np.ndarray, ...]
+    """Per point, (L, 2) int (image id, keypoint index) observations; image ids are the site database's."""
+    colors: np.ndarray
+    """(N, 3) uint8 RGB."""
+
+
+def seed_points(model: GuidedModel, seeds: Sequence[SeedPoints], config: SfmConfig) -> int:
+    """Add known points, keeping their observations in registered images (points left with fewer than two
+    are skipped), then complete and merge tracks across the seeds through the matches; returns the
+    observations added. Replaces `triangulate_all` when the points were triangulated and refined before."""
+    manager, reconstruction = model.mapper.observation_manager, model.reconstruction
+    registered = {int(i) for i in reconstruction.reg_image_ids()}
+    before = reconstruction.compute_num_observations()
+    for seed in seeds:
+        for xyz, observations, color in zip(seed.xyz, seed.tracks, seed.colors, strict=True):
+            kept = [(int(i), int(k)) for i, k in observations if int(i) in registered]
+            if len(kept) < 2:
+                continue
+            track = pycolmap.Track()
+            for image_id, keypoint in kept:
+                track.add_element(image_id, keypoint)
+            manager.add_point3D(xyz, track, color)
+    model.mapper.complete_and_merge_tracks(triangulator_options(config))
+    return int(reconstruction.compute_num_observations() - before)
+
+
+def model_seeds(reconstruction: pycolmap.Reconstruction, world_from_model: np.ndarray) -> SeedPoints:
+    """A model's points and tracks as seeds, moved by a (4, 4) similarity."""
+    points = list(reconstruction.points3D.values())
+    xyz = np.array([p.xyz for p in points]).reshape(-1, 3)
+    tracks = tuple(
+        np.array([(e.image_id, e.point2D_idx) for e in p.track.elements], dtype=np.int64).reshape(-1, 2)
+        for p in points
+    )
+    colors = np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)
+    moved = xyz @ world_from_model[:3, :3].T + world_from_model[:3, 3]
+    return SeedPoints(moved, tracks, colors)
 
 
 def retriangulate(model: GuidedModel, config: SfmConfig) -> int:
