@@ -15,9 +15,10 @@
    vectors cut to the observed cells (nobody can draw road that no camera saw).
 
 Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-count map) go to
-bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json.
+bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
 
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|rule]
+       [--out bench/results/end_to_end.json]
 """
 
 import argparse
@@ -65,7 +66,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-PLOTS = RESULTS / "end_to_end"
 logger = logging.getLogger("bench.end_to_end")
 
 
@@ -236,20 +236,20 @@ def cropped(image: np.ndarray) -> np.ndarray:
     return image[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1]
 
 
-def raster_plot(name: str, image: np.ndarray, title: str, label: str, **style: Any) -> str:
-    """One raster (cropped to its finite cells) with a colour bar, saved under PLOTS; its file name."""
+def raster_plot(plots_dir: Path, name: str, image: np.ndarray, title: str, label: str, **style: Any) -> str:
+    """One raster (cropped to its finite cells) with a colour bar, saved in `plots_dir`; its file name."""
     fig, ax = plt.subplots(figsize=(6, 5))
     shown = ax.imshow(cropped(image), **style)
     fig.colorbar(shown, ax=ax, label=label)
     ax.set_title(title)
     ax.set_axis_off()
     fig.tight_layout()
-    fig.savefig(PLOTS / name, dpi=110)
+    fig.savefig(plots_dir / name, dpi=110)
     return name
 
 
-def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) -> list[str]:
-    PLOTS.mkdir(parents=True, exist_ok=True)
+def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path, plots_dir: Path) -> list[str]:
+    plots_dir.mkdir(parents=True, exist_ok=True)
     written = []
     stages = dict(figures["stage_seconds"])
     for stage, seconds in figures["stage_reports"].items():  # a skipped stage: the run that made its outputs
@@ -260,7 +260,7 @@ def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) 
     ax.set_ylabel("seconds (stage reports where skipped)")
     ax.set_title("Time per stage")
     fig.tight_layout()
-    fig.savefig(PLOTS / "stage_seconds.png", dpi=110)
+    fig.savefig(plots_dir / "stage_seconds.png", dpi=110)
     written.append("stage_seconds.png")
     sre = figures["sre"]
     names = list(sre)
@@ -272,10 +272,11 @@ def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) 
     for ax in axes:
         ax.tick_params(axis="x", rotation=20)
     fig.tight_layout()
-    fig.savefig(PLOTS / "sre_f1.png", dpi=110)
+    fig.savefig(plots_dir / "sre_f1.png", dpi=110)
     written.append("sre_f1.png")
     written.append(
         raster_plot(
+            plots_dir,
             "elevation_error.png",
             error_map * 100,
             "Elevation error on road cells",
@@ -288,6 +289,7 @@ def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path) 
     counts = cv2.imread(str(rasters_folder / "observation_count.png"), cv2.IMREAD_UNCHANGED).astype(float)
     written.append(
         raster_plot(
+            plots_dir,
             "observation_count.png",
             np.where(counts > 0, counts, np.nan),
             "Observation count",
@@ -305,6 +307,9 @@ def main() -> None:
     parser.add_argument("--site-id", default="site-001")
     parser.add_argument("--proposer", choices=("learned", "rule"), default="learned")
     parser.add_argument("--max-features", type=int, default=None)
+    parser.add_argument(
+        "--out", type=Path, default=RESULTS / "end_to_end.json", help="figures JSON (plots beside)"
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
@@ -346,16 +351,18 @@ def main() -> None:
         },
         set(sfm_poses),
     )
-    figures["plots"] = plots(figures, error_map, rasters)
+    plots_dir = args.out.with_suffix("")
+    figures["plots"] = plots(figures, error_map, rasters, plots_dir)
     figures["command"] = "python bench/end_to_end.py " + " ".join(sys.argv[1:])
     figures["machine"] = {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")}
-    (RESULTS / "end_to_end.json").write_text(json.dumps(figures, indent=1, default=float) + "\n")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(figures, indent=1, default=float) + "\n")
     print(
         json.dumps(
             {k: figures[k] for k in ("stage_seconds", "poses", "elevation", "sre")}, indent=1, default=float
         )
     )
-    print(f"wrote {RESULTS / 'end_to_end.json'} and {PLOTS}/")
+    print(f"wrote {args.out} and {plots_dir}/")
 
 
 if __name__ == "__main__":
