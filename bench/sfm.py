@@ -119,12 +119,20 @@ def gauge_free_poses(world_from_cam: dict[str, np.ndarray], truth: dict[str, np.
 
 
 def run_incremental(
-    database: Path, image_dir: Path, views: list[CameraView], truth: dict[str, Any], timeout_s: int | None
+    database: Path,
+    image_dir: Path,
+    views: list[CameraView],
+    truth: dict[str, Any],
+    timeout_s: int | None,
+    threads: int,
 ) -> dict:
-    """Row (a); with `timeout_s` COLMAP stops mapping after that long and the row says it did not finish
-    (its time is then a lower bound, its errors and registered ratio those of the partial model)."""
+    """Row (a) on `threads` threads (as many as (e) has workers); with `timeout_s` COLMAP stops mapping
+    after that long and the row says it did not finish (its time is then a lower bound, its errors and
+    registered ratio those of the partial model)."""
     started, cpu = time.perf_counter(), cpu_seconds()
-    model = incremental_model(database, image_dir, [v.name for v in views], max_seconds=timeout_s)
+    model = incremental_model(
+        database, image_dir, [v.name for v in views], num_threads=threads, max_seconds=timeout_s
+    )
     seconds, cpu = time.perf_counter() - started, round(cpu_seconds() - cpu, 1)
     finished = timeout_s is None or seconds < timeout_s
     status = {"finished": finished, "timeout_s": timeout_s}
@@ -243,8 +251,11 @@ def guarded(name: str, measure: Callable[[], dict[str, Any]]) -> dict[str, Any]:
         return {"error": f"{type(err).__name__}: {err}"}
 
 
-def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], list[CameraView], dict]:
-    """Every method's row on the site (see the module docstring)."""
+def measure_all(
+    args: argparse.Namespace, save: Callable[[dict[str, dict[str, Any]], list[CameraView], dict], None]
+) -> None:
+    """Every asked method's row on the site (see the module docstring), in the order of `args.methods`;
+    `save` gets the rows so far after each method (a long run killed late keeps what it measured)."""
     site_database, manifest, views = site_inputs(args.site, args.scenes)
     truth = true_world_from_cam(args.site, views)
     image_dir = args.site / "nuscenes"
@@ -256,7 +267,7 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
         database = copy_database(site_database, scratch / "database.db")
         methods: dict[str, Callable[[], dict[str, Any]]] = {
             "a_incremental": lambda: run_incremental(
-                database, image_dir, views, truth, args.incremental_timeout_s
+                database, image_dir, views, truth, args.incremental_timeout_s, args.workers
             ),
             "b_plain": lambda: run_guided("plain", database, image_dir, views, truth),
             "c_rigid": lambda: run_guided("rigid", database, image_dir, views, truth),
@@ -284,10 +295,11 @@ def measure_all(args: argparse.Namespace) -> tuple[dict[str, dict[str, Any]], li
                 MergeConfig(global_max_iterations=2, global_function_tolerance=0.0),
             ),
         }
-        for key, measure in methods.items():
-            if key[0] in args.methods:
-                rows[key] = guarded(key, measure)
-    return rows, views, manifest
+        save(rows, views, manifest)
+        for letter in dict.fromkeys(args.methods):
+            for key in (k for k in methods if k[0] == letter):
+                rows[key] = guarded(key, methods[key])
+                save(rows, views, manifest)
 
 
 def _ratio(numerator: float | None, denominator: float | None) -> float | None:
@@ -342,7 +354,7 @@ def main() -> None:
     parser.add_argument(
         "--methods",
         default="abcdefg",
-        help="Letters of the methods to run (default all; e is always needed).",
+        help="Letters of the methods to run, in this order (default all; e is always needed).",
     )
     parser.add_argument(
         "--incremental-timeout-s",
@@ -355,7 +367,13 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     pycolmap.logging.minloglevel = 2
-    rows, views, manifest = measure_all(args)
+    measure_all(args, lambda rows, views, manifest: save_run(args, rows, views, manifest))
+
+
+def save_run(
+    args: argparse.Namespace, rows: dict[str, dict[str, Any]], views: list[CameraView], manifest: dict
+) -> None:
+    """Print the rows so far and add them as this run into the results file."""
     print_table(rows)
     summary = summarize(rows)
     print(json.dumps(summary))
