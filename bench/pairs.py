@@ -10,13 +10,18 @@ For the keyframe images of each site (after wigo -> keyframes -> sites, run here
              verification of that sample with each matcher ("blas": the default, one matrix product per pair;
              "colmap": COLMAP's CPU matcher, the baseline): seconds per pair (so the estimated total for every pair
              of the strategy, exhaustive included, which is too slow to run whole), CPU seconds per pair (the
-             machine may be shared) and the share of sampled pairs that verify.
+             machine may be shared) and the share of sampled pairs that verify. A site generated without images
+             (`cama synth --no-images`) cannot be matched: its matching time is an ESTIMATE, each strategy's pairs
+             times the CPU seconds per pair of the same strategy measured on a site with images (of this run, or
+             else kept in the output file), marked `"measured": false` with its basis.
 Ratios (HSP / exhaustive pairs and matching time, blas / colmap matching time) come from the same run.
 
 Usage: .venv/bin/python bench/pairs.py [--site data/synthetic/default] [--workspace W] [--sample 150]
 With --workspace, the site's existing wigo -> keyframes -> sites outputs are read (never written) instead of
 being recomputed into a temporary workspace.
-Prints the figures and writes them to bench/results/pairs.json (one entry per site folder given).
+Prints the figures and writes them to bench/results/pairs.json: one entry per site folder given, merged into
+the entries the file already holds for other sites (kept only when they were made with the same pairs config),
+with the command that made each entry under "commands".
 """
 
 import argparse
@@ -56,6 +61,8 @@ from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
 
 RESULTS = Path(__file__).parent / "results"
+STRATEGIES = ("exhaustive", "sequential", "sequential+hsp")
+MATCHERS = ("blas", "colmap")
 STRONG = {"mutual>=0.5": ("min", 0.5), "mutual>=0.3": ("min", 0.3), "max>=0.5": ("max", 0.5)}
 logger = logging.getLogger("bench.pairs")
 
@@ -118,10 +125,42 @@ def time_matching(
     return out
 
 
-def bench_site(site: Path, sample: int, seed: int, sites_from: Path | None) -> dict[str, Any]:
-    """All figures of one generated site (its sites read from `sites_from` when given, else computed)."""
+def has_images(dataset_root: Path, views: list[CameraView]) -> bool:
+    """Whether every view's image file exists (not so on a site generated with `cama synth --no-images`)."""
+    return all((dataset_root / view.name).is_file() for view in views)
+
+
+def measured_reference(sites: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
+    """CPU seconds per pair of each strategy and matcher on the first site entry whose matching was measured."""
+    for site, entries in sites.items():
+        for site_id, report in entries.items():
+            if all("blas" in report[name]["matching"] for name in STRATEGIES):
+                cpu = {
+                    name: {m: report[name]["matching"][m]["cpu_seconds_per_pair"] for m in MATCHERS}
+                    for name in STRATEGIES
+                }
+                return {"source": f"{site} {site_id}", "cpu_seconds_per_pair": cpu}
+    return None
+
+
+def estimated_matching(strategy: str, count: int, reference: dict[str, Any]) -> dict[str, Any]:
+    """The matching entry of a strategy that could not be matched (no images): an estimate, labelled as one."""
+    cpu = reference["cpu_seconds_per_pair"][strategy]
+    return {
+        "measured": False,
+        "estimate": f"NOT MEASURED: {count} pairs x the CPU seconds per pair of {strategy!r} measured on "
+        f"{reference['source']}; the site has no images (larger images or denser features would cost more)",
+        "reference_cpu_seconds_per_pair": cpu,
+    }
+
+
+def bench_site(
+    site: Path, sample: int, seed: int, sites_from: Path | None, reference: dict[str, Any] | None
+) -> dict[str, Any]:
+    """All figures of one generated site (its sites read from `sites_from` when given, else computed); matching
+    is estimated from `reference` (see `measured_reference`) when the site has no images."""
     dataset_root = site / "nuscenes"
-    dataset = load_dataset(dataset_root)
+    dataset = load_dataset(dataset_root, check_files=False)
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="cama-bench-pairs-") as tmp:
         workspace = Path(tmp)
@@ -133,20 +172,40 @@ def bench_site(site: Path, sample: int, seed: int, sites_from: Path | None) -> d
         for entry in read_sites_index(source / "sites" / "index.json")["sites"]:
             site_id = entry["site_id"]
             views = site_views(dataset, read_site_manifest(source / "sites" / site_id / "manifest.json"))
-            out[site_id] = bench_views(dataset, site, views, workspace / site_id, sample, seed)
+            images = has_images(dataset_root, views)
+            if not images and reference is None:
+                raise SystemExit(
+                    f"{site} has no images and no measured site gives matching costs: bench a site with images "
+                    "first (earlier in --site, or kept in --output)"
+                )
+            logger.info("%s %s: %d images, matching %s", site, site_id, len(views), images or "estimated")
+            out[site_id] = bench_views(
+                dataset, site, views, workspace / site_id, sample, seed, None if images else reference
+            )
     return out
 
 
 def bench_views(
-    dataset: Any, site: Path, views: list[CameraView], folder: Path, sample: int, seed: int
+    dataset: Any,
+    site: Path,
+    views: list[CameraView],
+    folder: Path,
+    sample: int,
+    seed: int,
+    reference: dict[str, Any] | None,
 ) -> dict[str, Any]:
-    """Pairs, recall and matching cost of each strategy on one site's keyframe images."""
+    """Pairs, recall and matching cost of each strategy on one site's keyframe images (matching timed on a
+    sample, or estimated from `reference` when given: the site has no images)."""
     config = PairsConfig()
     started = time.perf_counter()
     chosen, funnel = select_pairs(views, config)
     selection_s = time.perf_counter() - started
     started = time.perf_counter()
-    strong = strong_sets(covisibility_matrix(true_views(views, site), surface(site), grid=(15, 60)))
+    covisibility = covisibility_matrix(
+        true_views(views, site), surface(site), grid=(15, 60), show_progress=True
+    )
+    strong = strong_sets(covisibility)
+    del covisibility
     truth_s = time.perf_counter() - started
     n = len(views)
     exhaustive_count = n * (n - 1) // 2
@@ -156,12 +215,25 @@ def bench_views(
         "sequential+hsp": set(chosen),
     }
     rng = random.Random(seed)
-    report: dict[str, Any] = {"images": n, "selection_seconds": selection_s, "truth_seconds": truth_s}
+    report: dict[str, Any] = {
+        "images": n,
+        "images_rendered": reference is None,
+        "selection_seconds": selection_s,
+        "truth_seconds": truth_s,
+    }
     report["strong_pairs"] = {name: len(pairs) for name, pairs in strong.items()}
     report["hsp_funnel"] = funnel
     for name, pairs in strategies.items():
         count = exhaustive_count if pairs is None else len(pairs)
         recall = {k: 1.0 if pairs is None else len(s & pairs) / max(len(s), 1) for k, s in strong.items()}
+        report[name] = {"pairs": count, "share_of_exhaustive": count / exhaustive_count, "recall": recall}
+        if reference is not None:
+            report[name]["matching"] = estimated_matching(name, count, reference)
+            report[name]["estimated_matching_seconds"] = {
+                m: report[name]["matching"]["reference_cpu_seconds_per_pair"][m] * count for m in MATCHERS
+            }
+            logger.info("%s: %d pairs, recall %s, matching estimated", name, count, recall)
+            continue
         if pairs is None:
             drawn: set[Pair] = set()
             while len(drawn) < min(sample, exhaustive_count):
@@ -172,14 +244,9 @@ def bench_views(
             picked = sorted(rng.sample(sorted(pairs), min(sample, len(pairs))))
         (folder / name).mkdir(parents=True, exist_ok=True)
         timing = time_matching(dataset, views, picked, folder / name, FeaturesConfig())
-        report[name] = {
-            "pairs": count,
-            "share_of_exhaustive": count / exhaustive_count,
-            "recall": recall,
-            "matching": timing,
-            "estimated_matching_seconds": {
-                matcher: timing[matcher]["seconds_per_pair"] * count for matcher in ("blas", "colmap")
-            },
+        report[name]["matching"] = timing
+        report[name]["estimated_matching_seconds"] = {
+            matcher: timing[matcher]["seconds_per_pair"] * count for matcher in MATCHERS
         }
         logger.info("%s: %d pairs, recall %s, matching %s", name, count, recall, timing)
     hsp, full = report["sequential+hsp"], report["exhaustive"]
@@ -187,12 +254,30 @@ def bench_views(
         "pairs_hsp_over_exhaustive": hsp["pairs"] / full["pairs"],
         "matching_time_hsp_over_exhaustive": hsp["estimated_matching_seconds"]["blas"]
         / full["estimated_matching_seconds"]["blas"],
+    }
+    if reference is not None:
+        return report
+    report["ratios"] |= {
         "matching_cpu_blas_over_colmap": hsp["matching"]["blas"]["cpu_seconds_per_pair"]
         / hsp["matching"]["colmap"]["cpu_seconds_per_pair"],
         "matching_wall_blas_over_colmap": hsp["matching"]["blas"]["seconds_per_pair"]
         / hsp["matching"]["colmap"]["seconds_per_pair"],
     }
     return report
+
+
+def previous_results(path: Path, config: dict[str, Any]) -> dict[str, Any]:
+    """The output file's site entries and their commands, to merge into; none when absent or made with another
+    config (its figures would not compare)."""
+    empty: dict[str, Any] = {"sites": {}, "commands": {}}
+    if not path.is_file():
+        return empty
+    previous = json.loads(path.read_text())
+    if previous.get("config") != config:
+        logger.warning("%s was made with another config: its entries are not kept", path)
+        return empty
+    commands = previous.get("commands") or {site: previous.get("command", "") for site in previous["sites"]}
+    return {"sites": previous["sites"], "commands": commands}
 
 
 def main() -> None:
@@ -211,17 +296,20 @@ def main() -> None:
     sites = args.site or [Path("data/synthetic/default")]
     if args.workspace is not None and len(sites) != 1:
         parser.error("--workspace goes with exactly one --site")
-    results: dict[str, Any] = {
-        "command": " ".join([Path(sys.executable).name, *sys.argv]),
-        "config": {"pairs": PairsConfig().__dict__, "sample": args.sample, "strong": STRONG},
+    command = " ".join([Path(sys.executable).name, *sys.argv])
+    config = json.loads(
+        json.dumps({"pairs": PairsConfig().__dict__, "sample": args.sample, "strong": STRONG})
+    )
+    results = previous_results(args.output, config)
+    results |= {
+        "command": command,
+        "config": config,
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
-        "sites": {str(site): bench_site(site, args.sample, args.seed, args.workspace) for site in sites},
     }
-    if not any("large" in str(site) for site in sites):
-        results["large"] = (
-            "not run: the large preset was never generated (about an hour of rendering on 2 cores) and "
-            "`cama synth` cannot write only the tables, CAN and ground truth without rendering images"
-        )
+    for site in sites:
+        reference = measured_reference(results["sites"])
+        results["sites"][str(site)] = bench_site(site, args.sample, args.seed, args.workspace, reference)
+        results["commands"][str(site)] = command
     print(json.dumps(results, indent=2, default=str))
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=2, default=str) + "\n")
