@@ -44,6 +44,9 @@ class RuleConfig:
     """Largest direction change across a joined gap."""
     join_boundary_gap_m: float = 1.5
     """Largest gap joined between boundary pieces (curbs have no dashes; this bridges noise breaks)."""
+    divider_min_radius_m: float = 10.0
+    """Lane lines bend no tighter than this: a vertex whose turn, with its neighbours, has a smaller radius is a
+    kink (a speck of marking label stuck to the line pulls the skeleton aside) and is dropped."""
     extend_to_unseen_m: float = 7.0
     """A divider whose paint stops this close to unobserved cells, over road all the way, runs on to them:
     beyond the last dash the cameras read, a lane line goes on to the edge of what they saw (the dash gap
@@ -130,6 +133,7 @@ def _line_vectors(
         if cls == "boundary" and config.boundary_source == "road_edge":
             points = trim_hooks(points, config.hook_m, config.hook_angle_deg)
         if cls == "divider":
+            points = drop_kinks(points, config.divider_min_radius_m)
             points = extend_to_unseen(points, rasters, config.extend_to_unseen_m)
         line = LineString(points)
         if line.length < config.min_length_m:
@@ -159,6 +163,22 @@ def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> 
     near_off_road = cv2.dilate(off_road, _disk(config.curb_reach_m / resolution_m)) > 0
     rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)
     return rim & near_off_road
+
+
+def drop_kinks(points: np.ndarray, min_radius_m: float) -> np.ndarray:
+    """`points` without the interior vertices that turn tighter than `min_radius_m` (the radius of the circle
+    through a vertex and its neighbours), sharpest first, until none does."""
+    points = np.asarray(points, dtype=np.float64)
+    while len(points) > 2:
+        a, b, c = points[:-2], points[1:-1], points[2:]
+        cross = np.abs((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+        sides = np.linalg.norm(b - a, axis=1) * np.linalg.norm(c - b, axis=1) * np.linalg.norm(c - a, axis=1)
+        radius = np.divide(sides, 2 * cross, out=np.full(len(cross), np.inf), where=cross > 0)
+        k = int(np.argmin(radius))
+        if radius[k] >= min_radius_m:
+            break
+        points = np.delete(points, k + 1, axis=0)
+    return points
 
 
 def trim_hooks(points: np.ndarray, hook_m: float, angle_deg: float) -> np.ndarray:

@@ -10,7 +10,7 @@ from vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 from cama_pipeline.semantics import Semantic
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import load_site_rasters
-from models.vma.rule_based import RuleConfig, propose_rule_based, trim_hooks
+from models.vma.rule_based import RuleConfig, drop_kinks, propose_rule_based, trim_hooks
 
 
 def test_drawn_site_gives_the_drawn_vectors(drawn_site: Path) -> None:
@@ -129,3 +129,11 @@ def test_a_crossing_runs_from_kerb_to_kerb_past_its_outer_stripes(drawn_site: Pa
     assert xs.min() == pytest.approx(530, abs=0.2) and xs.max() == pytest.approx(534, abs=0.2), (
         "not along the road"
     )
+
+
+def test_a_kink_is_dropped_from_a_divider_but_a_gentle_curve_kept() -> None:
+    kinked = np.array([[0.0, 0.0], [5.0, 0.0], [5.8, -0.4], [6.6, -0.4], [7.5, 0.0], [20.0, 0.0]])
+    np.testing.assert_allclose(drop_kinks(kinked, 10.0), kinked[[0, 1, 4, 5]])
+    angles = np.linspace(0.0, 0.6, 6)
+    curve = 30.0 * np.column_stack([np.sin(angles), 1 - np.cos(angles)])  # radius 30 m
+    np.testing.assert_allclose(drop_kinks(curve, 10.0), curve)
