@@ -123,7 +123,11 @@ def _line_vectors(
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_line_m / res))
     closed = remove_small_blobs(closed, round(config.min_blob_m2 / res**2))
     min_pixels = max(2, round(config.min_piece_m / res))
-    paths = [rasters.global_from_pixel(p) for p in skeleton_paths(closed > 0, min_pixels)]
+    pixel_paths = skeleton_paths(closed > 0, min_pixels)
+    if cls == "boundary" and config.boundary_source == "road_edge":
+        road = _road_mask(rasters.semantic, res, config)
+        pixel_paths = [_half_cell_toward(p, road) for p in pixel_paths]
+    paths = [rasters.global_from_pixel(p) for p in pixel_paths]
     joined = join_polylines([(p, 1.0) for p in paths], join_gap_m, config.join_angle_deg)
     paths = [p for p, _ in joined]
     support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
@@ -151,14 +155,32 @@ def _boundary_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig
     return semantic == int(Semantic.CURB)
 
 
+def _road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+    """Road, marking and crosswalk cells (uint8), with small non-road holes in it (label noise) filled."""
+    road = np.isin(semantic, _ROAD_IDS).astype(np.uint8)
+    holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
+    return road | holes
+
+
+def _half_cell_toward(path: np.ndarray, road: np.ndarray) -> np.ndarray:
+    """A path of rim cells (col, row) moved half a cell towards the road cells beside each: onto the edge
+    between the road and its rim rather than the rim cells' centres."""
+    h, w = road.shape
+    cols, rows = path[:, 0].astype(int), path[:, 1].astype(int)
+    pull = np.zeros_like(path)
+    for dc, dr in ((dc, dr) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if (dc, dr) != (0, 0)):
+        c, r = np.clip(cols + dc, 0, w - 1), np.clip(rows + dr, 0, h - 1)
+        pull += road[r, c][:, None] * np.array([dc, dr]) / np.hypot(dc, dr)
+    norms = np.linalg.norm(pull, axis=1, keepdims=True)
+    return path + 0.5 * np.divide(pull, norms, out=np.zeros_like(pull), where=norms > 0)
+
+
 def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
     """Cells just outside the road with observed off-road ground (curb or background) within `curb_reach_m`:
     the road's boundary as a 1-cell band, at the road's sharp edge rather than along the curb label smeared
     over the sidewalk (or missing), bridging the thin unobserved strip a curb's face hides. Where the road
     runs into unobserved cells (a cut-off arm) there is none."""
-    road = np.isin(semantic, _ROAD_IDS).astype(np.uint8)
-    holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
-    road |= holes
+    road = _road_mask(semantic, resolution_m, config)
     off_road = np.isin(semantic, [int(Semantic.CURB), int(Semantic.BACKGROUND)]).astype(np.uint8)
     near_off_road = cv2.dilate(off_road, _disk(config.curb_reach_m / resolution_m)) > 0
     rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)
