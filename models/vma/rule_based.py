@@ -123,19 +123,17 @@ def _line_vectors(
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_line_m / res))
     closed = remove_small_blobs(closed, round(config.min_blob_m2 / res**2))
     min_pixels = max(2, round(config.min_piece_m / res))
-    pixel_paths = skeleton_paths(closed > 0, min_pixels)
-    if cls == "boundary" and config.boundary_source == "road_edge":
-        road = _road_mask(rasters.semantic, res, config)
-        pixel_paths = [_half_cell_toward(p, road) for p in pixel_paths]
-    paths = [rasters.global_from_pixel(p) for p in pixel_paths]
+    paths = [rasters.global_from_pixel(p) for p in skeleton_paths(closed > 0, min_pixels)]
     joined = join_polylines([(p, 1.0) for p in paths], join_gap_m, config.join_angle_deg)
     paths = [p for p, _ in joined]
     support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
+    road = _road_mask(rasters.semantic, res, config)
     out = []
     for path in paths:
         points = np.asarray(LineString(path).simplify(config.simplify_m).coords)
         if cls == "boundary" and config.boundary_source == "road_edge":
             points = trim_hooks(points, config.hook_m, config.hook_angle_deg)
+            points = _half_cell_toward_road(points, rasters, road)
         if cls == "divider":
             points = drop_kinks(points, config.divider_min_radius_m)
             points = extend_to_unseen(points, rasters, config.extend_to_unseen_m)
@@ -162,17 +160,28 @@ def _road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) ->
     return road | holes
 
 
-def _half_cell_toward(path: np.ndarray, road: np.ndarray) -> np.ndarray:
-    """A path of rim cells (col, row) moved half a cell towards the road cells beside each: onto the edge
-    between the road and its rim rather than the rim cells' centres."""
-    h, w = road.shape
-    cols, rows = path[:, 0].astype(int), path[:, 1].astype(int)
-    pull = np.zeros_like(path)
-    for dc, dr in ((dc, dr) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if (dc, dr) != (0, 0)):
-        c, r = np.clip(cols + dc, 0, w - 1), np.clip(rows + dr, 0, h - 1)
-        pull += road[r, c][:, None] * np.array([dc, dr]) / np.hypot(dc, dr)
-    norms = np.linalg.norm(pull, axis=1, keepdims=True)
-    return path + 0.5 * np.divide(pull, norms, out=np.zeros_like(pull), where=norms > 0)
+def _half_cell_toward_road(points: np.ndarray, rasters: SiteRasters, road: np.ndarray) -> np.ndarray:
+    """A polyline along rim cells moved half a cell towards the side the road lies on (most segments' vote):
+    onto the edge between the road and its rim rather than the rim cells' centres."""
+    line = LineString(points)
+    step = np.diff(points, axis=0)
+    lengths = np.linalg.norm(step, axis=1)
+    if line.length == 0 or not (lengths > 0).all():
+        return points
+    left = np.column_stack([-step[:, 1], step[:, 0]]) / lengths[:, None]
+    middles = (points[:-1] + points[1:]) / 2
+    probe = 3 * rasters.resolution_m
+
+    def on_road(xy: np.ndarray) -> np.ndarray:
+        colrow = np.rint(rasters.pixel_from_global(xy)).astype(int)
+        h, w = road.shape
+        return road[np.clip(colrow[:, 1], 0, h - 1), np.clip(colrow[:, 0], 0, w - 1)].astype(int)
+
+    vote = int(np.sum((on_road(middles + probe * left) - on_road(middles - probe * left)) * lengths))
+    if vote == 0:
+        return points
+    moved = line.offset_curve(np.sign(vote) * rasters.resolution_m / 2, join_style="mitre", mitre_limit=2.0)
+    return np.asarray(moved.coords) if isinstance(moved, LineString) and len(moved.coords) >= 2 else points
 
 
 def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
