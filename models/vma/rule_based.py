@@ -1,15 +1,18 @@
 """The rule-based proposer: semantic raster -> class masks -> skeletons -> simplified polylines with confidence.
 
 The cold-start proposer of the paper and the baseline the learned model must beat. Lane markings give
-dividers (double lines closed into one, dashes joined along their direction), curbs give boundaries, and
-crosswalk stripes closed into blocks give `ped_crossing` rectangles. Boundaries come from the curb label's
+dividers (double lines closed into one, dashes joined along their direction, kinks tighter than a lane line
+bends dropped, ends carried on to the edge of what was seen when the road goes on to it), curbs give
+boundaries, and crosswalk stripes closed into blocks give `ped_crossing` rectangles, carried on across the road
+to its edge (crossings run kerb to kerb; their outer stripes stop short). Boundaries come from the curb label's
 skeleton, or (`boundary_source="road_edge"`, for reconstructed rasters) from the edge of the road (road, marking
 or crosswalk cells) where observed off-road ground (curb or background) is near: on reconstructed rasters the
 curb's vertical face smears its label over the sidewalk, leaves it out in places (the road meets the sidewalk
 directly) and hides a thin strip beside it, while the road's edge stays sharp. Where the road runs into
 unobserved cells (the end of what the cameras saw) there is no boundary; the short hook a boundary's skeleton
-takes round that corner is cut off. Confidence is mask support: the share of
-a vector's length with its mask nearby (bridged dash gaps lower it), damped for short vectors.
+takes round that corner is cut off, and the line lies on the edge between the road and its rim cells.
+Confidence is mask support: the share of a vector's length with its mask nearby (bridged dash gaps lower it),
+damped for short vectors.
 """
 
 import logging
