@@ -10,11 +10,13 @@ For the keyframe images of each site (after wigo -> keyframes -> sites, run here
              verification of that sample with each matcher ("blas": the default, one matrix product per pair;
              "colmap": COLMAP's CPU matcher, the baseline): seconds per pair (so the estimated total for every pair
              of the strategy, exhaustive included, which is too slow to run whole), CPU seconds per pair (the
-             machine may be shared) and the share of sampled pairs that verify. A site generated without images
-             (`cama synth --no-images`) cannot be matched: its matching time is an ESTIMATE, each strategy's pairs
-             times the CPU seconds per pair of the same strategy measured on a site with images (of this run, or
-             else kept in the output file), marked `"measured": false` with its basis.
-Ratios (HSP / exhaustive pairs and matching time, blas / colmap matching time) come from the same run.
+             machine may be shared) and the share of sampled pairs that verify; totals for all of a strategy's
+             pairs are `estimated_matching_seconds` (wall) and `estimated_matching_cpu_seconds`. A site generated
+             without images (`cama synth --no-images`) cannot be matched: its matching time is an ESTIMATE,
+             each strategy's pairs times the CPU seconds per pair of the same strategy measured on a site with
+             images (of this run, or else kept in the output file), marked `"measured": false` with its basis,
+             with CPU totals only.
+Ratios (HSP / exhaustive pairs and matching CPU and wall time, blas / colmap matching time) come from the same run.
 
 Usage: .venv/bin/python bench/pairs.py [--site data/synthetic/default] [--workspace W] [--sample 150]
 With --workspace, the site's existing wigo -> keyframes -> sites outputs are read (never written) instead of
@@ -226,44 +228,58 @@ def bench_views(
     for name, pairs in strategies.items():
         count = exhaustive_count if pairs is None else len(pairs)
         recall = {k: 1.0 if pairs is None else len(s & pairs) / max(len(s), 1) for k, s in strong.items()}
-        report[name] = {"pairs": count, "share_of_exhaustive": count / exhaustive_count, "recall": recall}
-        if reference is not None:
-            report[name]["matching"] = estimated_matching(name, count, reference)
-            report[name]["estimated_matching_seconds"] = {
-                m: report[name]["matching"]["reference_cpu_seconds_per_pair"][m] * count for m in MATCHERS
-            }
-            logger.info("%s: %d pairs, recall %s, matching estimated", name, count, recall)
-            continue
-        if pairs is None:
-            drawn: set[Pair] = set()
-            while len(drawn) < min(sample, exhaustive_count):
-                i, j = sorted(rng.sample(range(n), 2))
-                drawn.add((i, j))
-            picked = sorted(drawn)
-        else:
-            picked = sorted(rng.sample(sorted(pairs), min(sample, len(pairs))))
-        (folder / name).mkdir(parents=True, exist_ok=True)
-        timing = time_matching(dataset, views, picked, folder / name, FeaturesConfig())
-        report[name]["matching"] = timing
-        report[name]["estimated_matching_seconds"] = {
-            matcher: timing[matcher]["seconds_per_pair"] * count for matcher in MATCHERS
+        entry: dict[str, Any] = {
+            "pairs": count,
+            "share_of_exhaustive": count / exhaustive_count,
+            "recall": recall,
         }
-        logger.info("%s: %d pairs, recall %s, matching %s", name, count, recall, timing)
+        if reference is None:
+            (folder / name).mkdir(parents=True, exist_ok=True)
+            picked = sample_pairs(pairs, n, sample, rng)
+            entry["matching"] = time_matching(dataset, views, picked, folder / name, FeaturesConfig())
+            cpu = {m: entry["matching"][m]["cpu_seconds_per_pair"] for m in MATCHERS}
+            entry["estimated_matching_seconds"] = {
+                m: entry["matching"][m]["seconds_per_pair"] * count for m in MATCHERS
+            }
+        else:
+            entry["matching"] = estimated_matching(name, count, reference)
+            cpu = entry["matching"]["reference_cpu_seconds_per_pair"]
+        entry["estimated_matching_cpu_seconds"] = {m: cpu[m] * count for m in MATCHERS}
+        report[name] = entry
+        logger.info("%s: %d pairs, recall %s, matching %s", name, count, recall, entry["matching"])
+    report["ratios"] = ratios(report, measured=reference is None)
+    return report
+
+
+def sample_pairs(pairs: set[Pair] | None, n: int, sample: int, rng: random.Random) -> list[Pair]:
+    """Up to `sample` random pairs of a strategy (None: exhaustive, drawn without listing every pair)."""
+    if pairs is not None:
+        return sorted(rng.sample(sorted(pairs), min(sample, len(pairs))))
+    drawn: set[Pair] = set()
+    while len(drawn) < min(sample, n * (n - 1) // 2):
+        i, j = sorted(rng.sample(range(n), 2))
+        drawn.add((i, j))
+    return sorted(drawn)
+
+
+def ratios(report: dict[str, Any], *, measured: bool) -> dict[str, float]:
+    """HSP over exhaustive (pairs, matching CPU, and matching wall time when measured) and blas over colmap
+    (when measured)."""
     hsp, full = report["sequential+hsp"], report["exhaustive"]
-    report["ratios"] = {
+    out = {
         "pairs_hsp_over_exhaustive": hsp["pairs"] / full["pairs"],
+        "matching_cpu_hsp_over_exhaustive": hsp["estimated_matching_cpu_seconds"]["blas"]
+        / full["estimated_matching_cpu_seconds"]["blas"],
+    }
+    if not measured:
+        return out
+    blas, colmap = hsp["matching"]["blas"], hsp["matching"]["colmap"]
+    return out | {
         "matching_time_hsp_over_exhaustive": hsp["estimated_matching_seconds"]["blas"]
         / full["estimated_matching_seconds"]["blas"],
+        "matching_cpu_blas_over_colmap": blas["cpu_seconds_per_pair"] / colmap["cpu_seconds_per_pair"],
+        "matching_wall_blas_over_colmap": blas["seconds_per_pair"] / colmap["seconds_per_pair"],
     }
-    if reference is not None:
-        return report
-    report["ratios"] |= {
-        "matching_cpu_blas_over_colmap": hsp["matching"]["blas"]["cpu_seconds_per_pair"]
-        / hsp["matching"]["colmap"]["cpu_seconds_per_pair"],
-        "matching_wall_blas_over_colmap": hsp["matching"]["blas"]["seconds_per_pair"]
-        / hsp["matching"]["colmap"]["seconds_per_pair"],
-    }
-    return report
 
 
 def previous_results(path: Path, config: dict[str, Any]) -> dict[str, Any]:
