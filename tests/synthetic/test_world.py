@@ -7,6 +7,7 @@ import torch
 from cama_pipeline.synthetic.config import LayoutConfig, SynthConfig, TerrainConfig, preset
 from cama_pipeline.synthetic.layout import build_layout
 from cama_pipeline.synthetic.rig import build_rig
+from cama_pipeline.synthetic.routes import plan_clips
 from cama_pipeline.synthetic.terrain import Terrain
 
 
@@ -31,6 +32,19 @@ def test_every_preset_builds_a_full_site(name):
     assert heading == pytest.approx(cfg.layout.curve_angle_deg, abs=1.0), "the main road curves"
     assert 2 <= cfg.layout.main_lanes_per_direction <= 3
     assert layout.sidewalk.area > 0 and 0.10 <= cfg.layout.curb_height_m <= 0.15
+
+
+@pytest.mark.parametrize("name", ["tiny", "default", "large"])
+def test_every_preset_plans_its_clips_within_their_routes(name):
+    cfg = preset(name)
+    layout = build_layout(cfg.layout)
+    plans = plan_clips(cfg, layout, Terrain(cfg.terrain), np.random.default_rng(0))
+    assert [plan.kind for plan in plans].count("moving") == len(cfg.clips.routes)
+    moving = [plan for plan in plans if plan.kind == "moving"]
+    travelled = [
+        np.linalg.norm(np.diff(p.motion.global_from_ego_t[:, :2], axis=0), axis=1).sum() for p in moving
+    ]
+    assert min(travelled) > 0.8 * cfg.clips.speed_mps * cfg.clips.moving_duration_s
 
 
 def test_terrain_rises_metres_with_grades_up_to_about_8_percent():
