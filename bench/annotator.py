@@ -6,8 +6,12 @@ backend (fresh SQLite database): it accepts proposals that match the ground trut
 proposal covered. A second, empty copy of the site is drawn from scratch. Every action is priced with the
 keystroke-level model (`app/simulation/costs.py`); both workflows pay the same road-scanning time.
 
+With `--rasters FOLDER` (a reconstruction's BEV rasters) the truth is cut to the cells they observed, as
+`bench/end_to_end.py` does; without it the whole generated truth is the target.
+
 Usage: .venv/bin/python bench/annotator.py [--site data/synthetic/default] [--proposals FILE ...]
-Prints the figures and writes bench/results/annotator.json.
+       [--rasters FOLDER] [--out bench/results/annotator.json]
+Prints the figures and writes them to --out.
 """
 
 import argparse
@@ -20,13 +24,19 @@ from pathlib import Path
 from typing import Any
 
 from app.simulation.annotator import correct_proposals, draw_from_scratch
-from app.simulation.workbench import load_proposals, local_backend, register_synthetic_site, true_polylines
+from app.simulation.workbench import (
+    load_proposals,
+    local_backend,
+    observed_true_polylines,
+    register_synthetic_site,
+    true_polylines,
+)
 
 RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
 
-def run(site: Path, proposal_files: list[Path]) -> dict[str, Any]:
-    truths = true_polylines(site)
+def run(site: Path, proposal_files: list[Path], rasters: Path | None = None) -> dict[str, Any]:
+    truths = observed_true_polylines(site, rasters) if rasters else true_polylines(site)
     with local_backend() as (admin, annotator):
         started = time.perf_counter()
         scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)
@@ -42,7 +52,8 @@ def run(site: Path, proposal_files: list[Path]) -> dict[str, Any]:
                 "wall_s": time.perf_counter() - started,
                 "speed_up_vs_scratch": scratch.total_s / log.total_s if log.total_s else None,
             }
-    return {"site": str(site), "true_elements": len(truths), "results": out}
+    truth = f"cut to the cells observed in {rasters}" if rasters else "all"
+    return {"site": str(site), "truth": truth, "true_elements": len(truths), "results": out}
 
 
 def main() -> None:
@@ -51,14 +62,18 @@ def main() -> None:
     parser.add_argument(
         "--proposals", type=Path, nargs="*", default=None, help="Default: <site>/workspace/proposals.json"
     )
+    parser.add_argument(
+        "--rasters", type=Path, default=None, help="cut the truth to these rasters' observed cells"
+    )
+    parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     files = args.proposals if args.proposals else [args.site / "workspace" / "proposals.json"]
-    figures = run(args.site, files)
+    figures = run(args.site, files, args.rasters)
     figures["command"] = "python bench/annotator.py " + " ".join(sys.argv[1:])
     figures["machine"] = {"python": platform.python_version()}
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(figures, indent=1))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(figures, indent=1))
     for name, result in figures["results"].items():
         speed = result.get("speed_up_vs_scratch")
         print(
@@ -66,7 +81,7 @@ def main() -> None:
             + (f", {speed:.2f}x faster than drawing" if speed else "")
             + f"  counts {dict(result['counts'])}"
         )
-    print(f"wrote {RESULTS}")
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

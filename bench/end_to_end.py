@@ -18,7 +18,7 @@ Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-cou
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
 
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|rule]
-       [--out bench/results/end_to_end.json]
+       [--out bench/results/end_to_end.json] [--measure-only]
 """
 
 import argparse
@@ -39,13 +39,12 @@ from surface import load_bev, truth_at  # bench/surface.py: this script's folder
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
 from app.simulation.annotator import correct_proposals, draw_from_scratch
-from app.simulation.plan import Polyline
 from app.simulation.workbench import (
     kept_map,
     load_proposals,
     local_backend,
+    observed_true_polylines,
     register_synthetic_site,
-    true_polylines,
 )
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
@@ -190,12 +189,7 @@ def simulated_pass(
 ) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     """The scripted annotator on the proposals and on an empty site, both working towards the observed parts of
     the true vectors; the corrected map (global 2D)."""
-    mask = observed_mask(rasters_folder)
-    truths = [
-        Polyline(t.cls, part)
-        for t in true_polylines(site)
-        for part in observed_parts(t.points, t.closed, mask)
-    ]
+    truths = observed_true_polylines(site, rasters_folder)
     with local_backend() as (admin, annotator):
         corrected_site = register_synthetic_site(admin, site, "corrected")
         load_proposals(admin, corrected_site, proposals)
@@ -310,17 +304,24 @@ def main() -> None:
     parser.add_argument(
         "--out", type=Path, default=RESULTS / "end_to_end.json", help="figures JSON (plots beside)"
     )
+    parser.add_argument(
+        "--measure-only",
+        action="store_true",
+        help="measure the workspace as it is, without running the pipeline (its proposals must exist)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
     workspace = site / "workspace"
-    seen: list[str] = []
-    result = run_pipeline(
-        site / "nuscenes",
-        workspace,
-        PipelineConfig(proposer=args.proposer, max_features=args.max_features),
-        on_stage=lambda s: (seen.append(s), print(f"== {s}", flush=True)),
-    )
+    stage_seconds: dict[str, float] = {}
+    if not args.measure_only:
+        result = run_pipeline(
+            site / "nuscenes",
+            workspace,
+            PipelineConfig(proposer=args.proposer, max_features=args.max_features),
+            on_stage=lambda s: print(f"== {s}", flush=True),
+        )
+        stage_seconds = {k: round(v, 1) for k, v in result.seconds.items()}
     dataset = load_dataset(site / "nuscenes")
     views = site_views(dataset, read_site_manifest(site_manifest_path(workspace, site_id)))
     rasters = surface_rasters(workspace, site_id)
@@ -329,7 +330,7 @@ def main() -> None:
         "site": str(site),
         "site_id": site_id,
         "proposer": args.proposer,
-        "stage_seconds": {k: round(v, 1) for k, v in result.seconds.items()},
+        "stage_seconds": stage_seconds,
         "stage_reports": stage_reports(workspace, site_id),
         "poses": pose_figures(site, views, workspace, site_id),
     }

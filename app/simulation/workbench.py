@@ -15,6 +15,8 @@ from app.backend.main import create_app
 from app.simulation.annotator import ApiSession
 from app.simulation.plan import Polyline
 from cama_pipeline.evaluate.inputs import load_vector_map
+from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from models.vma.rasters import load_site_rasters
 
 _PASSWORD = "simulated-annotator"
 
@@ -38,6 +40,18 @@ def true_polylines(site: Path) -> list[Polyline]:
     """The generator's true vectors of a synthetic site (global metres, 2D)."""
     elements = load_vector_map(Path(site) / "ground_truth" / "vector_map.json")
     return [Polyline(e.cls, np.asarray(e.points)[:, :2]) for e in elements]
+
+
+def observed_true_polylines(site: Path, rasters_folder: Path) -> list[Polyline]:
+    """The site's true vectors cut to the cells a reconstruction's rasters observed (nobody draws road that no
+    camera saw)."""
+    rasters = load_site_rasters(rasters_folder)
+    mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
+    return [
+        Polyline(t.cls, part)
+        for t in true_polylines(site)
+        for part in observed_parts(t.points, t.closed, mask)
+    ]
 
 
 def register_synthetic_site(admin: ApiSession, site: Path, name: str) -> int:
