@@ -228,9 +228,9 @@ def _trim_tail(points: np.ndarray, hook_m: float, cos_limit: float) -> np.ndarra
     total = along[-1]
     if total < 3 * hook_m:
         return points
-    for k in range(len(points) - 2, 0, -1):  # candidate turn vertices, nearest the end first
+    for k in range(1, len(points) - 1):  # candidate turn vertices, farthest from the end first
         if total - along[k] > hook_m:
-            break
+            continue
         before = points[k] - points[int(np.searchsorted(along, along[k] - 2 * hook_m, side="right")) - 1]
         after = points[-1] - points[k]
         norms = float(np.linalg.norm(before) * np.linalg.norm(after))

@@ -103,6 +103,8 @@ def test_road_edge_boundaries_run_on_where_the_road_meets_the_sidewalk_without_a
 def test_a_boundary_loses_the_hook_round_the_corner_into_unseen_cells() -> None:
     line = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 0.8]])
     np.testing.assert_allclose(trim_hooks(line, 1.5, 45.0), line[:2])
+    rounded = np.array([[0.0, 0.0], [10.0, 0.0], [10.3, 0.3], [10.3, 0.6]])  # a hook of two segments
+    np.testing.assert_allclose(trim_hooks(rounded, 1.5, 45.0), rounded[:2])
     bend = np.array([[0.0, 0.0], [10.0, 0.0], [14.0, 4.0]])  # a real turn, longer than a hook
     np.testing.assert_allclose(trim_hooks(bend, 1.5, 45.0), bend)
 
