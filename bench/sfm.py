@@ -21,7 +21,9 @@ measured, i.e. the model's shape without the global placement it inherits from o
 and CPU seconds (this process and its workers): on a shared machine compare CPU seconds.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
-       [--workers 2] [--methods abcdefg]
+       [--workers 2] [--methods abcdefg] [--incremental-timeout-s 900]
+(a) runs on as many threads as (e) has workers; with --incremental-timeout-s COLMAP stops it after that
+long, the row says "did not finish" (figures of its partial model) and the (e)/(a) ratio is a lower bound.
 The site's workspace must hold `cama sites` / `cama pairs` output; missing features are computed first.
 Adds the run to bench/results/sfm.json ({"runs": {"<preset>:<scenes>": {...}}}, each with its command line,
 site and scenes), so several sites measured by separate commands add up in one file.

@@ -9,6 +9,7 @@ up to the maximum number of iterations. Frames that BA moved implausibly far are
 
 import logging
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from cama_pipeline.sfm.bundle import bundle_adjust, implausible_frames
@@ -54,6 +55,13 @@ def single_pass(model: GuidedModel, config: SfmConfig, progress: Progress) -> di
     return {"iterations": [report], "stop": "single_pass"}
 
 
+def _pass_config(config: SfmConfig, iteration: int) -> SfmConfig:
+    """The config of one iteration's BA: the first may be capped (`first_ba_max_iterations`)."""
+    if iteration > 1 or config.first_ba_max_iterations is None:
+        return config
+    return replace(config, ba_max_iterations=config.first_ba_max_iterations)
+
+
 def iterative_bundle_adjustment(model: GuidedModel, config: SfmConfig, progress: Progress) -> dict[str, Any]:
     """Algorithm 1 (see the module docstring); one report entry per iteration and why it stopped."""
     iterations: list[dict[str, Any]] = []
@@ -62,7 +70,7 @@ def iterative_bundle_adjustment(model: GuidedModel, config: SfmConfig, progress:
         progress("iterative BA", i - 1, config.max_iterations)
         retriangulated = retriangulate(model, config)
         observations = int(model.reconstruction.compute_num_observations())
-        report = _adjust(model, config)
+        report = _adjust(model, _pass_config(config, i))
         post_ba = retriangulate(model, config)
         filtered = filter_points(model, config)
         ratio = (post_ba + filtered) / max(observations, 1)

@@ -24,6 +24,7 @@ def test_presets_are_the_benchmark_variants() -> None:
         ("max_refinement_change", 1.0),
         ("loss", "l1"),
         ("position_sigma_m", -1.0),
+        ("first_ba_max_iterations", 0),
     ],
 )
 def test_bad_fields_are_named(field: str, value: object) -> None:

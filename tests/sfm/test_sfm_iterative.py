@@ -44,3 +44,9 @@ def test_a_loose_threshold_stops_after_one_iteration_and_a_strict_one_at_the_lim
     assert (strict["stop"], len(ratios)) == ("max_iterations", 2) or (
         strict["stop"] == "converged" and ratios[-1] == 0
     )
+
+
+def test_the_first_ba_is_capped_and_the_later_ones_are_not(sfm_inputs: SfmInputs) -> None:
+    report = run_iterative(sfm_inputs, max_iterations=3, max_refinement_change=0.0, first_ba_max_iterations=2)
+    steps = [it["solver_iterations"] for it in report["iterations"]]
+    assert steps[0] <= 2 + 1 and max(steps[1:]) > 3  # Ceres counts its starting point as a step
