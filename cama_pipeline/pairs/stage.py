@@ -83,7 +83,7 @@ def run(
             done.append(SitePairs(site_id, folder, stored["images"], stored["counts"], skipped=True))
             continue
         if dataset is None:
-            dataset = load_dataset(Path(dataset_root))
+            dataset = load_dataset(Path(dataset_root), check_files=False)  # poses only: no image is read
         views = site_views(dataset, read_site_manifest(manifest_path))
         pairs, funnel = select_pairs(views, config)
         rows = [(views[i].name, views[j].name, reason) for (i, j), reason in sorted(pairs.items())]

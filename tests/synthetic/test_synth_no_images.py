@@ -67,16 +67,16 @@ def test_a_full_run_after_a_bare_one_renders_the_images(tmp_path):
     assert run(cfg, target, workers=1, show_progress=False).skipped
 
 
-@pytest.mark.parametrize("stage", ["pairs", "features"])
-def test_image_reading_stages_fail_naming_the_missing_image(bare_site, tmp_path, stage):
+def test_pairs_are_planned_without_images_and_features_fail_naming_the_missing_image(bare_site, tmp_path):
     site = tmp_path / "site"
     shutil.copytree(bare_site, site)
     dataset, workspace = str(site / "nuscenes"), str(tmp_path / "ws")
     runner = CliRunner()
-    for upstream in ("wigo", "keyframes", "sites"):
+    for upstream in ("wigo", "keyframes", "sites", "pairs"):
         result = runner.invoke(app, [upstream, dataset, "--workspace", workspace])
         assert result.exit_code == 0, f"{upstream}: {result.output}"
-    result = runner.invoke(app, [stage, dataset, "--workspace", workspace])
+    assert (tmp_path / "ws" / "pairs" / "site-001" / "pairs.txt").read_text().strip()
+    result = runner.invoke(app, ["features", dataset, "--workspace", workspace])
     assert result.exit_code == 2, result.output
     message = "".join(result.output.split())
     assert "imagefilenotfound" in message
