@@ -1,5 +1,6 @@
 """Merging independently reconstructed clips: similarity alignment of each clip to its neighbours through the
-3D points their cross-clip matches tie together, then one global re-triangulation and BA of the union.
+3D points their cross-clip matches tie together, then one global re-triangulation and BA of the union,
+which starts from the clips' points (`MergeConfig.seed_from_clips`).
 
 Every clip starts in the global odometry frame (odometry-guided initialisation), so a clip without enough
 shared points keeps its own poses ("poses" alignment, identity); clips linked by shared points are aligned

@@ -1,6 +1,6 @@
 """The SfM stage: every site of the workspace reconstructed clip by clip in parallel (odometry-guided SfM on
-each clip's images, in its own process), the clips merged where they share points, then re-triangulated
-and bundle-adjusted as one model. Outputs and their schema: `cama_pipeline.sfm.io`.
+each clip's images, in its own process), the clips merged where they share points, then started from
+the clips' refined points, re-triangulated and bundle-adjusted as one model. Outputs and their schema: `cama_pipeline.sfm.io`.
 
 A clip is a moving scene of the site with the stationary scenes merged into it. A clip whose SfM fails
 (night, too few matches) is reported and left out; the rest of the site still reconstructs.
