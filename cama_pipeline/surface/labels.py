@@ -1,9 +1,13 @@
 """Cell classes from the class votes of the observation pass, with curbs seen at curb height.
 
 A curb is raised: its face and top, projected onto the road plane, land up to a metre beyond the curb
-line (farther the farther the camera), so road-level votes smear the curb over the sidewalk. Cells whose
-road-level vote is a road class keep it; the others (curb or background) take the vote of the same cell
-sampled at curb height, where the curb top and the sidewalk beyond it are seen in place.
+line (farther the farther the camera), so road-level votes smear the curb over the sidewalk; and the
+cells of the curb top itself are voted road at road level by the rays that hit the foot of the face (the
+image masks label the face's lower part road). So every cell is voted at two heights, road level and
+curb height, and takes the classes of the height at which its views agree more (the larger top class
+share): a cell really at that height is seen in place from every camera, the other height smears it
+differently for each camera distance. Curb height may only give off-road classes (curb or background);
+cells whose road-level vote is not a road class take the curb-height vote as before.
 """
 
 import torch
@@ -16,16 +20,29 @@ EPSILON = 1e-3
 """Floor of the class frequencies before the logarithm (logits stay finite)."""
 
 
+def shares(votes: torch.Tensor) -> torch.Tensor:
+    """(V, 5) class votes scaled to shares summing to 1 per row (rows without votes stay 0)."""
+    return votes / votes.sum(dim=1, keepdim=True).clamp(min=1e-12)
+
+
 def fused_logits(ground: torch.Tensor, raised: torch.Tensor | None) -> torch.Tensor:
-    """(V, 5) logits from (V, 5) class frequencies sampled at road level and at curb height (None: the
-    road-level votes alone)."""
+    """(V, 5) logits from (V, 5) class votes sampled at road level and at curb height (None: the
+    road-level votes alone); see the module docstring."""
+    ground = shares(ground)
     logits = torch.log(ground + EPSILON)
     if raised is None:
         return logits
+    raised = shares(raised)
     road_classes = torch.tensor([int(c) for c in ROAD_SURFACE], device=ground.device)
+    off_road_classes = torch.tensor([int(c) for c in OFF_ROAD], device=ground.device)
     columns = [BEV_CLASSES.index(c) for c in OFF_ROAD]
-    votes = torch.zeros_like(ground)
+    votes = torch.zeros_like(raised)
     votes[:, columns] = raised[:, columns]
-    off_road = ~torch.isin(ground.argmax(dim=1), road_classes) & (votes.sum(dim=1) > 0)
+    has_votes = votes.sum(dim=1) > 0
+    ground_off_road = ~torch.isin(ground.argmax(dim=1), road_classes)
+    raised_agrees_more = torch.isin(raised.argmax(dim=1), off_road_classes) & (
+        raised.max(dim=1).values > ground.max(dim=1).values
+    )
+    off_road = (ground_off_road | raised_agrees_more) & has_votes
     logits[off_road] = torch.log(votes[off_road] + EPSILON)
     return logits
