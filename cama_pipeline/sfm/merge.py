@@ -51,8 +51,8 @@ class MergeConfig:
     """Start the merged model from the clips' refined points (moved by their alignments; tracks then
     completed and merged across clips through the matches) instead of triangulating every match again.
     Default site (912 images, 3 clips), same clips, with `num_threads=2`: merge 82 s wall / 75 CPU s
-    against 642 s / 343 CPU s for a fresh triangulation on one thread (which took 440 s, its first BA
-    190 s over 448k observations); errors 6.25 cm / 0.080 deg (gauge-free 0.57 cm / 0.021 deg) against
+    against 642 s / 343 CPU s for a fresh triangulation on one thread (on a loaded machine: 440 s wall
+    triangulating, 190 s wall in its BA over 448k observations); errors 6.25 cm / 0.080 deg (gauge-free 0.57 cm / 0.021 deg) against
     6.35 cm / 0.079 deg (0.59 cm / 0.021 deg)."""
     num_threads: int = 2
     """Solver threads of the merged BA: it runs alone once the clips are done (COLMAP uses one thread
