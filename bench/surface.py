@@ -16,8 +16,8 @@ curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`). Adam 
 and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
 
 Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 1]
-       [--sources ground_truth,sfm]
-Prints the figures and writes bench/results/surface.json.
+       [--sources ground_truth,sfm] [--out bench/results/surface.json]
+Prints the figures and writes them to `--out` (bench/results/surface.json by default).
 """
 
 import argparse
@@ -189,6 +189,7 @@ def main() -> None:
     parser.add_argument(
         "--sources", default="ground_truth,wigo,sfm", help="pose sources (sfm only when the site has it)"
     )
+    parser.add_argument("--out", type=Path, default=RESULTS / "surface.json", help="figures JSON")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     config = SurfaceConfig(resolution_m=args.resolution, epochs=args.epochs, torch_threads=args.threads)
@@ -233,9 +234,9 @@ def main() -> None:
             "seconds": reference["seconds"]["total"] / max(baseline["seconds"]["total"], 1e-9),
         },
     }
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "surface.json").write_text(json.dumps(results, indent=1))
-    print(f"wrote {RESULTS / 'surface.json'}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=1))
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":
