@@ -56,8 +56,9 @@ class SurfaceConfig:
     depth_tolerance: float = 0.03
     """Relative depth slack of the visibility (z-buffer) test, plus `resolution_m` absolute."""
     curb_height_m: float = 0.13
-    """Height above the road at which cells not voted road are voted again between curb and background
-    (a curb's face and top smear beyond it at road level, see `labels`); 0 turns this off."""
+    """Height above the road at which every cell is voted again: cells off the road at road level, or whose
+    views agree more at this height, take curb or background from it (a curb's face and top smear beyond
+    it at road level, see `labels`); 0 turns this off."""
     epochs: int = 0
     """Passes over all keyframe images optimising colour, semantics and (optionally) the elevation MLP.
     0 by default: on the default site one epoch moved the elevation away from the points (RMSE 3.1 ->

@@ -1,8 +1,8 @@
 """Mesh optimisation: per-vertex colour and semantic logits (and a refined elevation MLP) from the images.
 
 First pass (`observe`): every keyframe image sees its visible vertices; their weighted mean colour and
-class frequencies initialise the mesh (curb and background cells voted again at curb height, see
-`labels`) and the pixels that hit each cell make the observation count.
+class frequencies initialise the mesh (every cell voted again at curb height, where a curb top is seen in
+place; see `labels`) and the pixels that hit each cell make the observation count.
 Then `epochs` of Adam over image batches minimise the L1 colour error and the semantic cross-entropy of
 the vertices projected with the current elevation (differentiable `grid_sample`), weighted by the pixels
 each vertex covers and by the ground mask, with the surface-point loss (and the curvature prior) holding
