@@ -50,8 +50,11 @@ class SurfaceConfig:
     """Central-difference step of the curvature prior."""
     control_spacing_m: float = 1.0
     """The MLP is evaluated on a control grid this coarse and interpolated to the vertices (it is smooth)."""
-    max_range_m: float = 25.0
-    """Vertices farther than this from a camera are not projected into it (too oblique, too blurred)."""
+    max_range_m: float = 21.0
+    """Vertices farther than this from a camera are not projected into it (too oblique, too blurred).
+    Default site, SfM poses, 25 -> 21 m: proposal mAP (observed truth) 0.891 -> 0.932 and the simulated
+    annotator 1.81x -> 1.85x (the raster's far edges are less distorted), curb IoU 0.39 -> 0.35, the
+    other IoUs within 0.004, elevation unchanged; 18 m: mAP 0.937, annotator 1.83x, curb IoU 0.31."""
     min_depth_m: float = 0.5
     depth_tolerance: float = 0.03
     """Relative depth slack of the visibility (z-buffer) test, plus `resolution_m` absolute."""
