@@ -292,6 +292,8 @@ def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_prog
             with context.Pool(workers, initializer=_init_worker, initargs=(site.config,)) as pool:
                 for _ in pool.imap_unordered(_render_task, tasks, chunksize=4):
                     progress.advance(bar)
+                pool.close()  # let the workers exit: the with-block's terminate() SIGTERMs them mid-exit, and
+                pool.join()  # a native library's signal handler then prints a stack trace into the user's terminal
 
 
 # ---- ground truth ----------------------------------------------------------------------------------
