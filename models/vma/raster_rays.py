@@ -21,15 +21,21 @@ UNSEEN_RUN_M = 1.0
 """Unobserved cells count as the edge of what was seen when they go on for this long (not a speck)."""
 
 
-def labels_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
-    """Semantic ids at global points. Outside the raster: unobserved when the raster marks unobserved cells (a
-    reconstruction's raster spans what was seen), else -1 (a map raster that simply ends there)."""
+def cells_at(rasters: SiteRasters, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Raster cells of global points: rows, columns (nearest cell, possibly outside) and whether inside."""
     colrow = np.rint(rasters.pixel_from_global(xy)).astype(int)
     h, w = rasters.shape
     inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    return colrow[:, 1], colrow[:, 0], inside
+
+
+def labels_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
+    """Semantic ids at global points. Outside the raster: unobserved when the raster marks unobserved cells (a
+    reconstruction's raster spans what was seen), else -1 (a map raster that simply ends there)."""
+    rows, cols, inside = cells_at(rasters, xy)
     unseen_outside = bool((rasters.semantic == int(Semantic.UNOBSERVED)).any())
     labels = np.full(len(xy), int(Semantic.UNOBSERVED) if unseen_outside else -1, np.int64)
-    labels[inside] = rasters.semantic[colrow[inside, 1], colrow[inside, 0]]
+    labels[inside] = rasters.semantic[rows[inside], cols[inside]]
     return labels
 
 

@@ -25,7 +25,7 @@ from shapely.geometry import LineString
 
 from cama_pipeline.semantics import Semantic
 from models.vma.merge import join_polylines
-from models.vma.raster_rays import extend_to_unseen, road_left
+from models.vma.raster_rays import OFF_ROAD_IDS, ROAD_IDS, cells_at, extend_to_unseen, road_left
 from models.vma.rasters import SiteRasters
 from models.vma.skeleton_paths import skeleton_paths
 from models.vma.vectors import Vector
@@ -98,14 +98,18 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
     """Dividers, boundaries and crosswalks of a site from its semantic raster, global metres, with confidence."""
     config = config or RuleConfig()
     semantic = rasters.semantic
+    road = _road_mask(semantic, rasters.resolution_m, config)
     vectors = [
-        *_line_vectors(rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m),
+        *_line_vectors(
+            rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m, road
+        ),
         *_line_vectors(
             rasters,
-            _boundary_mask(semantic, rasters.resolution_m, config),
+            _boundary_mask(semantic, road, rasters.resolution_m, config),
             "boundary",
             config,
             config.join_boundary_gap_m,
+            road,
         ),
         *_crosswalks(rasters, semantic == int(Semantic.CROSSWALK), config),
     ]
@@ -119,9 +123,10 @@ def _disk(radius_px: float) -> np.ndarray:
 
 
 def _line_vectors(
-    rasters: SiteRasters, mask: np.ndarray, cls: str, config: RuleConfig, join_gap_m: float
+    rasters: SiteRasters, mask: np.ndarray, cls: str, config: RuleConfig, join_gap_m: float, road: np.ndarray
 ) -> list[Vector]:
-    """Skeleton polylines of one class mask; aligned pieces joined across gaps up to `join_gap_m`."""
+    """Skeleton polylines of one class mask; aligned pieces joined across gaps up to `join_gap_m` (`road`: the
+    site's road mask, which road-edge boundaries are moved towards)."""
     res = rasters.resolution_m
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_line_m / res))
     closed = remove_small_blobs(closed, round(config.min_blob_m2 / res**2))
@@ -130,7 +135,6 @@ def _line_vectors(
     joined = join_polylines([(p, 1.0) for p in paths], join_gap_m, config.join_angle_deg)
     paths = [p for p, _ in joined]
     support = cv2.dilate(mask.astype(np.uint8), _disk(config.support_radius_m / res)) > 0
-    road = _road_mask(rasters.semantic, res, config)
     out = []
     for path in paths:
         points = np.asarray(LineString(path).simplify(config.simplify_m).coords)
@@ -147,18 +151,17 @@ def _line_vectors(
     return out
 
 
-_ROAD_IDS = [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
-
-
-def _boundary_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+def _boundary_mask(
+    semantic: np.ndarray, road: np.ndarray, resolution_m: float, config: RuleConfig
+) -> np.ndarray:
     if config.boundary_source == "road_edge":
-        return road_edge(semantic, resolution_m, config)
+        return road_edge(semantic, road, resolution_m, config)
     return semantic == int(Semantic.CURB)
 
 
 def _road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
     """Road, marking and crosswalk cells (uint8), with small non-road holes in it (label noise) filled."""
-    road = np.isin(semantic, _ROAD_IDS).astype(np.uint8)
+    road = np.isin(semantic, ROAD_IDS).astype(np.uint8)
     holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
     return road | holes
 
@@ -176,9 +179,9 @@ def _half_cell_toward_road(points: np.ndarray, rasters: SiteRasters, road: np.nd
     probe = 3 * rasters.resolution_m
 
     def on_road(xy: np.ndarray) -> np.ndarray:
-        colrow = np.rint(rasters.pixel_from_global(xy)).astype(int)
+        rows, cols, _ = cells_at(rasters, xy)
         h, w = road.shape
-        return road[np.clip(colrow[:, 1], 0, h - 1), np.clip(colrow[:, 0], 0, w - 1)].astype(int)
+        return road[np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)].astype(int)
 
     vote = int(np.sum((on_road(middles + probe * left) - on_road(middles - probe * left)) * lengths))
     if vote == 0:
@@ -187,13 +190,12 @@ def _half_cell_toward_road(points: np.ndarray, rasters: SiteRasters, road: np.nd
     return np.asarray(moved.coords) if isinstance(moved, LineString) and len(moved.coords) >= 2 else points
 
 
-def road_edge(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+def road_edge(semantic: np.ndarray, road: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
     """Cells just outside the road with observed off-road ground (curb or background) within `curb_reach_m`:
     the road's boundary as a 1-cell band, at the road's sharp edge rather than along the curb label smeared
     over the sidewalk (or missing), bridging the thin unobserved strip a curb's face hides. Where the road
-    runs into unobserved cells (a cut-off arm) there is none."""
-    road = _road_mask(semantic, resolution_m, config)
-    off_road = np.isin(semantic, [int(Semantic.CURB), int(Semantic.BACKGROUND)]).astype(np.uint8)
+    runs into unobserved cells (a cut-off arm) there is none. `road`: `_road_mask` of the raster."""
+    off_road = np.isin(semantic, OFF_ROAD_IDS).astype(np.uint8)
     near_off_road = cv2.dilate(off_road, _disk(config.curb_reach_m / resolution_m)) > 0
     rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)
     return rim & near_off_road
@@ -326,8 +328,6 @@ def _alternations(
 ) -> int:
     """How often the stripe mask switches on or off along a line through `centre`."""
     stations = np.arange(-length / 2, length / 2, rasters.resolution_m)
-    colrow = np.rint(rasters.pixel_from_global(centre + np.outer(stations, unit))).astype(int)
-    h, w = stripes.shape
-    colrow = colrow[(colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)]
-    values = stripes[colrow[:, 1], colrow[:, 0]].astype(np.int8)
+    rows, cols, inside = cells_at(rasters, centre + np.outer(stations, unit))
+    values = stripes[rows[inside], cols[inside]].astype(np.int8)
     return int(np.abs(np.diff(values)).sum())
