@@ -5,7 +5,7 @@ matching with geometric verification on the pairs chosen by `cama pairs`.
     <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
         counts {"name": {"features", "masked"}}, "low_feature_images" [name], "pairs_listed",
         "pairs_verified", "median_inliers", "seconds": {"extract", "match"}
-    "fingerprint": config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
+    "fingerprint": code, config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
         as this stage left it (not its mtime: merely reading a SQLite database can touch that).
 A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
 later stages keyed on it stay up to date). Otherwise the database is reused: images already in it are not
@@ -25,6 +25,7 @@ from typing import Any
 import cv2
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
@@ -169,7 +170,11 @@ def run_site(
     previous = _previous_report(report_path, extractor)
     manifest_path = site_manifest_path(workspace, site_id)
     digest = fingerprint(
-        asdict(config), extractor.name, matcher.name, file_stats([manifest_path, pairs_file])
+        code_version("cama_pipeline.features"),
+        asdict(config),
+        extractor.name,
+        matcher.name,
+        file_stats([manifest_path, pairs_file]),
     )
     size = database.stat().st_size if database.is_file() else None
     if size is not None and previous.get("fingerprint") == digest and previous.get("database_bytes") == size:

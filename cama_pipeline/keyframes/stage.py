@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.keyframes.resync import ImageStamp, resync
 from cama_pipeline.keyframes.selection import is_stationary, path_length_m, select_keyframes
@@ -104,7 +105,9 @@ def run(
         source = wigo_path(workspace, name)
         path = keyframes_path(workspace, name)
         files[name] = path
-        digest = fingerprint("keyframes", config.to_json(), stored_fingerprint(source))
+        digest = fingerprint(
+            "keyframes", code_version("cama_pipeline.keyframes"), config.to_json(), stored_fingerprint(source)
+        )
         if not overwrite and stored_fingerprint(path) == digest:
             skipped.append(name)
             continue

@@ -5,6 +5,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import load_dataset
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
@@ -77,7 +78,7 @@ def run(
         site_id = site["site_id"]
         manifest_path = site_manifest_path(workspace, site_id)
         folder = pairs_dir(workspace, site_id)
-        digest = fingerprint(asdict(config), file_stats([manifest_path]))
+        digest = fingerprint(code_version("cama_pipeline.pairs"), asdict(config), file_stats([manifest_path]))
         if not overwrite and stored_fingerprint(folder / "pairs.json") == digest:
             stored = read_pairs(folder)
             done.append(SitePairs(site_id, folder, stored["images"], stored["counts"], skipped=True))

@@ -20,6 +20,7 @@ from typing import Any
 import pycolmap
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.stage import features_dir
 from cama_pipeline.pairs.cameras import CameraView, site_views
@@ -368,7 +369,13 @@ def run_site(
         raise FileNotFoundError(f"{database}: not found; run `cama features` first")
     folder = sfm_dir(workspace, site_id)
     features = stored_fingerprint(database.with_name("features.json")) or file_stats([database])
-    digest = fingerprint(asdict(config), asdict(merge_config), file_stats([manifest_path]), features)
+    digest = fingerprint(
+        code_version("cama_pipeline.sfm"),
+        asdict(config),
+        asdict(merge_config),
+        file_stats([manifest_path]),
+        features,
+    )
     if not overwrite and stored_fingerprint(folder / "report.json") == digest:
         return SiteSfm(site_id, folder, read_report(workspace, site_id), skipped=True)
     manifest = read_site_manifest(manifest_path)

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.site.aggregate import Aggregation, SceneTrack, aggregate
 from cama_pipeline.site.config import SiteConfig
@@ -95,6 +96,7 @@ def run(
     outputs = _read_scene_outputs(dataset, workspace)
     digest = fingerprint(
         "sites",
+        code_version("cama_pipeline.site"),
         config.to_json(),
         [
             (s.name, s.description, outputs[s.name][0].fingerprint, outputs[s.name][1].fingerprint)

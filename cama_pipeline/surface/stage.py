@@ -15,6 +15,7 @@ from typing import Any
 import torch
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.sfm.io import sfm_dir
 from cama_pipeline.site.workspace import (
@@ -100,7 +101,7 @@ def _site_digest(config: SurfaceConfig, dataset_root: Path, workspace: Path, sit
     inputs = [site_manifest_path(workspace, site_id), *pose_inputs(dataset_root, workspace, site_id, poses)]
     if config.use_sfm_points:
         inputs.append(sfm_dir(workspace, site_id) / "points.npz")
-    return fingerprint(asdict(config), poses, file_stats(inputs))
+    return fingerprint(code_version("cama_pipeline.surface"), asdict(config), poses, file_stats(inputs))
 
 
 def reconstruct_site(

@@ -9,6 +9,7 @@ from pathlib import Path
 from rich.progress import Progress
 from scipy.spatial.transform import Rotation
 
+from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, Scene, load_dataset
 from cama_pipeline.data.schema import CAN_DIR, CAN_MESSAGES, can_file_name
 from cama_pipeline.site.workspace import (
@@ -53,7 +54,9 @@ def scene_fingerprint(dataset: Dataset, scene: Scene, config: WigoConfig) -> str
     """Hash of the config and of the tables and CAN files the fusion of `scene` reads."""
     inputs = [dataset.version_dir / "sample_data.json", dataset.version_dir / "ego_pose.json"]
     inputs += [dataset.root / CAN_DIR / can_file_name(scene.name, m) for m in CAN_MESSAGES]
-    return fingerprint("wigo", config.to_json(), scene.token, file_stats(inputs))
+    return fingerprint(
+        "wigo", code_version("cama_pipeline.wigo"), config.to_json(), scene.token, file_stats(inputs)
+    )
 
 
 def to_wigo_file(fused: FusedPoses, scene: Scene, digest: str, config: WigoConfig) -> WigoFile:

@@ -1,18 +1,22 @@
 """`cama propose` as a function: a site's rasters -> proposals JSON (an AnnotationSet of `proposal` elements).
 
 Output coordinates are site metres: the site origin is the generator's `manifest.json` `config.site_origin_xy`
-when the site has one, else the raster origin. A rerun whose output is newer than the rasters and the
-checkpoint does nothing unless `overwrite`.
+when the site has one, else the raster origin. Beside it, `<out>.fingerprint` holds the digest of what made
+it (rasters, checkpoint version, proposer settings, the code); a rerun with the same digest does nothing unless
+`overwrite`.
 """
 
 import json
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Literal
 
 from annotations import Georeference
+from cama_pipeline.code_version import code_version
+from cama_pipeline.io import atomic_write_bytes
+from cama_pipeline.site.workspace import file_stats, fingerprint
 from models.vma.checkpoint import META, current_version, load_checkpoint
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, raster_dir_of
@@ -67,11 +71,15 @@ def propose(
     inputs = [raster_dir_of(site) / name for name in ("semantic.png", "photometric.png", "georeference.json")]
     if proposer == "learned" and checkpoint is not None:
         inputs.append(current_version(Path(checkpoint)) / META)
-    if (
-        out.is_file()
-        and not overwrite
-        and all(p.is_file() and p.stat().st_mtime <= out.stat().st_mtime for p in inputs)
-    ):
+    settings = [
+        proposer,
+        min_confidence,
+        asdict(inference or InferenceConfig()),
+        asdict(rule or RuleConfig()),
+    ]
+    digest = fingerprint(code_version("models.vma"), settings, file_stats([*inputs, site / "manifest.json"]))
+    stamp = out.with_name(f"{out.name}.fingerprint")
+    if out.is_file() and not overwrite and stamp.is_file() and stamp.read_text(encoding="utf-8") == digest:
         logger.info("%s is up to date; nothing to do", out)
         return ProposeResult(out, -1, 0.0, skipped=True)
     started = time.perf_counter()
@@ -91,6 +99,7 @@ def propose(
     georeference = Georeference.from_raster_json(geo, site_origin_xy=site_origin_of(site, rasters))
     proposals = proposals_as_annotations(vectors, georeference, site.name or "site", author)
     proposals.write_json(out)
+    atomic_write_bytes(stamp, digest.encode("utf-8"))
     seconds = time.perf_counter() - started
     logger.info("wrote %d proposals to %s in %.1f s", len(vectors), out, seconds)
     return ProposeResult(out, len(vectors), seconds, skipped=False)

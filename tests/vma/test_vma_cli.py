@@ -2,11 +2,14 @@
 
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 from vma_test_sites import drawn_semantic, write_raster_site
 
 from annotations import AnnotationSet
 from cama_pipeline.cli import app
+from models.vma.propose import propose
+from models.vma.rule_based import RuleConfig
 
 runner = CliRunner()
 
@@ -23,6 +26,19 @@ def test_propose_rule_based_writes_an_annotation_set_and_skips_when_up_to_date(
     assert proposals.georeference.site_origin_xy == (500.0, 800.0)  # no manifest: the raster origin
     again = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)])
     assert "up to date" in again.output
+
+
+def test_proposals_are_redone_when_settings_or_code_change(
+    drawn_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "proposals.json"
+    assert not propose(drawn_site, out, proposer="rule", show_progress=False).skipped
+    assert propose(drawn_site, out, proposer="rule", show_progress=False).skipped
+    kinked = RuleConfig(divider_min_radius_m=RuleConfig().divider_min_radius_m + 1.0)
+    assert not propose(drawn_site, out, proposer="rule", rule=kinked, show_progress=False).skipped
+    assert not propose(drawn_site, out, proposer="rule", min_confidence=0.2, show_progress=False).skipped
+    monkeypatch.setattr("models.vma.propose.code_version", lambda package: f"{package} edited")
+    assert not propose(drawn_site, out, proposer="rule", min_confidence=0.2, show_progress=False).skipped
 
 
 def test_propose_reports_bad_input(tmp_path: Path) -> None:

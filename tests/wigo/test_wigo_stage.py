@@ -42,6 +42,16 @@ def test_run_writes_a_pose_per_image_and_skips_up_to_date_scenes(site_root: Path
     assert read_wigo(changed.files["scene-0001"]).config["gnss_robust"] == "cauchy"
 
 
+def test_a_code_change_makes_outputs_stale(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = site_root / "nuscenes"
+    run(WigoConfig(), root, tmp_path, scenes=["scene-0001"], show_progress=False)
+    assert run(WigoConfig(), root, tmp_path, scenes=["scene-0001"], show_progress=False).skipped
+    monkeypatch.setattr("cama_pipeline.wigo.stage.code_version", lambda package: f"{package} edited")
+    assert run(WigoConfig(), root, tmp_path, scenes=["scene-0001"], show_progress=False).skipped == ()
+
+
 def test_unknown_scene_is_named(site_root: Path, tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="scene-9999"):
         run(WigoConfig(), site_root / "nuscenes", tmp_path, scenes=["scene-9999"], show_progress=False)
