@@ -12,6 +12,7 @@ from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import spatial_pairs
 from cama_pipeline.pairs.io import pairs_dir, read_pairs, write_pairs
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
+from cama_pipeline.site.outputs import SitesRun
 from cama_pipeline.site.workspace import (
     default_workspace,
     file_stats,
@@ -37,13 +38,7 @@ class SitePairs:
     skipped: bool
 
 
-@dataclass(frozen=True)
-class PairsResult:
-    """What a run did, per site."""
-
-    workspace: Path
-    sites: tuple[SitePairs, ...]
-    seconds: float
+PairsResult = SitesRun[SitePairs]
 
 
 def select_pairs(views: list[CameraView], config: PairsConfig) -> tuple[dict[Pair, str], dict[str, object]]:

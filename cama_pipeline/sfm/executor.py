@@ -37,15 +37,19 @@ def _log_like_parent(level: int) -> None:
     logging.basicConfig(level=level, format="%(levelname)s %(processName)s %(name)s: %(message)s")
 
 
-class LocalExecutor:
-    """A process pool on this machine (spawned processes: safe beside threads such as progress bars)."""
-
-    name = "local"
+class _WorkerCount:
+    """The validated number of tasks an executor runs at once."""
 
     def __init__(self, workers: int = 2) -> None:
         if workers < 1:
-            raise ValueError(f"LocalExecutor: workers must be >= 1, got {workers}")
+            raise ValueError(f"{type(self).__name__}: workers must be >= 1, got {workers}")
         self.workers = workers
+
+
+class LocalExecutor(_WorkerCount):
+    """A process pool on this machine (spawned processes: safe beside threads such as progress bars)."""
+
+    name = "local"
 
     def map(
         self, fn: Callable[[T], R], tasks: Sequence[T], *, on_done: DoneCallback | None = None
@@ -70,16 +74,11 @@ class LocalExecutor:
         return [results[i] for i in range(len(tasks))]
 
 
-class RayExecutor:
+class RayExecutor(_WorkerCount):
     """Ray tasks: a local Ray instance of `workers` CPUs unless Ray is already initialised (e.g. a cluster
     joined by `ray.init(address=...)` before the call); one CPU per task."""
 
     name = "ray"
-
-    def __init__(self, workers: int = 2) -> None:
-        if workers < 1:
-            raise ValueError(f"RayExecutor: workers must be >= 1, got {workers}")
-        self.workers = workers
 
     def map(
         self, fn: Callable[[T], R], tasks: Sequence[T], *, on_done: DoneCallback | None = None

@@ -48,6 +48,7 @@ from cama_pipeline.sfm.merge import (
     merge_groups,
 )
 from cama_pipeline.sfm.triangulate import model_seeds
+from cama_pipeline.site.outputs import SiteOutputs, SitesRun
 from cama_pipeline.site.workspace import (
     default_workspace,
     file_stats,
@@ -301,23 +302,9 @@ def reconstruct_site(
     )
 
 
-@dataclass(frozen=True)
-class SiteSfm:
-    """One site's SfM outputs and report."""
-
-    site_id: str
-    folder: Path
-    report: dict[str, Any]
-    skipped: bool
-
-
-@dataclass(frozen=True)
-class SfmResult:
-    """What a run did, per site."""
-
-    workspace: Path
-    sites: tuple[SiteSfm, ...]
-    seconds: float
+SiteSfm = SiteOutputs
+"""One site's SfM outputs and report."""
+SfmResult = SitesRun[SiteSfm]
 
 
 def _pose_entries(site: SiteReconstruction) -> dict[str, PoseEntry]:

@@ -8,7 +8,7 @@ import logging
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +18,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.sfm.io import sfm_dir
+from cama_pipeline.site.outputs import SiteOutputs
 from cama_pipeline.site.workspace import (
     default_workspace,
     file_stats,
@@ -47,14 +48,8 @@ from cama_pipeline.surface.poses import pose_inputs, posed_views
 logger = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class SiteSurface:
-    """One site's surface outputs and report."""
-
-    site_id: str
-    folder: Path
-    report: dict[str, Any]
-    skipped: bool
+SiteSurface = SiteOutputs
+"""One site's surface outputs and report."""
 
 
 def pick_device(config: SurfaceConfig) -> torch.device:
