@@ -43,6 +43,10 @@ class FeatureStore:
         image_id = self.image_ids.get(name)
         return image_id is not None and self._db.exists_keypoints(image_id)
 
+    def keypoint_count(self, name: str) -> int:
+        """Keypoints of an image already in the database."""
+        return int(self._db.num_keypoints_for_image(self.image_ids[name]))
+
     def _camera_id(self, view: CameraView) -> int:
         key = _camera_key(view)
         if key not in self._cameras:

@@ -3,8 +3,9 @@ matching with geometric verification on the pairs chosen by `cama pairs`.
 
     <workspace>/features/<site_id>/database.db     COLMAP database (cameras, images, keypoints, matches)
     <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
-        counts {"name": {"features", "masked"}}, "low_feature_images" [name], "pairs_listed",
-        "pairs_verified", "median_inliers", "seconds": {"extract", "match"}
+        counts {"name": {"features", "masked" (null when an interrupted run extracted it)}},
+        "low_feature_images" [name], "pairs_listed", "pairs_verified", "median_inliers",
+        "seconds": {"extract", "match"}
     "fingerprint": code, config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
         as this stage left it (not its mtime: merely reading a SQLite database can touch that).
 A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
@@ -120,10 +121,10 @@ def extract_missing(
     store: FeatureStore,
     extractor: FeatureExtractor,
     config: FeaturesConfig,
-) -> dict[str, dict[str, int]]:
+) -> dict[str, dict[str, int | None]]:
     """Extract the views the database lacks into it, with a progress bar; counts per newly extracted image.
     A multi-process run needs a picklable extractor."""
-    counts: dict[str, dict[str, int]] = {}
+    counts: dict[str, dict[str, int | None]] = {}
     todo = [view for view in views if not store.has(view.name)]
     columns = (TextColumn("features"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, transient=True) as progress:
@@ -183,10 +184,14 @@ def run_site(
     views = site_views(dataset, read_site_manifest(manifest_path))
     started = time.perf_counter()
     with open_database(database) as db:
+        store = FeatureStore(db)
         counts = {
             **previous.get("images", {}),
-            **extract_missing(dataset, views, FeatureStore(db), extractor, config),
+            **extract_missing(dataset, views, store, extractor, config),
         }
+        for view in views:  # extracted by an interrupted run that wrote no report: masked pixels unknown
+            if view.name not in counts:
+                counts[view.name] = {"features": store.keypoint_count(view.name), "masked": None}
     extracted = time.perf_counter()
     matcher.match(database, pairs_file)
     with open_database(database) as db:

@@ -101,6 +101,11 @@ def test_rerun_skips_when_up_to_date_reuses_the_database_otherwise_and_refuses_a
     report_path.write_text(json.dumps(stale))
     with pytest.raises(WorkspaceError, match="overwrite"):
         run(FeaturesConfig(), dataset_root, workspace)
+    report_path.unlink()  # an interrupted run leaves extracted images in the database but no report
+    (resumed,) = run(FeaturesConfig(), dataset_root, workspace)
+    counts = {name: count["features"] for name, count in resumed.report["images"].items()}
+    assert counts == {name: count["features"] for name, count in before["images"].items()}
+    assert {count["masked"] for count in resumed.report["images"].values()} == {None}
     report_path.write_text(json.dumps(changed.report))
 
 
