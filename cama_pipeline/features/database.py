@@ -70,6 +70,21 @@ class FeatureStore:
         return image_id
 
 
+def prune_unlisted(database: pycolmap.Database, listed: set[frozenset[str]]) -> int:
+    """Delete the matches and two-view geometries of pairs not in `listed` (left by an earlier pair list, which
+    later stages would otherwise still use); returns how many pairs went."""
+    names = {image.image_id: image.name for image in database.read_all_images()}
+    matched = set(database.read_num_matches()[0]) | set(database.read_two_view_geometry_num_inliers()[0])
+    pruned = 0
+    for pair_id in matched:
+        first, second = pycolmap.pair_id_to_image_pair(pair_id)
+        if frozenset((names[first], names[second])) not in listed:
+            database.delete_matches(first, second)
+            database.delete_two_view_geometry(first, second)
+            pruned += 1
+    return pruned
+
+
 def verified_pairs(database: pycolmap.Database) -> dict[tuple[str, str], int]:
     """Inlier counts of the geometrically verified pairs, by (nameA, nameB) in database id order."""
     names = {image.image_id: image.name for image in database.read_all_images()}

@@ -4,13 +4,15 @@ matching with geometric verification on the pairs chosen by `cama pairs`.
     <workspace>/features/<site_id>/database.db     COLMAP database (cameras, images, keypoints, matches)
     <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
         counts {"name": {"features", "masked" (null when an interrupted run extracted it)}},
-        "low_feature_images" [name], "pairs_listed", "pairs_verified", "median_inliers",
+        "low_feature_images" [name], "pairs_listed", "pairs_pruned", "pairs_verified", "median_inliers",
         "seconds": {"extract", "match"}
     "fingerprint": code, config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
         as this stage left it (not its mtime: merely reading a SQLite database can touch that).
 A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
 later stages keyed on it stay up to date). Otherwise the database is reused: images already in it are not
-extracted again and matched pairs are not matched again. A change of extractor needs `--overwrite`.
+extracted again, matched pairs are not matched again, and the matches of pairs the list no longer holds are
+deleted ("pairs_pruned"), so the database matches exactly the listed pairs. A change of extractor needs
+`--overwrite`.
 """
 
 import logging
@@ -29,7 +31,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
-from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
+from cama_pipeline.features.database import FeatureStore, open_database, prune_unlisted, verified_pairs
 from cama_pipeline.features.interface import FeatureExtractor, Features, PairMatcher
 from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
 from cama_pipeline.features.matching import BlasMatcher
@@ -194,8 +196,12 @@ def run_site(
                 counts[view.name] = {"features": store.keypoint_count(view.name), "masked": None}
     extracted = time.perf_counter()
     matcher.match(database, pairs_file)
+    listed = {frozenset(line.split()) for line in pairs_file.read_text().splitlines() if line.strip()}
     with open_database(database) as db:
+        pruned = prune_unlisted(db, listed)
         verified = verified_pairs(db)
+    if pruned:
+        logger.info("dropped the matches of %d pairs no longer listed in %s", pruned, pairs_file)
     low = sorted(name for name, c in counts.items() if c["features"] < config.min_features_warning)
     if low:
         logger.warning(
@@ -208,7 +214,8 @@ def run_site(
         "matcher": matcher.name,
         "images": counts,
         "low_feature_images": low,
-        "pairs_listed": sum(1 for line in pairs_file.read_text().splitlines() if line.strip()),
+        "pairs_listed": len(listed),
+        "pairs_pruned": pruned,
         "pairs_verified": len(verified),
         "median_inliers": statistics.median(verified.values()) if verified else 0,
         "seconds": {"extract": extracted - started, "match": time.perf_counter() - extracted},

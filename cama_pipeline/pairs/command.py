@@ -47,12 +47,13 @@ def pairs_command(
     except INPUT_ERRORS as err:
         raise fail(err) from err
     table = Table(title=f"pairs ({result.workspace / 'pairs'})")
-    for column in ("site", "images", "exhaustive", "temporal", "rig", "hsp", "total", "share"):
+    kinds = ("exhaustive", "temporal", "rig", "repeat", "hsp", "total")
+    for column in ("site", "images", *kinds, "share"):
         table.add_column(column)
     for site in result.sites:
         counts = site.counts
         share = counts["total"] / max(counts["exhaustive"], 1)
         name = site.site_id + (" (up to date)" if site.skipped else "")
-        values = [counts[k] for k in ("exhaustive", "temporal", "rig", "hsp", "total")]
+        values = [counts.get(k, 0) for k in kinds]
         table.add_row(name, str(site.images), *map(str, values), f"{share:.1%}")
     console.print(table)

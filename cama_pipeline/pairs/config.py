@@ -30,6 +30,12 @@ class PairsConfig:
     """Ground footprints reach at most this far from the camera (far road is too oblique to match)."""
     footprint_grid: tuple[int, int] = (20, 72)
     """Ground samples around the camera (ranges, azimuths) projected into the image to trace the footprint."""
+    repeat_distance_m: float = 0.25
+    """An image whose camera centre is this close to an earlier image of the same camera and scene (and whose axis
+    is within `repeat_angle_deg`) repeats that view: paired with it, temporally and in the rig, but not spatially
+    (`cama_pipeline.pairs.repeats`). Keyframes of a moving clip lie 1 m or more apart; 0 turns repeats off."""
+    repeat_angle_deg: float = 2.0
+    """Largest angle between the optical axes of an image and the one it repeats."""
     min_footprint_overlap: float = 0.4
     """Least overlap of two ground footprints (shared area over the larger one) to keep a spatial pair. It tracks
     the true mutual co-visibility closely (correlation 0.98 on the default site), so this sets the pair count:
@@ -40,6 +46,11 @@ class PairsConfig:
         for name in ("sequential_window", "rig_window", "knn"):
             if getattr(self, name) < 0:
                 raise ValueError(f"PairsConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.repeat_distance_m < 0 or not 0 < self.repeat_angle_deg <= 180:
+            raise ValueError(
+                "PairsConfig: repeat_distance_m must be >= 0 and repeat_angle_deg in (0, 180], got "
+                f"{self.repeat_distance_m} and {self.repeat_angle_deg}"
+            )
         for name in ("knn_radius_m", "max_dz_m", "face_to_face_max_distance_m", "footprint_max_range_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"PairsConfig.{name} must be > 0, got {getattr(self, name)}")

@@ -86,11 +86,14 @@ def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: Pairs
 
 
 def spatial_pairs(
-    views: list[CameraView], config: PairsConfig, exclude: set[Pair]
+    views: list[CameraView], config: PairsConfig, exclude: set[Pair], skip: set[int] | None = None
 ) -> tuple[dict[Pair, str], HspStats]:
-    """HSP pairs not already in `exclude`, with the funnel of what each rule removed."""
+    """HSP pairs not already in `exclude` and not involving a view of `skip`, with the funnel of what each
+    rule removed."""
     stats = HspStats()
     candidates = knn_candidates(views, config, exclude)
+    if skip:
+        candidates = [(i, j) for i, j in candidates if i not in skip and j not in skip]
     verdicts = rule_verdicts(views, candidates, config)
     stats.candidates = len(candidates)
     for rule in ("height", "view_cone", "face_to_face"):

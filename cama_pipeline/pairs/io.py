@@ -3,9 +3,9 @@
     <workspace>/pairs/<site_id>/pairs.txt    one "nameA nameB" line per pair (COLMAP's imported pair list)
     <workspace>/pairs/<site_id>/pairs.json   schema "cama.pairs/1":
         {"schema", "site_id", "fingerprint", "config": {...}, "images": int,
-         "counts": {"exhaustive", "temporal", "rig", "hsp", "total"},
-         "hsp_funnel": {"candidates", "dropped": {rule: n}, "kept"},
-         "pairs": [[nameA, nameB, reason]]}     reason: "temporal" | "rig" | "hsp"
+         "counts": {"exhaustive", "temporal", "rig", "repeat", "hsp", "total"},
+         "hsp_funnel": {"candidates", "dropped": {rule: n}, "kept", "repeated_views"},
+         "pairs": [[nameA, nameB, reason]]}     reason: "temporal" | "rig" | "repeat" | "hsp"
 Image names are paths relative to the data set root.
 """
 

@@ -11,6 +11,7 @@ from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import spatial_pairs
 from cama_pipeline.pairs.io import pairs_dir, read_pairs, write_pairs
+from cama_pipeline.pairs.repeats import repeat_pairs, repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
 from cama_pipeline.site.outputs import SitesRun
 from cama_pipeline.site.workspace import (
@@ -42,15 +43,19 @@ PairsResult = SitesRun[SitePairs]
 
 
 def select_pairs(views: list[CameraView], config: PairsConfig) -> tuple[dict[Pair, str], dict[str, object]]:
-    """Sequential pairs, then HSP pairs among the rest; the HSP funnel for the report."""
+    """Sequential pairs, each repeated view with the one it repeats, then HSP pairs among the rest of the
+    views that repeat nothing; the HSP funnel (with the number of repeated views) for the report."""
     pairs = sequential_pairs(views, config)
-    spatial, stats = spatial_pairs(views, config, exclude=set(pairs))
+    repeats = repeated_views(views, config)
+    for pair, reason in repeat_pairs(repeats).items():
+        pairs.setdefault(pair, reason)
+    spatial, stats = spatial_pairs(views, config, exclude=set(pairs), skip=set(repeats))
     pairs.update(spatial)
-    return pairs, asdict(stats)
+    return pairs, {**asdict(stats), "repeated_views": len(repeats)}
 
 
 def _counts(pairs: dict[Pair, str], n_images: int) -> dict[str, int]:
-    counts = {reason: 0 for reason in ("temporal", "rig", "hsp")}
+    counts = {reason: 0 for reason in ("temporal", "rig", "repeat", "hsp")}
     for reason in pairs.values():
         counts[reason] += 1
     return {"exhaustive": n_images * (n_images - 1) // 2, **counts, "total": len(pairs)}

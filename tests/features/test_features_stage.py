@@ -175,3 +175,26 @@ def test_extraction_processes_store_what_one_process_stores(
             stored[workers] = (counts, [db.read_keypoints(i + 1).tobytes() for i in range(len(views))])
     assert len(stored[1][0]) == len(views)
     assert stored[1] == stored[2]
+
+
+def test_matches_of_pairs_no_longer_listed_are_dropped(dataset_root: Path, workspace: Path) -> None:
+    pairs_file = workspace / "pairs" / "site-001" / "pairs.txt"
+    lines = pairs_file.read_text().splitlines()
+    (site,) = run(FeaturesConfig(), dataset_root, workspace)
+    with open_database(site.database) as db:
+        before = set(verified_pairs(db))
+    kept = lines[: len(lines) // 2]
+    pairs_file.write_text("".join(f"{line}\n" for line in kept))
+    try:
+        (pruned,) = run(FeaturesConfig(), dataset_root, workspace)
+        listed = {frozenset(line.split()) for line in kept}
+        with open_database(pruned.database) as db:
+            after = set(verified_pairs(db))
+            names = {image.image_id: image.name for image in db.read_all_images()}
+            matched = [pycolmap.pair_id_to_image_pair(pair_id) for pair_id in db.read_num_matches()[0]]
+        assert all(frozenset((names[i], names[j])) in listed for i, j in matched)
+        assert after and all(frozenset(pair) in listed for pair in after)
+        assert after == {pair for pair in before if frozenset(pair) in listed}
+        assert pruned.report["pairs_pruned"] >= len(before - after) > 0
+    finally:
+        pairs_file.write_text("".join(f"{line}\n" for line in lines))

@@ -2,11 +2,13 @@
 
 import math
 
+import pytest
 from pair_views import view
 
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import knn_candidates, spatial_pairs
+from cama_pipeline.pairs.repeats import repeated_views
 from cama_pipeline.pairs.sequential import overlapping_channels, sequential_pairs
 from cama_pipeline.pairs.stage import select_pairs
 
@@ -103,3 +105,30 @@ def test_selection_is_a_small_share_of_exhaustive_on_a_long_drive() -> None:
     pairs, funnel = select_pairs(views, PairsConfig())
     exhaustive = len(views) * (len(views) - 1) // 2
     assert len(pairs) < 0.2 * exhaustive and funnel["kept"] > 0
+
+
+def test_a_stationary_clip_is_paired_through_its_first_view_only() -> None:
+    north = drive("north", (0, -40), 90, 21)
+    parked = drive("parked", (-6, 0), 0, 8, step_m=0.02)  # a car waiting at the junction: 8 frames, 14 cm
+    views = north + parked
+    config = PairsConfig()
+    repeats = repeated_views(views, config)
+    firsts = {i for i, v in enumerate(views) if v.scene == "parked" and v.frame_index == 0}
+    assert set(repeats) == {i for i, v in enumerate(views) if v.scene == "parked" and v.frame_index > 0}
+    assert set(repeats.values()) == firsts
+    assert all(views[i].channel == views[r].channel for i, r in repeats.items())
+    pairs, funnel = select_pairs(views, config)
+    assert funnel["repeated_views"] == len(repeats)
+    spatial = [pair for pair, reason in pairs.items() if reason == "hsp"]
+    assert spatial and not any(i in repeats or j in repeats for i, j in spatial)
+    assert any(i in firsts or j in firsts for i, j in spatial)  # the parked car's place is still paired
+    for index, representative in repeats.items():
+        assert pairs[(min(index, representative), max(index, representative))] in ("repeat", "temporal")
+    unrepeated, _ = select_pairs(views, PairsConfig(repeat_distance_m=0))
+    assert len(unrepeated) > len(pairs)
+    assert not repeated_views(north, config)  # keyframes of a drive never repeat
+
+
+def test_repeat_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match="repeat_distance_m"):
+        PairsConfig(repeat_distance_m=-1.0)
