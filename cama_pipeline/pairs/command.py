@@ -7,6 +7,7 @@ from rich.console import Console
 from rich.table import Table
 
 from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.io import PAIR_REASONS
 from cama_pipeline.pairs.stage import run
 from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
 
@@ -47,7 +48,7 @@ def pairs_command(
     except INPUT_ERRORS as err:
         raise fail(err) from err
     table = Table(title=f"pairs ({result.workspace / 'pairs'})")
-    kinds = ("exhaustive", "temporal", "rig", "repeat", "hsp", "total")
+    kinds = ("exhaustive", *PAIR_REASONS, "total")
     for column in ("site", "images", *kinds, "share"):
         table.add_column(column)
     for site in result.sites:

@@ -18,6 +18,8 @@ from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.site.workspace import WorkspaceError, read_json
 
 PAIRS_SCHEMA = "cama.pairs/1"
+PAIR_REASONS = ("temporal", "rig", "repeat", "hsp")
+"""Why a pair was chosen, in the order the counts list them."""
 
 
 def pairs_dir(workspace: Path, site_id: str) -> Path:

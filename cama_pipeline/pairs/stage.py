@@ -10,7 +10,7 @@ from cama_pipeline.data import load_dataset
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import spatial_pairs
-from cama_pipeline.pairs.io import pairs_dir, read_pairs, write_pairs
+from cama_pipeline.pairs.io import PAIR_REASONS, pairs_dir, read_pairs, write_pairs
 from cama_pipeline.pairs.repeats import repeat_pairs, repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
 from cama_pipeline.site.outputs import SitesRun
@@ -55,7 +55,7 @@ def select_pairs(views: list[CameraView], config: PairsConfig) -> tuple[dict[Pai
 
 
 def _counts(pairs: dict[Pair, str], n_images: int) -> dict[str, int]:
-    counts = {reason: 0 for reason in ("temporal", "rig", "repeat", "hsp")}
+    counts = {reason: 0 for reason in PAIR_REASONS}
     for reason in pairs.values():
         counts[reason] += 1
     return {"exhaustive": n_images * (n_images - 1) // 2, **counts, "total": len(pairs)}
