@@ -15,6 +15,7 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
                       re-triangulation and global BA of the merged model
     (f) no priors     (e) without WIGO's odometry and position priors in BA (do they help?)
     (g) previous      (e) as it was before the speed-up: every BA run to full tolerance, two merge passes
+    (h) scale gauge   (e) with the gauge fit scaling the model too (`SfmConfig.gauge_fit_scale`)
 Guided models are placed in the global frame by the gauge fit to all their WIGO poses (`sfm.gauge`). Every
 guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
 measured, i.e. the model's shape without the global placement it inherits from odometry. Rows give wall
@@ -285,6 +286,15 @@ def measure_all(
                 args.workers,
                 scratch / "f",
                 SfmConfig.preset("iterative", odometry_priors=False),
+            ),
+            "h_parallel_scale_gauge": lambda: run_parallel(
+                clips,
+                database,
+                image_dir,
+                truth,
+                args.workers,
+                scratch / "h",
+                SfmConfig.preset("iterative", gauge_fit_scale=True),
             ),
             "g_parallel_previous_merge": lambda: run_parallel(
                 clips,

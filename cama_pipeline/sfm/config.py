@@ -47,6 +47,8 @@ class SfmConfig:
     anchor_gauge: bool = True
     """After BA, move the model rigidly onto all its odometry poses at once (weighted least squares, see
     `cama_pipeline.sfm.gauge`): WIGO's slow per-clip drift averages out instead of being inherited."""
+    gauge_fit_scale: bool = False
+    """Gauge fit: scale the model too (a similarity onto the odometry; see `cama_pipeline.sfm.gauge`)."""
     gauge_position_sigma_m: float = 0.15
     """Gauge fit: sigma of an odometry position (WIGO's reported marginal, default site: 15-20 cm)."""
     gauge_tilt_sigma_deg: float = 0.035

@@ -153,17 +153,18 @@ def anchor(
     sigmas = GaugeSigmas(
         config.gauge_position_sigma_m, config.gauge_tilt_sigma_deg, config.gauge_heading_sigma_deg
     )
-    fit = fit_gauge(world_from_ego, odometry, sigmas)
+    fit = fit_gauge(world_from_ego, odometry, sigmas, fit_scale=config.gauge_fit_scale)
     if fit is None:
         return None, world_from_ego
     apply_gauge(reconstruction, fit.new_from_old)
     logger.info(
-        "gauge: moved %.3f m, turned %.4f deg onto %d odometry poses",
+        "gauge: moved %.3f m, turned %.4f deg, scaled by %.5f onto %d odometry poses",
         fit.shift_m,
         fit.rotation_deg,
+        fit.scale,
         fit.poses,
     )
-    return fit.to_json(), {name: fit.new_from_old @ pose for name, pose in world_from_ego.items()}
+    return fit.to_json(), {name: fit.move_pose(pose) for name, pose in world_from_ego.items()}
 
 
 def _refined_poses(model: GuidedModel, views: Sequence[CameraView]) -> dict[str, np.ndarray]:

@@ -89,6 +89,48 @@ def test_fit_averages_per_clip_drift_better_than_any_single_clip() -> None:
     assert position < single_position
 
 
+def _scaled(poses: dict[str, np.ndarray], scale: float) -> dict[str, np.ndarray]:
+    """The poses with their positions scaled about their mean (a model of the right shape, too small or large)."""
+    centre = np.mean([pose[:3, 3] for pose in poses.values()], axis=0)
+    scaled = {}
+    for name, pose in poses.items():
+        scaled[name] = pose.copy()
+        scaled[name][:3, 3] = centre + scale * (pose[:3, 3] - centre)
+    return scaled
+
+
+def test_fit_with_scale_recovers_a_known_similarity() -> None:
+    """A model 0.15 % too small and misplaced comes back exactly with `fit_scale`; the rigid fit keeps the
+    scale, so its positions stay off by up to 0.15 % of the 100 m drive's half length."""
+    truth = _drive()
+    offset = _pose(np.radians([0.1, -0.05, 0.3]), np.array([0.4, -0.3, 0.1]))
+    small = _moved(_scaled(truth, 1 / 1.0015), offset)
+    fit = fit_gauge(small, truth, SIGMAS, fit_scale=True)
+    assert fit is not None and fit.scale == pytest.approx(1.0015, abs=1e-9)
+    assert fit.to_json()["scale"] == fit.scale
+    position, rotation = _errors({n: fit.move_pose(p) for n, p in small.items()}, truth)
+    assert position < 1e-6 and rotation < 1e-6
+    rigid = fit_gauge(small, truth, SIGMAS)
+    assert rigid is not None and rigid.scale == 1.0
+    rigid_position, rigid_rotation = _errors({n: rigid.move_pose(p) for n, p in small.items()}, truth)
+    assert 0.02 < rigid_position < 0.1 and rigid_rotation < 1e-6
+
+
+def test_apply_and_move_pose_agree_on_a_similarity() -> None:
+    """A scaled gauge moves a model's point (apply_gauge) and a pose at that point (move_pose) to the same
+    place, and the moved pose keeps a proper rotation."""
+    truth = _drive(clips=1, frames=5)
+    fit = fit_gauge(_scaled(truth, 0.99), truth, SIGMAS, fit_scale=True)
+    assert fit is not None
+    model = pycolmap.Reconstruction()
+    world_from_cam = _pose(np.radians([1.0, 2.0, 30.0]), np.array([3.0, -4.0, 1.5]))
+    point_id = model.add_point3D(world_from_cam[:3, 3], pycolmap.Track())
+    apply_gauge(model, fit.new_from_old)
+    moved = fit.move_pose(world_from_cam)
+    np.testing.assert_allclose(model.point3D(point_id).xyz, moved[:3, 3], atol=1e-9)
+    np.testing.assert_allclose(moved[:3, :3] @ moved[:3, :3].T, np.eye(3), atol=1e-12)
+
+
 def test_fit_needs_three_shared_poses() -> None:
     truth = _drive(clips=1, frames=2)
     assert fit_gauge(truth, truth, SIGMAS) is None
@@ -131,3 +173,29 @@ def test_reconstruction_is_placed_on_the_given_odometry(sfm_inputs: SfmInputs) -
     centre = np.mean([p.xyz for p in moved.reconstruction.points3D.values()], axis=0)
     plain_centre = np.mean([p.xyz for p in plain.reconstruction.points3D.values()], axis=0)
     np.testing.assert_allclose(centre - plain_centre, shift, atol=0.02)
+
+
+@pytest.mark.slow
+def test_scale_gauge_takes_the_scale_of_the_odometry(sfm_inputs: SfmInputs) -> None:
+    """With `gauge_fit_scale` the model follows the odometry's scale: against odometry 0.3 % larger (scaled
+    about its centre) the fit's scale and the spread of the refined poses both grow by 0.3 %."""
+    views = sfm_inputs.longest_drive()
+    centre = np.mean([v.world_from_ego[:3, 3] for v in views], axis=0)
+    larger = {}
+    for view in views:
+        larger[view.name] = view.world_from_ego.copy()
+        larger[view.name][:3, 3] = centre + 1.003 * (view.world_from_ego[:3, 3] - centre)
+    config = SfmConfig.preset("rigid", gauge_fit_scale=True)
+
+    def spread_and_scale(odometry: dict[str, np.ndarray] | None) -> tuple[float, float]:
+        result = reconstruct_views(
+            views, sfm_inputs.database, sfm_inputs.image_dir, config, odometry=odometry
+        )
+        positions = np.array([pose[:3, 3] for pose in result.world_from_ego.values()])
+        radius = float(np.linalg.norm(positions - positions.mean(axis=0), axis=1).mean())
+        return radius, result.report["gauge"]["scale"]
+
+    radius, scale = spread_and_scale(None)
+    larger_radius, larger_scale = spread_and_scale(larger)
+    assert larger_scale / scale == pytest.approx(1.003, abs=1e-5)
+    assert larger_radius / radius == pytest.approx(1.003, abs=1e-5)
