@@ -15,10 +15,12 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
                       re-triangulation and global BA of the merged model
     (f) no priors     (e) without WIGO's odometry and position priors in BA (do they help?)
     (g) previous      (e) as it was before the speed-up: every BA run to full tolerance, two merge passes
-    (h) scale gauge   (e) with the gauge fit scaling the model too (`SfmConfig.gauge_fit_scale`)
-Guided models are placed in the global frame by the gauge fit to all their WIGO poses (`sfm.gauge`). Every
-guided row also gives "gauge_free" errors: after the best similarity to the true cameras, as (a) is
-measured, i.e. the model's shape without the global placement it inherits from odometry. Rows give wall
+    (h) rigid gauge   (e) with the rigid gauge fit of before (`SfmConfig.gauge_fit_scale` off; results files
+                      made before the switch have (e) rigid and "h_parallel_scale_gauge" scaled instead)
+Guided models are placed in the global frame by the gauge fit to all their WIGO poses (`sfm.gauge`; a
+similarity unless the row says rigid). Every guided row also gives "gauge_free" errors: after the best
+similarity to the true cameras, as (a) is measured, i.e. the model's shape without the global placement it
+inherits from odometry. Rows give wall
 and CPU seconds (this process and its workers): on a shared machine compare CPU seconds.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
@@ -287,14 +289,14 @@ def measure_all(
                 scratch / "f",
                 SfmConfig.preset("iterative", odometry_priors=False),
             ),
-            "h_parallel_scale_gauge": lambda: run_parallel(
+            "h_parallel_rigid_gauge": lambda: run_parallel(
                 clips,
                 database,
                 image_dir,
                 truth,
                 args.workers,
                 scratch / "h",
-                SfmConfig.preset("iterative", gauge_fit_scale=True),
+                SfmConfig.preset("iterative", gauge_fit_scale=False),
             ),
             "g_parallel_previous_merge": lambda: run_parallel(
                 clips,

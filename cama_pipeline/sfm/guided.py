@@ -149,7 +149,8 @@ def anchor(
     config: SfmConfig,
 ) -> tuple[dict[str, Any] | None, dict[str, np.ndarray]]:
     """Move the model and its refined ego poses onto the odometry poses (see `cama_pipeline.sfm.gauge`);
-    the fit's report (None when too few poses are shared) and the moved poses."""
+    the fit's report (None when too few poses are shared) and the moved poses. A scaled fit scales the whole
+    model, the camera-to-rig translations of its rigs included."""
     sigmas = GaugeSigmas(
         config.gauge_position_sigma_m, config.gauge_tilt_sigma_deg, config.gauge_heading_sigma_deg
     )
