@@ -45,7 +45,7 @@ class SfmConfig:
     anchor_rotation_sigma_deg: float = 2.0
     """Odometry prior: sigma of each keyframe's absolute orientation (the anchor against free roll)."""
     anchor_gauge: bool = True
-    """After BA, move the model rigidly onto all its odometry poses at once (weighted least squares, see
+    """After BA, move the model onto all its odometry poses at once (weighted least squares, see
     `cama_pipeline.sfm.gauge`): WIGO's slow per-clip drift averages out instead of being inherited."""
     gauge_fit_scale: bool = True
     """Gauge fit: scale the model too (a similarity onto the odometry; see `cama_pipeline.sfm.gauge`). The

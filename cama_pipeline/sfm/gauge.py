@@ -6,8 +6,9 @@ clip (decimetres, nearly constant over a clip, different between clips), so the 
 *all* odometry poses averages it over clips. The rigid fit is a rotation about the model's centre and a
 shift, by weighted least squares on camera positions and orientations, the orientations split into tilt
 (well known from gravity) and heading (poorly known). With `fit_scale` (the pipeline's default,
-`SfmConfig.gauge_fit_scale`) it also scales the model about its centre: the images fix each clip's scale only to about 0.1 % with this rig (and bias it the same
-way in every clip), while the odometry's scale error differs per clip and averages out over a site's clips.
+`SfmConfig.gauge_fit_scale`) it also scales the model about its centre: the images fix each clip's scale
+only to about 0.1 % with this rig (and bias it the same way in every clip), while the odometry's scale
+error differs per clip and averages out over a site's clips.
 """
 
 import logging
