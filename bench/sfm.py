@@ -20,8 +20,8 @@ guided methods start from are measured too, giving the accuracy gain; the speed 
 Guided models are placed in the global frame by the gauge fit to all their WIGO poses (`sfm.gauge`; a
 similarity unless the row says rigid). Every guided row also gives "gauge_free" errors: after the best
 similarity to the true cameras, as (a) is measured, i.e. the model's shape without the global placement it
-inherits from odometry. Rows give wall
-and CPU seconds (this process and its workers): on a shared machine compare CPU seconds.
+inherits from odometry. Rows give wall and CPU seconds (this process and its workers): on a shared machine
+compare CPU seconds.
 
 Usage: .venv/bin/python bench/sfm.py [--site data/synthetic/default] [--scenes scene-0001 scene-0002]
        [--workers 2] [--methods abcdefg] [--incremental-timeout-s 900]
