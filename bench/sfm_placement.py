@@ -23,7 +23,7 @@ from cama_pipeline.io import atomic_write_json
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.baseline import pose_errors
 from cama_pipeline.sfm.config import SfmConfig
-from cama_pipeline.sfm.gauge import GaugeSigmas, fit_gauge
+from cama_pipeline.sfm.gauge import fit_gauge
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.sfm.merge import robust_similarity
 
@@ -60,11 +60,7 @@ def scaled(poses: Poses, scale: float) -> Poses:
 
 def placed(ego: Poses, wigo_ego: Poses, views: dict[str, CameraView], fit_scale: bool) -> Poses:
     """Camera poses of `ego` after the pipeline's gauge fit onto WIGO (rigid, or scaled)."""
-    config = SfmConfig()
-    sigmas = GaugeSigmas(
-        config.gauge_position_sigma_m, config.gauge_tilt_sigma_deg, config.gauge_heading_sigma_deg
-    )
-    fit = fit_gauge(ego, wigo_ego, sigmas, fit_scale=fit_scale)
+    fit = fit_gauge(ego, wigo_ego, SfmConfig().gauge_sigmas(), fit_scale=fit_scale)
     if fit is None:
         raise SystemExit("fewer than 3 poses shared with WIGO")
     return {name: fit.move_pose(pose) @ views[name].ego_from_cam for name, pose in ego.items()}

@@ -4,6 +4,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
+from cama_pipeline.sfm.gauge import GaugeSigmas
+
 PresetName = Literal["plain", "rigid", "iterative"]
 LossName = Literal["cauchy", "huber", "trivial"]
 
@@ -141,6 +143,12 @@ class SfmConfig:
             raise ValueError(f"SfmConfig.loss must be cauchy, huber or trivial, got {self.loss!r}")
         if self.refine_extrinsics and not self.rigid:
             raise ValueError("SfmConfig.refine_extrinsics needs rigid=True (plain BA has no rig)")
+
+    def gauge_sigmas(self) -> GaugeSigmas:
+        """The weights of the gauge fit (see `cama_pipeline.sfm.gauge`)."""
+        return GaugeSigmas(
+            self.gauge_position_sigma_m, self.gauge_tilt_sigma_deg, self.gauge_heading_sigma_deg
+        )
 
     @classmethod
     def preset(cls, name: str, **overrides: object) -> "SfmConfig":

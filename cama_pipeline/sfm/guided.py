@@ -18,7 +18,7 @@ import pycolmap
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
-from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
+from cama_pipeline.sfm.gauge import apply_gauge, fit_gauge
 from cama_pipeline.sfm.iterative import iterative_bundle_adjustment, single_pass
 from cama_pipeline.sfm.model import GuidedModel, build_model, clip_label, matrix_from_rigid
 from cama_pipeline.sfm.triangulate import SeedPoints, seed_points, triangulate_all
@@ -151,10 +151,7 @@ def anchor(
     """Move the model and its refined ego poses onto the odometry poses (see `cama_pipeline.sfm.gauge`);
     the fit's report (None when too few poses are shared) and the moved poses. A scaled fit scales the whole
     model, the camera-to-rig translations of its rigs included."""
-    sigmas = GaugeSigmas(
-        config.gauge_position_sigma_m, config.gauge_tilt_sigma_deg, config.gauge_heading_sigma_deg
-    )
-    fit = fit_gauge(world_from_ego, odometry, sigmas, fit_scale=config.gauge_fit_scale)
+    fit = fit_gauge(world_from_ego, odometry, config.gauge_sigmas(), fit_scale=config.gauge_fit_scale)
     if fit is None:
         return None, world_from_ego
     apply_gauge(reconstruction, fit.new_from_old)
