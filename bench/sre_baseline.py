@@ -5,20 +5,24 @@
     coarse logged ego poses and the flat-ground assumption (z = ego height), as the paper's nuScenes row.
 Two more rows separate the two causes: the true map with coarse poses, the baseline map with true poses.
 
+Each row records `sre_ref_px`, the SRE at 960x540 (the paper's and CAMA's scale; the figure README quotes), beside
+`sre_px` in the images' own pixels (512 wide on the synthetic sites), precision, recall and F1.
+
 Usage: .venv/bin/python bench/sre_baseline.py [--site data/synthetic/default] [--boundaries]
-Prints the figures and writes them to bench/results/sre_baseline.json.
+Prints the figures (SRE at 960x540 first) and writes them and the command to bench/results/sre_baseline.json.
 """
 
 import argparse
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
 from rich.console import Console
 
 from cama_pipeline.data import load_dataset
-from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate import SreConfig, SreSummary, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.command import report_table
 from cama_pipeline.semantics import Semantic
 
@@ -57,12 +61,22 @@ def main() -> None:
             "seconds": round(seconds, 1),
         }
         del figures[name]["config"]
-        print(f"{name}: " + ", ".join(f"{k} {_fmt(v)}" for k, v in vars(report.overall).items()))
+        print(headline(name, report.overall))
     figures["config"] = report.to_json(with_images=False)["config"]
+    figures["command"] = "python bench/sre_baseline.py " + " ".join(sys.argv[1:])
     figures["machine"] = {"python": platform.python_version()}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(figures, indent=2) + "\n")
     print(f"written {args.out}")
+
+
+def headline(name: str, summary: SreSummary) -> str:
+    """One row's figures, SRE at 960x540 (`sre_ref_px`) first, the images' own pixels after it."""
+    return (
+        f"{name}: SRE {_fmt(summary.sre_ref_px)} px at 960x540 (sre_ref_px; {_fmt(summary.sre_px)} px at the"
+        f" images' own width), precision {_fmt(summary.precision)}, recall {_fmt(summary.recall)},"
+        f" F1 {_fmt(summary.f1)}, images {summary.images}"
+    )
 
 
 def _fmt(value: object) -> str:

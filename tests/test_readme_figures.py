@@ -1,0 +1,386 @@
+"""README's figures agree with the results files the benchmarks wrote (issue 20, point 6).
+
+Each checked table is found by its header and by the paragraph above it, which must name the results file and the
+bench script that wrote it. Every figure is compared at the precision README prints it: the JSON value is
+formatted with as many decimals as the figure in the cell has, figure by figure in the order the cell shows them.
+SRE is checked at 960x540 (`sre_ref_px`), the paper's and CAMA's scale.
+"""
+
+import json
+import re
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+RESULTS = ROOT / "bench" / "results"
+
+NUMBER = re.compile(r"(?<![\w.])-?\d[\d,]*(?:\.\d+)?")
+"""A figure as README prints it: digits with thousands commas and decimals, not glued to a word (p95, c1)."""
+RESULTS_PATH = re.compile(r"bench/results/[\w./-]*[\w/]")
+
+Expected = float | int | None
+"""A figure's value; None skips that figure of the cell."""
+
+
+@dataclass(frozen=True)
+class MarkdownTable:
+    """A README table: its header cells, its rows by first cell, and the paragraph right above it."""
+
+    header: list[str]
+    rows: dict[str, list[str]]
+    context: str
+
+
+@cache
+def readme_text() -> str:
+    return README.read_text(encoding="utf-8")
+
+
+@cache
+def results(name: str) -> dict[str, Any]:
+    return json.loads((RESULTS / name).read_text(encoding="utf-8"))
+
+
+def _cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+
+def tables(text: str) -> list[MarkdownTable]:
+    """Every pipe table of `text`, with the paragraph (lines up to the previous blank line) above it."""
+    lines = text.splitlines()
+    found, i = [], 0
+    while i < len(lines):
+        if not lines[i].startswith("|"):
+            i += 1
+            continue
+        start = i
+        while i < len(lines) and lines[i].startswith("|"):
+            i += 1
+        block = lines[start:i]
+        above = start - 1
+        while above >= 0 and not lines[above].strip():
+            above -= 1
+        top = above
+        while top >= 0 and lines[top].strip():
+            top -= 1
+        rows = {_cells(line)[0]: _cells(line) for line in block[2:]}
+        found.append(MarkdownTable(_cells(block[0]), rows, "\n".join(lines[top + 1 : above + 1])))
+    return found
+
+
+def table(first_header: str, context_has: str = "") -> MarkdownTable:
+    """The one table whose first header cell is `first_header` and whose paragraph contains `context_has`."""
+    matches = [t for t in tables(readme_text()) if t.header[0] == first_header and context_has in t.context]
+    assert len(matches) == 1, f"README: {len(matches)} tables headed {first_header!r} after {context_has!r}"
+    return matches[0]
+
+
+def figures(cell: str) -> list[str]:
+    return [token.replace(",", "") for token in NUMBER.findall(cell)]
+
+
+def assert_shows(cell: str, expected: list[Expected], where: str) -> None:
+    """The cell's first figures are the expected values, each rounded as README prints it."""
+    shown = figures(cell)
+    assert len(shown) >= len(expected), f"{where}: {cell!r} shows {shown}, expected {len(expected)} figures"
+    for token, value in zip(shown, expected, strict=False):
+        if value is None:
+            continue
+        decimals = len(token.split(".")[1]) if "." in token else 0
+        assert f"{value:.{decimals}f}" == token, (
+            f"{where}: README shows {token} in {cell!r}; the results file says {value!r}"
+        )
+
+
+def row(t: MarkdownTable, label: str) -> list[str]:
+    assert label in t.rows, f"README table after {t.context[:60]!r}: no row {label!r}"
+    return t.rows[label]
+
+
+def assert_names_source(t: MarkdownTable, results_file: str, script: str) -> None:
+    assert f"bench/results/{results_file}" in t.context, (
+        f"table after {t.context!r} does not name {results_file}"
+    )
+    assert script in t.context, f"table after {t.context!r} does not name the command ({script})"
+
+
+def test_every_results_file_named_exists() -> None:
+    named = {m.group(0).rstrip("/.") for m in RESULTS_PATH.finditer(readme_text())}
+    assert named
+    missing = sorted(p for p in named if not (ROOT / p).exists())
+    assert not missing, f"README names results files that do not exist: {missing}"
+
+
+SRE_ROWS_BASELINE = {
+    "ground-truth 3D map, true poses": "a_gt3d_true_poses",
+    "baseline 2D map (no z, offset, rule-based divider), logged coarse poses": "b_baseline2d_coarse_poses",
+}
+SRE_ROWS_END_TO_END = {
+    "(a) true 3D map, true poses": "a_truth",
+    "(b) baseline 2D map, coarse poses": "b_baseline_2d",
+    "(c1) pipeline proposals as they are, SfM poses": "c1_proposals",
+    "(c2) pipeline after the simulated correction pass, SfM poses": "c2_corrected",
+}
+
+
+def _sre_figures(summary: dict[str, Any]) -> list[Expected]:
+    return [summary["sre_ref_px"], summary["precision"], summary["recall"], summary["f1"]]
+
+
+def test_sre_baseline_table_at_960x540() -> None:
+    t = table("map (default synthetic site)")
+    assert_names_source(t, "sre_baseline.json", "bench/sre_baseline.py")
+    assert "960x540" in t.header[1] and "sre_ref_px" in t.header[1]
+    recorded = results("sre_baseline.json")
+    for label, key in SRE_ROWS_BASELINE.items():
+        cells = row(t, label)
+        assert_shows(" | ".join(cells[1:5]), _sre_figures(recorded[key]["overall"]), f"SRE row {label!r}")
+
+
+def test_end_to_end_sre_table_at_960x540() -> None:
+    t = table("map", "SRE")
+    assert_names_source(t, "end_to_end.json", "bench/end_to_end.py")
+    assert "960x540" in t.header[1] and "sre_ref_px" in t.header[1]
+    recorded = results("end_to_end.json")["sre"]
+    for label, key in SRE_ROWS_END_TO_END.items():
+        cells = row(t, label)
+        assert_shows(" | ".join(cells[1:5]), _sre_figures(recorded[key]), f"end-to-end SRE row {label!r}")
+
+
+VMA_ROWS = {
+    "rule-based": "rule_based",
+    "learned v0002, rescored (shipped)": "learned",
+    "learned v0002, its own points": "learned_refined",
+    "free-query MapTR v0001": "learned_free",
+}
+
+
+def test_vma_chamfer_ap_table() -> None:
+    t = table("proposer")
+    assert_names_source(t, "vma.json", "bench/vma.py")
+    recorded = results("vma.json")["results"]
+    for label, key in VMA_ROWS.items():
+        expected = [recorded["clean"][key]["mean_ap"], recorded["degraded"][key]["mean_ap"]]
+        assert_shows(" | ".join(row(t, label)[1:3]), expected, f"VMA row {label!r}")
+
+
+def test_vma_confidence_bins() -> None:
+    bins = results("vma.json")["results"]["degraded"]["learned"]["confidence_bins"]
+    shown = ", ".join(f"{b['precision']:.2f}" for b in bins)
+    assert f"({shown} for [0, .25)" in " ".join(readme_text().split())
+
+
+SURFACE_ROWS = {
+    "true": "ground_truth",
+    "SfM": "sfm",
+    "WIGO": "wigo",
+}
+
+
+def _surface_figures(run: dict[str, Any]) -> list[Expected]:
+    iou = run["iou"]
+    return [
+        run["elevation_rmse_m"] * 100,
+        iou["road"],
+        iou["curb"],
+        iou["lane_marking"],
+        iou["crosswalk"],
+        run["psnr_db"],
+        run["seconds"]["elevation"],
+        run["seconds"]["observe"],
+    ]
+
+
+def test_surface_table() -> None:
+    t = table("poses", "bench/surface.py")
+    assert_names_source(t, "surface.json", "bench/surface.py")
+    recorded = results("surface.json")
+    by_poses = {run["poses"]: run for run in recorded["runs"]}
+    for label, poses in SURFACE_ROWS.items():
+        assert_shows(
+            " | ".join(row(t, label)[1:]), _surface_figures(by_poses[poses]), f"surface row {label!r}"
+        )
+    baseline = recorded["baseline_no_prior_no_gate_no_curb_height_gt_poses"]
+    label = "true, without the curvature prior, SfM gate and curb-height vote"
+    assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(baseline), f"surface row {label!r}")
+
+
+SFM_ROWS = {
+    "(a) pycolmap incremental mapping": "a_incremental",
+    "(b) guided + plain BA": "b_plain",
+    "(c) + rigid BA": "c_rigid",
+    "(d) + iterative BA": "d_iterative",
+    "(e) parallel clips + merge": "e_parallel",
+}
+
+
+def _sfm_figures(method: dict[str, Any], with_shape: bool = True) -> list[Expected]:
+    """Wall / CPU s, position / rotation, reprojection, registered and, where README shows it, shape only."""
+    figures = [method["seconds"], method["cpu_seconds"], method["position_cm"], method["rotation_deg"]]
+    figures += [method["reprojection_error_px"], method["registered_ratio"]]
+    return figures + [method["gauge_free"]["position_cm"]] if with_shape else figures
+
+
+@pytest.mark.parametrize(
+    ("site", "run_key", "h_file"),
+    [
+        ("default", "default:scene-0001,scene-0002,scene-0003", "sfm_scale_gauge.json"),
+        (
+            "large",
+            "large:scene-0001,scene-0002,scene-0003,scene-0004,scene-0005,scene-0006",
+            "sfm_large_scale_gauge.json",
+        ),
+    ],
+)
+def test_sfm_tables(site: str, run_key: str, h_file: str) -> None:
+    t = table("method", f"bench/sfm.py --site data/synthetic/{site}")
+    assert_names_source(t, "sfm.json", "bench/sfm.py")
+    methods = results("sfm.json")["runs"][run_key]["methods"]
+    for label, key in SFM_ROWS.items():
+        expected = _sfm_figures(methods[key], with_shape=key != "a_incremental")  # (a): no shape-only figure
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"sfm {site} row {label!r}")
+    wigo = methods["wigo"]
+    assert_shows(
+        " | ".join(row(t, "WIGO coarse poses")[2:]),
+        [wigo["position_cm"], wigo["rotation_deg"], wigo["registered_ratio"]],
+        f"sfm {site} WIGO row",
+    )
+    h_row = next(label for label in t.rows if label.startswith("(h)"))
+    h = results(h_file)["runs"][run_key]["methods"]["h_parallel_scale_gauge"]
+    assert_shows(
+        " | ".join(row(t, h_row)[1:]), _sfm_figures(h, with_shape=site == "large"), f"sfm {site} (h)"
+    )
+
+
+def test_sfm_placement_table() -> None:
+    t = table("site", "bench/sfm_placement.py")
+    assert_names_source(t, "sfm_placement.json", "bench/sfm_placement.py")
+    for site, run in results("sfm_placement.json")["runs"].items():
+        rows = run["rows"]
+        clips = run["clip_scale_to_truth"].values()
+        expected = [
+            rows["as_written"]["position_cm"],
+            rows["model_at_true_scale_rigid_gauge"]["position_cm"],
+            rows["true_shape_rigid_gauge"]["position_cm"],
+            rows["true_shape_scaled_gauge"]["position_cm"],
+            run["model_scale_to_truth"],
+            min(clips),
+            max(clips),
+        ]
+        assert_shows(" | ".join(row(t, site)[1:]), expected, f"sfm placement row {site!r}")
+
+
+PAIRS_ROWS = {
+    "exhaustive": "exhaustive",
+    "sequential": "sequential",
+    "sequential + HSP (40 m, 40 % overlap, repeats)": "sequential+hsp",
+}
+
+
+def test_pairs_table() -> None:
+    t = table("strategy")
+    assert_names_source(t, "pairs.json", "bench/pairs.py")
+    sites = results("pairs.json")["sites"]
+    for label, key in PAIRS_ROWS.items():
+        expected: list[Expected] = []
+        for site in ("data/synthetic/default", "data/synthetic/large"):
+            strategy = sites[site]["site-001"][key]
+            cpu = strategy["estimated_matching_cpu_seconds"]["blas"]
+            expected += [
+                strategy["pairs"],
+                strategy["share_of_exhaustive"] * 100,
+                strategy["recall"]["mutual>=0.5"],
+            ]
+            expected += [cpu] + ([cpu / 3600] if key == "exhaustive" and site.endswith("large") else [])
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"pairs row {label!r}")
+
+
+API_ROWS = {
+    "SQLite, current": ("sqlite", False),
+    "SQLite, commit 1ddf7a8": ("sqlite", True),
+    "PostgreSQL, current": ("postgresql", False),
+    "PostgreSQL, commit 1ddf7a8": ("postgresql", True),
+}
+
+
+def test_api_load_table() -> None:
+    t = table("server")
+    assert_names_source(t, "api_load.json", "bench/api_load.py")
+    recorded = results("api_load.json")
+    for label, (database, baseline) in API_ROWS.items():
+        server = recorded[database]["baseline"] if baseline else recorded[database]
+        paced, saturation = server["paced"], server["saturation"]
+        expected = [
+            paced["p50_ms"],
+            paced["p99_ms"],
+            saturation["throughput_edits_per_s"],
+            paced["server_cpu_ms_per_edit"],
+        ]
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"API row {label!r}")
+
+
+def test_end_to_end_measures_table() -> None:
+    t = table("measure")
+    assert_names_source(t, "end_to_end.json", "bench/end_to_end.py")
+    e2e = results("end_to_end.json")
+    stages, reports = e2e["stage_seconds"], e2e["stage_reports"]
+    stage_figures = [stages[s] for s in ("wigo", "keyframes", "sites", "pairs")] + [stages["features"] / 60]
+    stage_figures += [reports["features"]["extract"], reports["features"]["match"], stages["sfm"]]
+    stage_figures += [reports["sfm"]["clips"], reports["sfm"]["merge"], stages["surface"], stages["propose"]]
+    assert_shows(row(t, "time per stage (first run)")[1], stage_figures, "end-to-end time per stage")
+    wigo, sfm = e2e["poses"]["wigo"], e2e["poses"]["sfm"]
+    assert_shows(
+        row(t, "camera poses, absolute")[1],
+        [wigo["position_cm"], wigo["rotation_deg"], sfm["position_cm"], sfm["rotation_deg"]],
+        "end-to-end poses",
+    )
+    assert_shows(
+        row(t, "camera poses, shape only")[1],
+        [
+            wigo["gauge_free_position_cm"],
+            wigo["gauge_free_rotation_deg"],
+            sfm["gauge_free_position_cm"],
+            sfm["gauge_free_rotation_deg"],
+        ],
+        "end-to-end poses, shape only",
+    )
+    elevation = e2e["elevation"]
+    assert_shows(
+        row(t, "elevation (SfM poses + points), observed road cells")[1],
+        [elevation["rmse_cm"], elevation["median_abs_cm"], elevation["p95_abs_cm"]],
+        "end-to-end elevation",
+    )
+    observed, everything = e2e["proposals_ap"]["observed_truth"], e2e["proposals_ap"]["all_truth"]
+    classes = observed["class_ap"]
+    assert_shows(
+        row(t, "VMA proposals on the reconstructed rasters, Chamfer mAP")[1],
+        [
+            observed["mean_ap"],
+            classes["divider"],
+            classes["ped_crossing"],
+            classes["boundary"],
+            everything["mean_ap"],
+        ],
+        "end-to-end proposals",
+    )
+    annotator = e2e["annotator"]
+    counts = annotator["corrected"]["counts"]
+    assert_shows(
+        row(t, "simulated annotator, person-hours per km of observed road")[1],
+        [
+            annotator["scratch"]["hours_per_km"],
+            annotator["corrected"]["hours_per_km"],
+            annotator["speed_up"],
+            counts["accept"],
+            counts["fix"],
+            counts["reject"],
+            counts["drawn"],
+            counts["gaps_drawn"],
+        ],
+        "end-to-end annotator",
+    )
