@@ -1,4 +1,12 @@
-"""Fixtures shared by every test folder: a tiny synthetic site, generated once per session, read-only."""
+"""Fixtures shared by every test folder: a tiny synthetic site, generated once per session, read-only.
+
+Missing dependencies (tests/dependency_policy.py, registered here as a plugin): a test that needs something not
+installed (PostgreSQL's server programs, Chromium, a Python package) skips with a reason naming it, and fails
+under CI (`CI=true`), since `make test` installs all of them. Under CI no test may skip at all: every skip of the
+suite is one for a missing dependency (there is no skip for another reason, and no `skipif`), so the plugin
+reports any skip under CI as a failure, a safety net for a skip that does not go through the policy's helpers. A
+future skip for another reason would have to be allowed there explicitly.
+"""
 
 from dataclasses import dataclass
 from pathlib import Path
@@ -9,6 +17,8 @@ from cama_pipeline.pipeline import PipelineConfig, PipelineResult
 from cama_pipeline.pipeline import run as run_pipeline
 from cama_pipeline.synthetic.config import SynthConfig, preset
 from cama_pipeline.synthetic.generate import SynthResult, run
+
+pytest_plugins = ["dependency_policy"]
 
 
 @dataclass(frozen=True)

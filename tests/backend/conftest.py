@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 from backend_helpers import GEOREFERENCE, PASSWORD, divider, login, register_site
+from dependency_policy import missing
 from fastapi.testclient import TestClient
 from postgres_server import PostgresServer, find_bin_dir
 
@@ -17,10 +18,13 @@ from app.backend.main import create_app
 
 @pytest.fixture(scope="session")
 def postgres() -> Iterator[PostgresServer]:
-    """A PostgreSQL server for the session; skipped (with the reason shown) when PostgreSQL is not installed."""
+    """A PostgreSQL server for the session; skipped with the reason, or failed under CI, when not installed."""
     bin_dir = find_bin_dir()
     if bin_dir is None:
-        pytest.skip("PostgreSQL server programs (initdb, pg_ctl) not installed")
+        missing(
+            "PostgreSQL server programs (initdb, pg_ctl on PATH or in /usr/lib/postgresql/*/bin)",
+            "`make test` installs them: its postgresql target installs Debian's postgresql package",
+        )
     server = PostgresServer(bin_dir)
     server.start()
     yield server

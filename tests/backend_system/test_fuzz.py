@@ -10,6 +10,7 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
+from dependency_policy import require_module
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
@@ -18,7 +19,7 @@ from system_helpers import ADMIN, GEOREFERENCE, ORIGIN_XY, PASSWORD, divider_poi
 from app.backend.config import Settings
 from app.backend.main import create_app
 
-schemathesis = pytest.importorskip("schemathesis")
+schemathesis = require_module("schemathesis")
 
 MAX_EXAMPLES = 25
 """Examples per operation; about 20 operations keep the run well under a minute."""

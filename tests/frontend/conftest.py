@@ -3,7 +3,8 @@
 from collections.abc import Iterator
 
 import pytest
-from editor_browser_helpers import SeededServer, launch_chromium, seeded_server
+from dependency_policy import require_program
+from editor_browser_helpers import CHROMIUM_PATH, SeededServer, launch_chromium, seeded_server
 from playwright.sync_api import Browser, Page, ViewportSize, expect, sync_playwright
 from system_helpers import free_port
 
@@ -26,7 +27,12 @@ def seeded(tmp_path_factory: pytest.TempPathFactory, review_url: str) -> Iterato
 
 @pytest.fixture(scope="session")
 def browser() -> Iterator[Browser]:
-    """Headless Debian Chromium."""
+    """Headless Debian Chromium; skipped with the reason, or failed under CI, when it is not installed."""
+    require_program(
+        CHROMIUM_PATH,
+        "the browser tests drive it through Playwright",
+        "`make test` installs it: its chromium target installs Debian's chromium package",
+    )
     with sync_playwright() as playwright:
         chromium = launch_chromium(playwright)
         yield chromium

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from dependency_policy import require_module
 
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.executor import LocalExecutor, RayExecutor, make_executor
@@ -29,7 +30,7 @@ def test_unknown_executor_or_no_workers_is_refused() -> None:
 @pytest.fixture(scope="module")
 def local_ray() -> object:
     """One small local Ray instance for the module (start-up takes 10-20 s)."""
-    ray = pytest.importorskip("ray")
+    ray = require_module("ray")
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield ray
     ray.shutdown()
