@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
 
+from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.site.workspace import default_workspace, read_sites_index, sites_index_path
 
 logger = logging.getLogger(__name__)
@@ -21,7 +22,28 @@ STAGES = ("wigo", "keyframes", "sites", "pairs", "features", "sfm", "surface", "
 
 
 class PipelineError(RuntimeError):
-    """A stage failed; the message names the stage and its error."""
+    """A stage failed; the message names the stage and its error, and says whether the input was at fault."""
+
+    def __init__(self, stage: str, err: Exception, *, bad_input: bool) -> None:
+        self.stage = stage
+        self.bad_input = bad_input
+        """The data set or a file the caller named (a checkpoint) is missing or unreadable; False: the stage's
+        own work failed (e.g. every SfM clip failed, no road points to fit)."""
+        what = "stopped on bad input" if bad_input else "failed"
+        super().__init__(f"stage {stage} {what}: {err}")
+
+
+def _is_bad_input(stage: str, err: Exception) -> bool:
+    """Whether a stage's error is the caller's input (the data set, a named file or checkpoint), not its work.
+
+    The workspace is the path's own output, so an error about it (WorkspaceError) is a stage failure here."""
+    if isinstance(err, DatasetError | FileNotFoundError):
+        return True
+    if stage == "propose":
+        from models.vma.checkpoint import CheckpointError  # imported by the propose stage already
+
+        return isinstance(err, CheckpointError)
+    return False
 
 
 @dataclass(frozen=True)
@@ -34,7 +56,9 @@ class PipelineConfig:
     max_features: int | None = None
     """SIFT keypoints per image; None keeps the features stage's default."""
     proposer: Literal["learned", "rule"] = "learned"
-    checkpoint: Path = Path("models/vma/checkpoints")
+    checkpoint: Path | None = None
+    """VMA checkpoint registry or version folder for the learned proposer; None: the model shipped with the
+    package (`models.vma.shipped`), found from any working directory."""
     surface_poses: Literal["sfm", "wigo"] = "sfm"
 
 
@@ -45,6 +69,8 @@ class PipelineResult:
     workspace: Path
     seconds: dict[str, float] = field(default_factory=dict)
     proposals: dict[str, Path] = field(default_factory=dict)
+    checkpoint: Path | None = None
+    """The VMA checkpoint version folder the learned proposer used (None: rule-based, or not reached)."""
 
 
 def proposals_path(workspace: Path, site_id: str) -> Path:
@@ -93,24 +119,21 @@ def _stage_calls(
     }
 
 
-def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool) -> dict[str, Path]:
-    """VMA proposals for every site from its reconstructed rasters."""
+def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool, result: PipelineResult) -> None:
+    """VMA proposals for every site from its reconstructed rasters, recorded in `result`."""
     from models.vma.propose import propose
-    from models.vma.rule_based import RuleConfig
 
-    out: dict[str, Path] = {}
     for site in read_sites_index(sites_index_path(workspace))["sites"]:
         site_id = site["site_id"]
-        result = propose(
+        proposed = propose(
             surface_rasters(workspace, site_id),
             proposals_path(workspace, site_id),
             proposer=config.proposer,
             checkpoint=config.checkpoint if config.proposer == "learned" else None,
-            rule=RuleConfig(boundary_source="road_edge"),  # reconstructed rasters: curb labels are smeared
             overwrite=overwrite,
         )
-        out[site_id] = result.out
-    return out
+        result.proposals[site_id] = proposed.out
+        result.checkpoint = proposed.checkpoint
 
 
 def run(
@@ -136,11 +159,11 @@ def run(
         started = time.perf_counter()
         try:
             if stage == "propose":
-                result.proposals = _propose_sites(workspace, config, overwrite)
+                _propose_sites(workspace, config, overwrite, result)
             else:
                 calls[stage]()
         except (ValueError, FileNotFoundError, RuntimeError) as err:
-            raise PipelineError(f"stage {stage} failed: {err}") from err
+            raise PipelineError(stage, err, bad_input=_is_bad_input(stage, err)) from err
         result.seconds[stage] = time.perf_counter() - started
         logger.info("stage %s done in %.1f s", stage, result.seconds[stage])
     return result

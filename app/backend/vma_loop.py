@@ -7,7 +7,10 @@ used, so this module and `jobs/vma.py` import it inside their functions: `cama s
 
 import logging
 from collections.abc import Collection
+from dataclasses import replace
 from pathlib import Path
+
+from app.backend.config import Settings
 
 logger = logging.getLogger(__name__)
 
@@ -32,3 +35,17 @@ def qa_sample(element_ids: Collection[int], share: float, seed: int) -> set[int]
     from models.vma.loop import qa_sample as sample
 
     return sample(element_ids, share, seed)
+
+
+def with_shipped_registry(settings: Settings) -> Settings:
+    """`settings` with a VMA registry: the configured one, else `<data_dir>/vma-registry`, seeded on first start
+    with a copy of the model shipped in the package (found from any working directory), so the servers that
+    `cama serve` and `cama demo` start can refresh proposals with the learned model and retrain it, and new
+    versions land in the server's data folder, never inside the installed package."""
+    from models.vma.shipped import seed_registry
+
+    if settings.vma_registry is not None:
+        return settings
+    registry = seed_registry(Path(settings.data_dir) / "vma-registry")
+    logger.info("VMA registry %s (seeded from the shipped model)", registry)
+    return replace(settings, vma_registry=registry)

@@ -55,6 +55,20 @@ def report_path(workspace: Path, site_id: str) -> Path:
     return surface_dir(workspace, site_id) / "report.json"
 
 
+def is_surface_bev(folder: Path) -> bool:
+    """Whether a raster folder is a surface stage's `bev/` (reconstructed rasters: its finished report beside it),
+    not a generator's ground truth; proposers treat the two differently (smeared curbs)."""
+    folder = Path(folder)
+    report = folder.parent / "report.json"
+    if folder.name != "bev" or not report.is_file():
+        return False
+    try:
+        read_report(report)
+    except ValueError:
+        return False
+    return True
+
+
 def rasters_from_vertices(
     grid: SurfaceGrid, heights: np.ndarray, colour: np.ndarray, label: np.ndarray, count: np.ndarray
 ) -> SurfaceRasters:

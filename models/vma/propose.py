@@ -17,10 +17,12 @@ from annotations import Georeference
 from cama_pipeline.code_version import code_version
 from cama_pipeline.io import atomic_write_bytes
 from cama_pipeline.site.workspace import file_stats, fingerprint
-from models.vma.checkpoint import META, current_version, load_checkpoint
+from cama_pipeline.surface.outputs import is_surface_bev
+from models.vma.checkpoint import META, load_checkpoint
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, raster_dir_of
-from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.rule_based import BoundarySource, RuleConfig, propose_rule_based
+from models.vma.shipped import checkpoint_label, resolve_checkpoint
 from models.vma.train import device_for
 from models.vma.vectors import Vector, proposals_as_annotations
 
@@ -37,6 +39,8 @@ class ProposeResult:
     count: int
     seconds: float
     skipped: bool
+    checkpoint: Path | None
+    """The checkpoint version folder the learned proposer used; None for the rule-based one."""
 
 
 def site_origin_of(site: Path, rasters: SiteRasters) -> tuple[float, float]:
@@ -51,6 +55,13 @@ def site_origin_of(site: Path, rasters: SiteRasters) -> tuple[float, float]:
     return rasters.origin_xy
 
 
+def boundary_source_for(site: Path) -> BoundarySource:
+    """Where boundaries come from by default: the road's edge on reconstructed rasters (a surface stage's `bev/`,
+    whose curb labels are smeared), the curb class on a generator's sharp ground-truth rasters. `cama propose`
+    and `cama run` both use this, so the same rasters give the same proposals from either command."""
+    return "road_edge" if is_surface_bev(raster_dir_of(site)) else "curb"
+
+
 def propose(
     site: Path,
     out: Path,
@@ -63,32 +74,33 @@ def propose(
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> ProposeResult:
-    """Propose vectors for a site with the learned model (needs `checkpoint`) or the rule-based proposer;
-    `rule` sets the rule-based proposer, and the learned model's candidates when it is anchored."""
+    """Propose vectors for a site with the learned model (`checkpoint`: a registry or version folder, None for
+    the shipped model) or the rule-based proposer; `rule` sets the rule-based proposer, and the learned model's
+    candidates when it is anchored."""
     site, out = Path(site), Path(out)
-    if proposer == "learned" and checkpoint is None:
-        raise ValueError("propose: the learned proposer needs a checkpoint (a version folder or a registry)")
+    rule = rule or RuleConfig(boundary_source=boundary_source_for(site))
+    version = resolve_checkpoint(checkpoint) if proposer == "learned" else None
     inputs = [raster_dir_of(site) / name for name in ("semantic.png", "photometric.png", "georeference.json")]
-    if proposer == "learned" and checkpoint is not None:
-        inputs.append(current_version(Path(checkpoint)) / META)
+    if version is not None:
+        logger.info("VMA checkpoint %s", checkpoint_label(version))
+        inputs.append(version / META)
     settings = [
         proposer,
         min_confidence,
         asdict(inference or InferenceConfig()),
-        asdict(rule or RuleConfig()),
+        asdict(rule),
     ]
     digest = fingerprint(code_version("models.vma"), settings, file_stats([*inputs, site / "manifest.json"]))
     stamp = out.with_name(f"{out.name}.fingerprint")
     if out.is_file() and not overwrite and stamp.is_file() and stamp.read_text(encoding="utf-8") == digest:
         logger.info("%s is up to date; nothing to do", out)
-        return ProposeResult(out, -1, 0.0, skipped=True)
+        return ProposeResult(out, -1, 0.0, skipped=True, checkpoint=version)
     started = time.perf_counter()
     rasters = load_site_rasters(site)
     vectors: list[Vector]
-    if proposer == "learned" and checkpoint is not None:
-        loaded = load_checkpoint(Path(checkpoint), device=str(device_for()))
-        if rule is not None:
-            inference = replace(inference or InferenceConfig(), rule=rule)
+    if version is not None:
+        loaded = load_checkpoint(version, device=str(device_for()))
+        inference = replace(inference or InferenceConfig(), rule=rule)
         vectors = predict_site(loaded.model, rasters, inference, show_progress=show_progress)
         author = f"vma-{loaded.path.name}"
     else:
@@ -102,4 +114,4 @@ def propose(
     atomic_write_bytes(stamp, digest.encode("utf-8"))
     seconds = time.perf_counter() - started
     logger.info("wrote %d proposals to %s in %.1f s", len(vectors), out, seconds)
-    return ProposeResult(out, len(vectors), seconds, skipped=False)
+    return ProposeResult(out, len(vectors), seconds, skipped=False, checkpoint=version)

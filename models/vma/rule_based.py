@@ -32,6 +32,9 @@ from models.vma.vectors import Vector
 
 logger = logging.getLogger(__name__)
 
+BoundarySource = Literal["curb", "road_edge"]
+"""Which raster evidence boundaries follow (see `RuleConfig.boundary_source`)."""
+
 
 @dataclass(frozen=True)
 class RuleConfig:
@@ -56,7 +59,7 @@ class RuleConfig:
     `join_gap_m` bridges between pieces)."""
     min_length_m: float = 2.0
     """Shorter polylines are dropped."""
-    boundary_source: Literal["curb", "road_edge"] = "curb"
+    boundary_source: BoundarySource = "curb"
     """Boundaries along the curb label ('curb': generator rasters, where it is one sharp band) or along the
     road's edge next to observed off-road ground ('road_edge': reconstructed rasters, where the curb label is
     smeared or missing)."""

@@ -1,0 +1,96 @@
+"""The shipped VMA model is found from any working directory, says which checkpoint it is, and is never
+written to: retraining servers get their own seeded registry."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from annotations import AnnotationSet
+from app.backend.config import Settings
+from app.backend.jobs.vma import unavailable_kinds
+from app.backend.vma_loop import with_shipped_registry
+from cama_pipeline.pipeline import PipelineConfig
+from models.vma.checkpoint import CURRENT, CheckpointError
+from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _promoted_version() -> str:
+    return str(json.loads((REPO / "models" / "vma" / "checkpoints" / CURRENT).read_text())["version"])
+
+
+def test_the_shipped_model_is_found_from_any_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert PipelineConfig().checkpoint is None  # `cama run` asks for the shipped model, not a relative path
+    version = resolve_checkpoint(None)
+    assert version.is_absolute() and version.name == _promoted_version()
+    assert version == (REPO / "models" / "vma" / "checkpoints" / _promoted_version()).resolve()
+
+
+def test_resolve_checkpoint_names_a_bad_folder(tmp_path: Path) -> None:
+    with pytest.raises(CheckpointError, match=str(tmp_path)):
+        resolve_checkpoint(tmp_path)
+
+
+def test_cama_propose_from_a_temporary_directory_uses_and_names_the_shipped_model(
+    drawn_site: Path, tmp_path: Path
+) -> None:
+    """The real command line, started outside the checkout: it finds the model and prints which one."""
+    workdir = tmp_path / "elsewhere"
+    workdir.mkdir()
+    env = {**os.environ, "COLUMNS": "60"}
+    done = subprocess.run(
+        [sys.executable, "-m", "cama_pipeline.cli", "propose", str(drawn_site), "--out", "p.json"],
+        cwd=workdir,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    version = _promoted_version()
+    shipped = shipped_registry().resolve() / version
+    assert f"VMA checkpoint {version} (shipped with the package: {shipped})" in done.stdout
+    proposals = AnnotationSet.read_json(workdir / "p.json")
+    assert proposals.elements and {e.author for e in proposals.elements} == {f"vma-{version}"}
+
+
+def test_seed_registry_copies_the_shipped_model_once_and_leaves_it_untouched(tmp_path: Path) -> None:
+    shipped = shipped_registry()
+    before = sorted(p.name for p in shipped.iterdir())
+    registry = seed_registry(tmp_path / "server" / "vma-registry")
+    assert (registry / CURRENT).read_text() == (shipped / CURRENT).read_text()
+    assert (registry / _promoted_version() / "model.pt").read_bytes() == (
+        shipped / _promoted_version() / "model.pt"
+    ).read_bytes()
+    (registry / CURRENT).write_text(json.dumps({"version": "v0001"}))  # a later promotion is kept
+    assert seed_registry(registry) == registry and "v0001" in (registry / CURRENT).read_text()
+    assert sorted(p.name for p in shipped.iterdir()) == before
+    assert not list(tmp_path.glob("server/.*partial"))
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(CheckpointError, match="foreign: not empty and not a VMA registry"):
+        seed_registry(foreign)
+    assert (foreign / "notes.txt").read_text() == "mine"
+
+
+def test_servers_get_a_seeded_registry_so_the_learned_model_and_retrain_are_available(tmp_path: Path) -> None:
+    bare = Settings(data_dir=tmp_path / "data")
+    assert "no VMA checkpoint registry" in unavailable_kinds(bare)["retrain"]
+    settings = with_shipped_registry(bare)
+    assert settings.vma_registry == tmp_path / "data" / "vma-registry"
+    assert (tmp_path / "data" / "vma-registry" / CURRENT).is_file()
+    # the registry is there; what retrain still needs is a held-out site for its promotion gate
+    assert "validation sites" in unavailable_kinds(settings)["retrain"]
+    gated = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_validation_sites=(tmp_path,)))
+    assert "retrain" not in unavailable_kinds(gated)
+    chosen = Settings(data_dir=tmp_path / "data", vma_registry=tmp_path / "mine")
+    assert with_shipped_registry(chosen) == chosen  # a configured registry is used as it is
