@@ -193,6 +193,16 @@ class ElementPublic(BaseModel):
     )
 
 
+class ElementChangesPublic(BaseModel):
+    """A site's element changes after a cursor: poll with `since` set to the last answer's `cursor`."""
+
+    cursor: int = Field(description="The newest edit-log id this answer covers: the next `since`.")
+    elements: list[ElementPublic] = Field(
+        description="Elements created or changed since, at their current version (deleted ones excluded)."
+    )
+    deleted: list[int] = Field(description="Ids of elements deleted since.")
+
+
 class ReviewRequest(BaseModel):
     """Move an element to a review state; `version` as last read."""
 

@@ -49,6 +49,7 @@ def serve_command(
     import uvicorn
 
     from app.backend.main import create_app
+    from app.backend.poll_log import quiet_change_polls
 
     try:
         settings = Settings.from_env(
@@ -65,4 +66,5 @@ def serve_command(
     app = create_app(settings)
     gc.collect()
     gc.freeze()  # start-up objects live as long as the server: keep full collections (GIL held) off them
+    quiet_change_polls("uvicorn.access")  # the 3D review's polls every 2 s would fill the access log
     uvicorn.run(app, host=host, port=port, log_level="info", access_log=ACCESS_LOG)

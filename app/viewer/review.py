@@ -65,10 +65,11 @@ def show_vectors(scene: ReviewScene, source: VectorSource) -> ReviewScene:
 
 
 def follow(scene: ReviewScene, source: VectorSource, stop: threading.Event, *, interval_s: float) -> None:
-    """Re-read the source every `interval_s` until `stop` is set; a failed read keeps the last state and warns."""
+    """Ask the source what changed every `interval_s` until `stop` is set and draw that; a failed read keeps the
+    last state and warns."""
     while not stop.wait(interval_s):
         try:
-            counts = scene.sync_vectors(source.load())
+            counts = scene.apply_changes(source.changes())
         except VectorSourceError as err:
             logger.warning("vectors not refreshed: %s", err)
             continue

@@ -1,7 +1,7 @@
 """The viser scene of the 3D review: layers with toggles, vectors kept in step with their source, click to select.
 
-`ReviewScene` owns the scene nodes; `sync_vectors` redraws only elements whose id, version, state or class
-changed, so polling a source every few seconds is cheap.
+`ReviewScene` owns the scene nodes; `apply_changes` draws a source's changes and `sync_vectors` a whole set, each
+redrawing only elements whose id, version, state or class changed, so polling a source every few seconds is cheap.
 """
 
 import logging
@@ -17,7 +17,7 @@ from trimesh.visual.texture import TextureVisuals
 
 from app.viewer.content import SparsePointsView, Surface, lift_polyline
 from app.viewer.geometry import LocalFrame, pick_element, polyline_segments
-from app.viewer.sources import ViewElement
+from app.viewer.sources import VectorChanges, ViewElement
 from app.viewer.style import CAMERA_RGB, SELECTED_RGB, element_rgb
 
 logger = logging.getLogger(__name__)
@@ -127,12 +127,20 @@ class ReviewScene:
     def sync_vectors(self, elements: Sequence[ViewElement]) -> SyncCounts:
         """Make the drawn vectors equal `elements`; only changed ones are redrawn."""
         incoming = {e.id: e for e in elements}
-        removed = [i for i in self._vectors if i not in incoming]
+        gone = [i for i in self._vectors if i not in incoming]
+        return self.apply_changes(VectorChanges(list(incoming.values()), gone))
+
+    def apply_changes(self, changes: VectorChanges) -> SyncCounts:
+        """Remove the elements gone and draw the new or changed ones (all others stay as drawn, unless the
+        changes are `complete`); an element whose version, state and class are the ones drawn is left alone."""
+        if changes.complete:
+            return self.sync_vectors(changes.elements)
+        removed = [i for i in dict.fromkeys(changes.removed) if i in self._vectors]
         for element_id in removed:
             self._handles.pop(element_id).remove()
             del self._vectors[element_id]
         added = updated = not_lifted = 0
-        for element in incoming.values():
+        for element in changes.elements:
             known = self._vectors.get(element.id)
             if known is not None and known[0].key == element.key:
                 continue

@@ -1,5 +1,6 @@
 """Database operations used by the routes; every function takes keyword-only arguments and commits its work."""
 
+from app.backend.crud.changes import element_changes
 from app.backend.crud.elements import (
     create_elements,
     delete_element,
@@ -25,6 +26,7 @@ __all__ = [
     "create_site",
     "create_user",
     "delete_element",
+    "element_changes",
     "element_history",
     "ensure_admin",
     "get_element",

@@ -1,4 +1,5 @@
-"""Map elements of a site: create, bulk proposals, bounding-box query, read, update, soft delete."""
+"""Map elements of a site: create, bulk proposals, bounding-box query, changes since a cursor, read, update,
+soft delete."""
 
 import logging
 import math
@@ -12,7 +13,14 @@ from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionD
 from app.backend.crud.elements import Preaccept
 from app.backend.errors import InvalidInputError
 from app.backend.models import Element
-from app.backend.schemas import ConflictBody, ElementCreate, ElementPublic, ElementUpdate, ProposalBulk
+from app.backend.schemas import (
+    ConflictBody,
+    ElementChangesPublic,
+    ElementCreate,
+    ElementPublic,
+    ElementUpdate,
+    ProposalBulk,
+)
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}/elements", tags=["elements"])
@@ -65,6 +73,26 @@ def list_elements(
         limit=limit,
     )
     return [crud.public(element) for element in elements]
+
+
+@router.get("/changes", response_model=ElementChangesPublic)
+def element_changes(
+    site_id: IdPath,
+    session: SessionDep,
+    _user: CurrentUser,
+    since: Annotated[
+        int, Query(ge=0, le=MAX_ID, description="The previous answer's `cursor`; 0: every element.")
+    ] = 0,
+) -> ElementChangesPublic:
+    """Elements created or changed after the cursor `since` (an edit-log id), deleted ones as ids, and the
+    cursor to send next: read everything once with `since=0`, then poll; an idle poll carries no element. A
+    cursor newer than the log (another database) is answered with cursor 0: read everything again."""
+    changes = crud.element_changes(session=session, site_id=site_id, since=since)
+    return ElementChangesPublic(
+        cursor=changes.cursor,
+        elements=[crud.public(element) for element in changes.elements],
+        deleted=changes.deleted,
+    )
 
 
 @router.post("", response_model=ElementPublic, status_code=status.HTTP_201_CREATED)
