@@ -17,6 +17,7 @@ from pydantic import BaseModel
 from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, export_cama, import_cama
 from annotations.maptr_format import MaptrFile, export_maptr, import_maptr
 from annotations.schema import AnnotationSet, Georeference
+from cama_pipeline.console import bad_input
 from cama_pipeline.data import DatasetError, load_dataset
 from cama_pipeline.io import atomic_write_bytes
 
@@ -48,12 +49,6 @@ def write_schemas(folder: Path = SCHEMA_DIR) -> list[Path]:
         atomic_write_bytes(folder / name, schema_text(model).encode("utf-8"))
         paths.append(folder / name)
     return paths
-
-
-def _fail(error: Exception) -> typer.Exit:
-    """Print `error: ...` and give the exit to raise (code 2)."""
-    typer.echo(f"error: {error}", err=True)
-    return typer.Exit(code=2)
 
 
 def _load_elevation(path: Path | None) -> np.ndarray | None:
@@ -93,7 +88,7 @@ def export_command(
             raster = _load_elevation(elevation)
             written = export_cama(annotations, out, name=name, elevation=raster, dataset=data, scenes=scene)
     except (ValueError, FileNotFoundError, DatasetError) as error:
-        raise _fail(error) from error
+        raise bad_input(error) from error
     typer.echo(f"exported {len(annotations.elements)} elements ({format.value}) to {written}")
 
 
@@ -125,7 +120,7 @@ def import_command(
             )
         annotations.write_json(out)
     except (ValueError, FileNotFoundError) as error:
-        raise _fail(error) from error
+        raise bad_input(error) from error
     typer.echo(f"imported {len(annotations.elements)} elements ({format.value}) to {out}")
 
 

@@ -5,14 +5,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
+
+from cama_pipeline.console import bad_input, console
 
 app = typer.Typer(
     help="CAMA Studio: consistent, accurate 3D HD-map annotation from surround-view video.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
 )
-console = Console()
 
 
 @app.callback()
@@ -61,8 +61,7 @@ def synth(
         cfg = make_preset(preset, **overrides)
         result = run(cfg, out, images=images, overwrite=overwrite, workers=workers)
     except (ValueError, FileExistsError) as err:
-        console.print(f"[red]error:[/red] {err}")
-        raise typer.Exit(code=2) from err
+        raise bad_input(err) from err
     state = "up to date, nothing generated" if result.skipped else f"generated in {result.seconds:.0f} s"
     console.print(f"[green]site[/green] {result.out_dir} ({state})")
     console.print(f"  data set (nuScenes layout): {result.dataset_root}  version {result.version}")

@@ -4,9 +4,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
-console = Console()
+from cama_pipeline.console import bad_input, console, failure
 
 
 def run_command(
@@ -51,9 +50,10 @@ def run_command(
                 f"[bold]{stage}[/bold] ({STAGES.index(stage) + 1}/{len(STAGES)})"
             ),
         )
-    except (PipelineError, ValueError) as err:
-        console.print(f"[red]error:[/red] {err}")
-        raise typer.Exit(1) from None
+    except PipelineError as err:  # the data set or checkpoint at fault (2), or a stage that broke (1)
+        raise (bad_input(err) if err.bad_input else failure(err)) from err
+    except ValueError as err:
+        raise bad_input(err) from err
     for stage, seconds in result.seconds.items():
         console.print(f"  {stage:<10} {seconds:8.1f} s")
     for site_id, path in result.proposals.items():

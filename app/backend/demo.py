@@ -25,6 +25,7 @@ from app.backend.config import Settings
 from app.backend.errors import InvalidInputError
 from app.backend.models import Site, User
 from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
+from cama_pipeline.console import bad_input
 
 logger = logging.getLogger(__name__)
 DEMO_USERS = (("admin", "admin"), ("lead", "lead"), ("annotator", "annotator"))
@@ -120,9 +121,8 @@ def demo_command(
     ] = 8080,
 ) -> None:
     """Load the site and its proposals into the backend and serve the editor (Ctrl+C stops it)."""
-    import uvicorn
-
     from app.backend.main import create_app
+    from app.backend.serve import run_server
 
     password = os.environ.get("CAMA_DEMO_PASSWORD", DEFAULT_PASSWORD)
     settings = Settings(data_dir=data_dir)
@@ -136,8 +136,7 @@ def demo_command(
             )
             site_id = site.id
     except InvalidInputError as err:
-        typer.echo(f"error: {err.field}: {err.message}", err=True)
-        raise typer.Exit(code=2) from err
+        raise bad_input(f"{err.field}: {err.message}") from err
     url = f"http://{host}:{port}/"
     typer.echo(f"site {site_dir} loaded as site {site_id}" + (f" with {loaded} proposals" if loaded else ""))
     typer.echo(f"editor: {url}#/site/{site_id}   API docs: {url}docs")
@@ -148,7 +147,7 @@ def demo_command(
         _start_review(site_dir, rasters, site_id, password, f"http://{host}:{port}", host, view_port)
         # the review's site is known only once loaded; the editor's link reads these two fields per request
         app.state.settings = replace(settings, review_url=review_url(host, view_port), review_site_id=site_id)
-    uvicorn.run(app, host=host, port=port, log_level="warning")
+    run_server(app, host=host, port=port, log_level="warning")
 
 
 def review_url(host: str, port: int) -> str:

@@ -4,11 +4,12 @@ import gc
 import logging
 import os
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from app.backend.config import Settings
+from cama_pipeline.console import bad_input, failure
 
 logger = logging.getLogger(__name__)
 
@@ -46,8 +47,6 @@ def serve_command(
     ] = None,
 ) -> None:
     """Serve the annotation API (OpenAPI at /docs); settings from CAMA_* variables, options win."""
-    import uvicorn
-
     from app.backend.main import create_app
     from app.backend.poll_log import quiet_change_polls
 
@@ -61,10 +60,23 @@ def serve_command(
             review_url=review_url,
         )
     except ValueError as error:
-        typer.echo(f"error: {error}", err=True)
-        raise typer.Exit(code=2) from error
+        raise bad_input(error) from error
     app = create_app(settings)
     gc.collect()
     gc.freeze()  # start-up objects live as long as the server: keep full collections (GIL held) off them
     quiet_change_polls("uvicorn.access")  # the 3D review's polls every 2 s would fill the access log
-    uvicorn.run(app, host=host, port=port, log_level="info", access_log=ACCESS_LOG)
+    run_server(app, host=host, port=port, log_level="info", access_log=ACCESS_LOG)
+
+
+def run_server(app: Any, *, host: str, port: int, **options: Any) -> None:
+    """`uvicorn.run`; a server that cannot start (its port taken, an address not of this machine) exits with code 1
+    and an `error:` line naming the address, not with uvicorn's own code 3."""
+    import uvicorn
+    from uvicorn.config import STARTUP_FAILURE
+
+    try:
+        uvicorn.run(app, host=host, port=port, **options)
+    except SystemExit as stop:
+        if stop.code != STARTUP_FAILURE:
+            raise
+        raise failure(f"the server could not start on {host}:{port} (its log above says why)") from None

@@ -5,9 +5,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
-console = Console()
+from cama_pipeline.console import bad_input, console
 
 
 def view_command(
@@ -54,9 +53,9 @@ def view_command(
         scene = open_review(server, ViewInputs(site_dir, workspace, site_id), source)
     except (ViewInputError, VectorSourceError, WorkspaceError, FileNotFoundError, ValueError) as err:
         server.stop()
-        console.print(f"[red]error:[/red] {err}")
-        raise typer.Exit(1) from None
-    console.print(f"3D review of {site_id}: http://{host}:{port}  (Ctrl+C stops)")
+        raise bad_input(err) from err
+    # viser takes the next free port when `port` is busy
+    console.print(f"3D review of {site_id}: http://{host}:{server.get_port()}  (Ctrl+C stops)")
     stop = threading.Event()
     try:
         follow(scene, source, stop, interval_s=poll_s)

@@ -6,9 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from cama_pipeline.console import bad_input, console
 from cama_pipeline.data import DatasetError, load_dataset
 from cama_pipeline.evaluate.inputs import EvaluationInputError, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.projection import ProjectionConfig
@@ -19,7 +19,6 @@ from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import Semantic
 
 logger = logging.getLogger(__name__)
-console = Console()
 
 
 class PoseSource(StrEnum):
@@ -61,8 +60,7 @@ def eval_command(
         data = load_dataset(dataset)
         report = evaluate_sre(data, elements, config, true_poses=pose_table, scenes=scene, show_progress=True)
     except (EvaluationInputError, DatasetError, FileNotFoundError, ValueError) as err:
-        console.print(f"[red]error:[/red] {err}")
-        raise typer.Exit(code=2) from err
+        raise bad_input(err) from err
     atomic_write_json(out, report.to_json(), indent=1)
     console.print(report_table(report, f"SRE of {vector_map.name} ({poses.value} poses)"))
     console.print(f"report written to {out}")

@@ -3,13 +3,11 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.stage import run
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def features_command(
@@ -38,7 +36,7 @@ def features_command(
         )
         sites = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:
-        raise fail(err) from err
+        raise bad_input(err) from err
     for site in sites:
         report = site.report
         counts = [c["features"] for c in report["images"].values()]

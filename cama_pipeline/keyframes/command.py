@@ -3,15 +3,13 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.keyframes.stage import run
 from cama_pipeline.site.workspace import read_keyframes
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 
 
 def keyframes_command(
@@ -31,7 +29,7 @@ def keyframes_command(
             min_rotation_deg=min_rotation_deg,
         )
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
-        table = Table(title=f"keyframes ({result.workspace / 'keyframes'})")
+        table = Table(title="keyframes")
         table.add_column("scene", no_wrap=True, min_width=10)
         for column in ("frames", "keyframes", "stationary", "path m", "max diff ms", "max range ms"):
             table.add_column(column)
@@ -47,5 +45,6 @@ def keyframes_command(
                 f"{kf.max_time_range_us / 1000:.1f}",
             )
     except INPUT_ERRORS as err:
-        raise fail(err) from err
+        raise bad_input(err) from err
     console.print(table)
+    console.print(f"  -> {result.workspace / 'keyframes'}")

@@ -3,15 +3,13 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.io import PAIR_REASONS
 from cama_pipeline.pairs.stage import run
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def pairs_command(
@@ -46,8 +44,8 @@ def pairs_command(
         )
         result = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:
-        raise fail(err) from err
-    table = Table(title=f"pairs ({result.workspace / 'pairs'})")
+        raise bad_input(err) from err
+    table = Table(title="pairs")
     kinds = ("exhaustive", *PAIR_REASONS, "total")
     for column in ("site", "images", *kinds, "share"):
         table.add_column(column)
@@ -58,3 +56,4 @@ def pairs_command(
         values = [counts.get(k, 0) for k in kinds]
         table.add_row(name, str(site.images), *map(str, values), f"{share:.1%}")
     console.print(table)
+    console.print(f"  -> {result.workspace / 'pairs'}")

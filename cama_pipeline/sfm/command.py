@@ -3,15 +3,13 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console, failure
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import EXECUTORS
 from cama_pipeline.sfm.stage import run
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def sfm_command(
@@ -28,12 +26,14 @@ def sfm_command(
 ) -> None:
     """Reconstruct each site: every clip on its own from the WIGO poses, then merged and adjusted as one."""
     if executor not in EXECUTORS:
-        raise fail(ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}"))
+        raise bad_input(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     try:
         config = SfmConfig.preset(preset)
         result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
-    except (*INPUT_ERRORS, SfmError) as err:
-        raise fail(err) from err
+    except INPUT_ERRORS as err:
+        raise bad_input(err) from err
+    except SfmError as err:  # every clip failed: the reconstruction, not its input
+        raise failure(err) from err
     for site in result.sites:
         merged, clips = site.report["merged"], site.report["clips"]
         failed = [scene for scene, clip in clips.items() if clip["status"] != "ok"]

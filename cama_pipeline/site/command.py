@@ -3,13 +3,11 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.site.config import SiteConfig
 from cama_pipeline.site.stage import run
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def sites_command(
@@ -26,7 +24,7 @@ def sites_command(
         config = SiteConfig(overlap_radius_m=overlap_radius_m, night_brightness=night_brightness)
         result = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:
-        raise fail(err) from err
+        raise bad_input(err) from err
     state = " (up to date)" if result.skipped else ""
     for site in result.aggregation.sites:
         merged = ", ".join(f"{s} -> {m}" for s, m in site.merged.items()) or "none"

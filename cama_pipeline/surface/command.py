@@ -3,14 +3,12 @@
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.stage import run
-from cama_pipeline.wigo.command import INPUT_ERRORS, DatasetArg, OverwriteOpt, WorkspaceOpt, fail
-
-console = Console()
+from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def surface_command(
@@ -41,14 +39,16 @@ def surface_command(
         )
         sites = run(config, dataset, workspace, poses=poses, overwrite=overwrite)
     except INPUT_ERRORS as err:
-        raise fail(err) from err
+        raise bad_input(err) from err
     table = Table(title=f"surface ({poses} poses)")
-    for column in ("site", "images", "vertices", "cells observed", "seconds", "folder"):
+    for column in ("site", "images", "vertices", "cells observed", "seconds"):
         table.add_column(column)
     for site in sites:
         report = site.report
         name = site.site_id + (" (up to date)" if site.skipped else "")
         seconds = sum(report["seconds"].values())
         values = (report["images"], report["vertices"], report["cells_observed"], f"{seconds:.1f}")
-        table.add_row(name, *map(str, values), str(site.folder))
+        table.add_row(name, *map(str, values))
     console.print(table)
+    for site in sites:  # paths on their own lines: a long one would crush the table
+        console.print(f"  {site.site_id} -> {site.folder}")

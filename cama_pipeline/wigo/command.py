@@ -4,14 +4,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
-from cama_pipeline.data import DatasetError
-from cama_pipeline.site.workspace import WorkspaceError
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.wigo.config import RobustKernel, WigoConfig
 from cama_pipeline.wigo.stage import run
-
-console = Console()
 
 DatasetArg = Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")]
 WorkspaceOpt = Annotated[
@@ -19,16 +15,6 @@ WorkspaceOpt = Annotated[
 ]
 ScenesOpt = Annotated[list[str] | None, typer.Option("--scene", help="Only this scene (repeatable).")]
 OverwriteOpt = Annotated[bool, typer.Option(help="Recompute even when the outputs are up to date.")]
-
-
-def fail(err: Exception) -> typer.Exit:
-    """Print an input error and return the exit to raise (code 2)."""
-    console.print(f"[red]error:[/red] {err}")
-    return typer.Exit(code=2)
-
-
-INPUT_ERRORS = (DatasetError, WorkspaceError, FileNotFoundError, ValueError)
-"""Errors that mean bad input (printed, exit code 2), not a bug."""
 
 
 def wigo_command(
@@ -48,7 +34,7 @@ def wigo_command(
         config = WigoConfig(gnss_robust=kernel, logged_pose_sigmas=sigmas)
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
     except INPUT_ERRORS as err:
-        raise fail(err) from err
+        raise bad_input(err) from err
     done = len(result.files) - len(result.skipped)
     console.print(
         f"[green]wigo[/green] {done} scene(s) fused, {len(result.skipped)} up to date, "

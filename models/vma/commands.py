@@ -5,9 +5,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 
 from annotations import AnnotationSet
+from cama_pipeline.console import bad_input, console
 from cama_pipeline.data import DatasetError
 from cama_pipeline.evaluate.inputs import EvaluationInputError
 from cama_pipeline.io import atomic_write_json
@@ -23,15 +23,9 @@ from models.vma.split import SplitConfig, split_dataset
 from models.vma.train import train
 
 logger = logging.getLogger(__name__)
-console = Console()
 
 DEFAULT_REGISTRY = Path("models/vma/checkpoints")
 _ERRORS = (ValueError, FileNotFoundError, CheckpointError, EvaluationInputError)
-
-
-def _fail(err: Exception) -> typer.Exit:
-    console.print(f"[red]error:[/red] {err}")
-    return typer.Exit(code=2)
 
 
 def seed_range(text: str) -> list[int]:
@@ -77,7 +71,7 @@ def propose_command(
             overwrite=overwrite,
         )
     except _ERRORS as err:
-        raise _fail(err) from err
+        raise bad_input(err) from err
     state = (
         "up to date, nothing done"
         if result.skipped
@@ -137,7 +131,7 @@ def train_command(
         )
         promoted = not val or _gate_new(registry, folder, list(val or []))
     except _ERRORS as err:
-        raise _fail(err) from err
+        raise bad_input(err) from err
     console.print(f"[green]checkpoint[/green] {folder} ({'promoted' if promoted else 'not promoted: gate'})")
 
 
@@ -176,7 +170,7 @@ def retrain_command(
         config = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4), tolerance=tolerance)
         result = retrain_from_corrections(registry, items, val, config, show_progress=True)
     except _ERRORS as err:
-        raise _fail(err) from err
+        raise bad_input(err) from err
     verdict = "[green]promoted[/green]" if result.promoted else "[yellow]not promoted[/yellow] (gate)"
     console.print(
         f"candidate {result.candidate}: mAP {result.candidate_metrics['mean_ap']} vs current "
@@ -202,7 +196,7 @@ def vma_eval_command(
         else:
             raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
     except _ERRORS as err:
-        raise _fail(err) from err
+        raise bad_input(err) from err
     atomic_write_json(out, report, indent=1)
     for cls, ap in report["class_ap"].items():
         console.print(f"  {cls:13s} AP {'-' if ap is None else f'{ap:.3f}'}")
@@ -222,5 +216,5 @@ def vma_split_command(
     try:
         split = split_dataset(dataset, out, SplitConfig(val_share, overlap_m, seed))
     except (*_ERRORS, DatasetError) as err:
-        raise _fail(err) from err
+        raise bad_input(err) from err
     console.print(f"[green]split[/green] {len(split.train)} train / {len(split.val)} val scenes -> {out}")

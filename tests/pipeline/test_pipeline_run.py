@@ -23,8 +23,9 @@ def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(
 
 
 def test_a_failing_stage_is_named(tmp_path: Path) -> None:
-    with pytest.raises(PipelineError, match="stage wigo failed"):
+    with pytest.raises(PipelineError, match="stage wigo stopped on bad input") as missing:
         run(tmp_path / "no-such-dataset", tmp_path / "ws", stop_after="wigo")
+    assert missing.value.bad_input and missing.value.stage == "wigo"
     with pytest.raises(ValueError, match="stop_after"):
         run(tmp_path, stop_after="everything")
 
@@ -32,9 +33,9 @@ def test_a_failing_stage_is_named(tmp_path: Path) -> None:
 def test_cama_run_reports_a_bad_option_and_a_missing_dataset(tmp_path: Path) -> None:
     runner = CliRunner()
     bad = runner.invoke(app, ["run", str(tmp_path), "--executor", "cloud"])
-    assert bad.exit_code == 1 and "--executor" in bad.output
+    assert bad.exit_code == 2 and "--executor" in bad.output
     missing = runner.invoke(app, ["run", str(tmp_path / "none"), "--stop-after", "wigo"])
-    assert missing.exit_code == 1 and "stage wigo failed" in missing.output
+    assert missing.exit_code == 2 and "stage wigo stopped on bad input" in missing.output
 
 
 @pytest.mark.slow

@@ -78,6 +78,5 @@ def test_pairs_are_planned_without_images_and_features_fail_naming_the_missing_i
     assert (tmp_path / "ws" / "pairs" / "site-001" / "pairs.txt").read_text().strip()
     result = runner.invoke(app, ["features", dataset, "--workspace", workspace])
     assert result.exit_code == 2, result.output
-    message = "".join(result.output.split())
-    assert "imagefilenotfound" in message
-    assert ".jpg" in message and str(site).replace(" ", "") in message
+    (error,) = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert "image file not found" in error and ".jpg" in error and str(site) in error

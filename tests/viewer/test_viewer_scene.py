@@ -124,5 +124,5 @@ def test_view_command_names_a_missing_workspace(tmp_path: Path) -> None:
     from cama_pipeline.cli import app
 
     result = CliRunner().invoke(app, ["view", str(tmp_path / "nowhere"), "--port", str(_free_port())])
-    assert result.exit_code == 1
+    assert result.exit_code == 2
     assert "nowhere" in result.output

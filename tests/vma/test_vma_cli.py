@@ -17,15 +17,20 @@ runner = CliRunner()
 def test_propose_rule_based_writes_an_annotation_set_and_skips_when_up_to_date(
     drawn_site: Path, tmp_path: Path
 ) -> None:
-    out = tmp_path / "proposals.json"
+    # a path over 200 characters and a narrow terminal: the message must still be one line (issue 20)
+    out = tmp_path.joinpath(*(f"{'long-folder-name-' * 4}{i}" for i in range(4)), "proposals.json")
+    assert len(str(out)) > 200
     result = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)])
     assert result.exit_code == 0, result.output
     proposals = AnnotationSet.read_json(out)
     assert {e.cls for e in proposals.elements} == {"divider", "boundary", "ped_crossing"}
     assert all(e.source == "proposal" and e.confidence is not None for e in proposals.elements)
     assert proposals.georeference.site_origin_xy == (500.0, 800.0)  # no manifest: the raster origin
-    again = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)])
-    assert "up to date" in again.output
+    modified = out.stat().st_mtime_ns
+    args = ["propose", str(drawn_site), "--proposer", "rule", "--out", str(out)]
+    again = runner.invoke(app, args, env={"COLUMNS": "40"})
+    assert again.exit_code == 0 and out.stat().st_mtime_ns == modified, again.output
+    assert any(f"{out} (up to date, nothing done)" in line for line in again.output.splitlines())
 
 
 def test_proposals_are_redone_when_settings_or_code_change(
