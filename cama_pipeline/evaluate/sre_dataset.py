@@ -4,13 +4,13 @@ import logging
 from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cama_pipeline.data import CameraImage, Dataset, Pose
 from cama_pipeline.evaluate.inputs import EvaluationInputError, VectorElement
 from cama_pipeline.evaluate.projection import PinholeCamera, project_polyline
 from cama_pipeline.evaluate.sre import ProjectedInstance, SreConfig, extract_instances, match_image
 from cama_pipeline.evaluate.sre_report import ImageSre, SreReport
+from cama_pipeline.progress import StageProgress
 
 logger = logging.getLogger(__name__)
 
@@ -41,9 +41,8 @@ def evaluate_sre(
         if images is None or im.token in images
     ]
     results = []
-    columns = (TextColumn("sre"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, disable=not show_progress) as progress:
-        bar = progress.add_task("sre", total=len(work))
+    with StageProgress("sre", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task("images", total=len(work))
         for scene, frame, image in work:
             global_from_ego = _pose_for(image, true_poses)
             results.append(_evaluate_image(scene, frame, image, global_from_ego, used, config))

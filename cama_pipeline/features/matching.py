@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import pycolmap
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from threadpoolctl import threadpool_limits
 
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import open_database
 from cama_pipeline.features.sift import verification_options
+from cama_pipeline.progress import StageProgress
 
 logger = logging.getLogger(__name__)
 NO_MATCHES = np.zeros((0, 2), dtype=np.uint32)
@@ -124,11 +124,10 @@ class BlasMatcher:
             return
         used = sorted({image_id for pair in pairs for image_id in pair})
         descriptors = {i: np.asarray(db.read_descriptors(i).data) for i in used}
-        columns = (TextColumn("matching"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with (
             threadpool_limits(limits=1, user_api="blas"),  # our threads run the pairs: BLAS on one each
             ThreadPoolExecutor(self._config.num_threads) as pool,
-            Progress(*columns, transient=True) as progress,
+            StageProgress("features", logger=logger, transient=True) as progress,
         ):
             task = progress.add_task("matching", total=len(pairs))
             for chunk in _chunks(pairs, CHUNK_PAIRS):

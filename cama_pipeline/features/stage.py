@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
@@ -39,6 +38,7 @@ from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.io import pairs_dir
+from cama_pipeline.progress import StageProgress
 from cama_pipeline.site.workspace import (
     WorkspaceError,
     default_workspace,
@@ -128,9 +128,8 @@ def extract_missing(
     A multi-process run needs a picklable extractor."""
     counts: dict[str, dict[str, int | None]] = {}
     todo = [view for view in views if not store.has(view.name)]
-    columns = (TextColumn("features"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, transient=True) as progress:
-        task = progress.add_task("features", total=len(todo))
+    with StageProgress("features", logger=logger, transient=True) as progress:
+        task = progress.add_task("extract", total=len(todo))
         for view, (features, masked) in zip(todo, _extracted(dataset, todo, extractor, config), strict=True):
             store.add(view, features)
             counts[view.name] = {"features": len(features.keypoints), "masked": masked}

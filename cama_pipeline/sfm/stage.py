@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import Any
 
 import pycolmap
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.stage import features_dir
 from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.progress import StageProgress
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import Executor, make_executor
@@ -178,7 +178,7 @@ def _clip_tasks(
 
 
 def run_clips(
-    tasks: list[ClipTask], executor: Executor, progress: Progress | None = None
+    tasks: list[ClipTask], executor: Executor, progress: StageProgress | None = None
 ) -> list[ClipOutcome]:
     """Every clip on the executor, the progress bar advancing as each finishes; failures logged."""
     bar = progress.add_task("clips", total=len(tasks)) if progress is not None else None
@@ -195,7 +195,7 @@ def run_clips(
     return outcomes
 
 
-def _phase_reporter(progress: Progress | None, label: str) -> Callable[[str, int, int], None] | None:
+def _phase_reporter(progress: StageProgress | None, label: str) -> Callable[[str, int, int], None] | None:
     """A guided-SfM progress callback that shows the phase and iteration on a bar of `progress`."""
     if progress is None:
         return None
@@ -212,7 +212,7 @@ def merge_site(
     tasks: list[ClipTask],
     config: SfmConfig,
     merge_config: MergeConfig,
-    progress: Progress | None = None,
+    progress: StageProgress | None = None,
 ) -> tuple[GuidedResult, list[CameraView], dict[str, Any]]:
     """Align the successful clips, then re-triangulate and adjust their union as one model: (its result,
     the aligned views that went in, the merge report). SfmError when every clip failed."""
@@ -271,7 +271,7 @@ def reconstruct_site(
     *,
     executor: Executor,
     merge_config: MergeConfig | None = None,
-    progress: Progress | None = None,
+    progress: StageProgress | None = None,
 ) -> SiteReconstruction:
     """Parallel per-clip reconstruction, then the merge (clip models are kept under `workdir/clips/`)."""
     started = time.perf_counter()
@@ -333,11 +333,6 @@ def write_site(
     return report
 
 
-def _progress(show: bool) -> Progress:
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    return Progress(*columns, transient=True, disable=not show)
-
-
 def run_site(
     dataset: Dataset,
     workspace: Path,
@@ -368,7 +363,10 @@ def run_site(
     manifest = read_site_manifest(manifest_path)
     views = site_views(dataset, manifest)
     shutil.rmtree(folder / "clips", ignore_errors=True)  # no stale model of a clip that fails this time
-    with tempfile.TemporaryDirectory(prefix="cama-sfm-") as scratch, _progress(show_progress) as progress:
+    with (
+        tempfile.TemporaryDirectory(prefix="cama-sfm-") as scratch,
+        StageProgress("sfm", logger=logger, enabled=show_progress, transient=True) as progress,
+    ):
         copy = copy_database(database, Path(scratch) / "database.db")
         site = reconstruct_site(
             site_clips(views, manifest),

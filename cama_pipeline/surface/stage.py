@@ -13,10 +13,10 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.progress import StageProgress
 from cama_pipeline.sfm.io import sfm_dir
 from cama_pipeline.site.outputs import SiteOutputs
 from cama_pipeline.site.workspace import (
@@ -71,9 +71,9 @@ def torch_threads(count: int) -> Iterator[None]:
 
 
 class _Phases:
-    """One rich progress bar per phase, its description showing the loss."""
+    """One progress bar per phase, its description showing the loss."""
 
-    def __init__(self, progress: Progress, site_id: str):
+    def __init__(self, progress: StageProgress, site_id: str):
         self.progress = progress
         self.site_id = site_id
         self.seconds: dict[str, float] = {}
@@ -160,8 +160,10 @@ def run(
     index = read_sites_index(sites_index_path(workspace))
     dataset: Dataset | None = None
     done: list[SiteSurface] = []
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, disable=not show_progress) as progress, torch_threads(config.torch_threads):
+    with (
+        StageProgress("surface", logger=logger, enabled=show_progress) as progress,
+        torch_threads(config.torch_threads),
+    ):
         for site in index["sites"]:
             site_id = site["site_id"]
             digest = _site_digest(config, Path(dataset_root), workspace, site_id, poses)

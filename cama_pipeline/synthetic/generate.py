@@ -31,10 +31,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import torch
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
 from cama_pipeline.io import atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth as gt
 from cama_pipeline.synthetic.config import SynthConfig
@@ -280,9 +280,8 @@ def _tasks(site: SyntheticSite, dataset_root: Path) -> Iterator[tuple[int, int, 
 def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_progress: bool) -> None:
     """Render every shot of every clip, in `workers` processes (1 = in this process)."""
     tasks = list(_tasks(site, dataset_root))
-    columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, disable=not show_progress) as progress:
-        bar = progress.add_task("render", total=len(tasks))
+    with StageProgress("synthetic", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task("render images", total=len(tasks))
         if workers <= 1:
             for clip_index, shot_index, root in tasks:
                 render_shot(site, clip_index, shot_index, Path(root))
@@ -316,8 +315,7 @@ def _write_ground_truth(
 ) -> None:
     """Vector map, baseline map, true poses and BEV rasters; also the data set's drivable-area prior."""
     cfg = site.config
-    columns = (TextColumn("ground truth: {task.description}"), BarColumn(), MofNCompleteColumn())
-    with Progress(*columns, disable=not show_progress) as progress:
+    with StageProgress("synthetic ground truth", logger=logger, enabled=show_progress) as progress:
         bar = progress.add_task("vector maps", total=4)
         vectors = gt.vector_map(site.layout, site.world, cfg.site_origin_xy)
         atomic_write_json(gt_dir / "vector_map.json", {"elements": vectors})
@@ -340,4 +338,4 @@ def _write_ground_truth(
             semantic, [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
         )
         atomic_write_image(dataset_root / "maps" / "drivable_area.png", drivable.astype(np.uint8) * 255)
-        progress.update(bar, advance=1, description="done")
+        progress.update(bar, advance=1, description="written")

@@ -6,12 +6,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from rich.progress import Progress
 from scipy.spatial.transform import Rotation
 
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, Scene, load_dataset
 from cama_pipeline.data.schema import CAN_DIR, CAN_MESSAGES, can_file_name
+from cama_pipeline.progress import StageProgress
 from cama_pipeline.site.workspace import (
     PoseRecord,
     WigoFile,
@@ -94,8 +94,8 @@ def run(
     chosen = select_scenes(dataset, scenes)
     files: dict[str, Path] = {}
     skipped: list[str] = []
-    with Progress(disable=not show_progress, transient=True) as progress:
-        bar = progress.add_task("WIGO fusion", total=len(chosen))
+    with StageProgress("wigo", logger=logger, enabled=show_progress, transient=True) as progress:
+        bar = progress.add_task("fuse scenes", total=len(chosen))
         for scene in chosen:
             path = wigo_path(workspace, scene.name)
             digest = scene_fingerprint(dataset, scene, config)

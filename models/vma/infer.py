@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from cama_pipeline.progress import StageProgress
 from models.vma.anchors import Anchors, patch_anchors, stack_anchors
 from models.vma.config import ModelConfig
 from models.vma.merge import MergeConfig, clip_to_core, core_bounds, merge_windows
@@ -80,9 +80,8 @@ def predict_site(
     )
     weighted = np.zeros((len(rule), 2))  # per candidate: sum of length x own-class probability, sum of length
     pieces: list[Vector] = []
-    columns = (TextColumn("proposing"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, disable=not show_progress) as progress, torch.no_grad():
-        bar = progress.add_task("windows", total=len(windows))
+    with StageProgress("vma", logger=logger, enabled=show_progress) as progress, torch.no_grad():
+        bar = progress.add_task("propose windows", total=len(windows))
         for start in range(0, len(windows), config.batch_size):
             chunk = windows[start : start + config.batch_size]
             images = torch.as_tensor(

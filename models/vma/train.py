@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 import torch
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from cama_pipeline.progress import StageProgress
 from models.vma.anchors import stack_anchors
 from models.vma.checkpoint import load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig, config_dict
@@ -119,14 +119,8 @@ def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: 
     )
     started = time.perf_counter()
     losses = []
-    columns = (
-        TextColumn("training {task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, disable=not show_progress) as progress:
-        bar = progress.add_task("", total=config.steps)
+    with StageProgress("training", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task(total=config.steps)
         for step in range(config.steps):
             batch = [sampler(rng) for _ in range(config.batch_size)]
             images = torch.as_tensor(np.stack([s.image for s in batch]), device=device)

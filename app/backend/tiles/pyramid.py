@@ -24,7 +24,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from app.backend.tiles.georef import GeoreferenceLike, RasterGeoreference
 from app.backend.tiles.layers import (
@@ -39,6 +38,7 @@ from app.backend.tiles.layers import (
     load_layer,
 )
 from cama_pipeline.io import atomic_write_bytes
+from cama_pipeline.progress import StageProgress
 
 logger = logging.getLogger(__name__)
 
@@ -209,9 +209,9 @@ def _write_levels(
 ) -> None:
     """Write every tile: the finest level from raster windows, then each coarser level from its children."""
     total = sum(level.cols * level.rows for level in levels)
-    columns = (TextColumn(f"tiles {style.name}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
-    with Progress(*columns, disable=total < _PROGRESS_MIN_TILES) as progress:
-        task = progress.add_task("tiles", total=total)
+    shown = total >= _PROGRESS_MIN_TILES
+    with StageProgress(f"tiles {style.name}", logger=logger, enabled=shown) as progress:
+        task = progress.add_task(total=total)
         finest = levels[-1]
         for y in range(finest.rows):
             for x in range(finest.cols):
