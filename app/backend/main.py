@@ -18,7 +18,7 @@ from app.backend.errors import install_error_handlers
 from app.backend.jobs.kinds import JOB_KINDS
 from app.backend.jobs.runner import JobRunner
 from app.backend.jobs.vma import unavailable_kinds, vma_job_kinds
-from app.backend.middleware import BodySizeLimit
+from app.backend.middleware import BodySizeLimit, ResponseHeaders
 
 logger = logging.getLogger(__name__)
 
@@ -78,5 +78,6 @@ def create_app(settings: Settings) -> FastAPI:
     app.include_router(api_router)
     app.include_router(frontend.router)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_payload_bytes)
+    app.add_middleware(ResponseHeaders)  # added last, so outermost: the 413s get the headers too
     logger.info("backend ready on %s", engine.url.render_as_string(hide_password=True))
     return app

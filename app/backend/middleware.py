@@ -1,4 +1,5 @@
-"""A pure ASGI middleware that answers 413 to request bodies larger than the configured limit."""
+"""Pure ASGI middlewares: 413 for request bodies larger than the configured limit, and the headers every answer
+carries (no content sniffing; no caching unless the route chose a cache policy)."""
 
 import json
 import logging
@@ -55,3 +56,34 @@ class BodySizeLimit:
             return {"type": "http.request", "body": b"".join(chunks), "more_body": False}
 
         await self.app(scope, replay, send)
+
+
+NO_SNIFF = (b"x-content-type-options", b"nosniff")
+NO_STORE = (b"cache-control", b"no-store")
+
+
+class ResponseHeaders:
+    """Add `X-Content-Type-Options: nosniff` to every answer, and `Cache-Control: no-store` to every answer
+    whose route set no cache policy of its own: API answers carry tokens, users and work in progress, which no
+    browser or proxy cache should keep. The routes that set one keep it: the editor's hashed assets and the
+    fingerprinted raster tiles (immutable: their names or ETags change with their content) and the editor page
+    (`no-cache`: revalidated on every load)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Pass the request through; add the headers to the response start."""
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = list(message.get("headers", []))
+                names = {name.lower() for name, _ in headers}
+                headers += [header for header in (NO_SNIFF, NO_STORE) if header[0] not in names]
+                message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)

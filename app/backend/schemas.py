@@ -1,7 +1,9 @@
 """API request and response shapes (pydantic), separate from the ORM models.
 
 Element geometry is validated by the `annotations` package (`MapElement`): one definition of a valid element.
-Non-finite numbers are rejected at parse time (`allow_inf_nan=False`), since JSON parsers accept NaN.
+Non-finite numbers are rejected at parse time (`allow_inf_nan=False`), since JSON parsers accept NaN. Request
+shapes are strict (`STRICT`): no string or boolean is taken for a number (`"1"`, `true`, `[false, 0]` are 422);
+an integer is a number wherever a float is expected, since JSON does not tell `1` from `1.0`.
 """
 
 import logging
@@ -18,7 +20,9 @@ logger = logging.getLogger(__name__)
 Role = Literal["annotator", "lead", "admin"]
 Point = Annotated[Sequence[float], Field(min_length=2, max_length=2)]
 """[x, y] in metres (an array of two numbers; a plain array keeps the OpenAPI schema simple for clients)."""
-STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, populate_by_name=True)
+STRICT = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, populate_by_name=True)
+"""For request shapes: unknown fields, non-finite numbers and type coercions (strings or booleans as numbers)
+are refused."""
 
 
 def check_element(*, cls: str, points: Sequence[Point], source: str, confidence: float | None) -> None:

@@ -8,7 +8,7 @@ import pytest
 from backend_helpers import PASSWORD, crosswalk, divider, login
 from fastapi.testclient import TestClient
 
-from app.backend.crud import queues
+from app.backend.crud import leases
 from app.backend.crud.users import utc_now
 from app.backend.schemas_review import DEFAULT_LEASE_S
 
@@ -127,7 +127,7 @@ def test_expired_lease_frees_the_item(
     lease = next_item(client, site_id, headers["annotator"])
     assert lease is not None and next_item(client, site_id, other) is None
     later = utc_now() + timedelta(seconds=DEFAULT_LEASE_S + 1)
-    monkeypatch.setattr(queues, "clock", lambda: later)
+    monkeypatch.setattr(leases, "clock", lambda: later)
     taken = next_item(client, site_id, other)
     assert taken is not None and taken["element_id"] == only and taken["username"] == "ann2"
     stale = client.post(f"/api/leases/{lease['id']}/renew", headers=headers["annotator"])

@@ -65,7 +65,8 @@ def test_tile_is_png_with_immutable_cache_and_etag(
     response = client.get(url, headers=headers["annotator"])
     assert response.status_code == 200, response.text
     assert response.headers["content-type"] == "image/png"
-    assert "immutable" in response.headers["cache-control"]
+    assert "immutable" in response.headers["cache-control"] and "private" in response.headers["cache-control"]
+    assert response.headers["x-content-type-options"] == "nosniff"
     image = cv2.imdecode(np.frombuffer(response.content, np.uint8), cv2.IMREAD_UNCHANGED)
     assert image.shape[2] == 4 and max(image.shape[:2]) <= 256  # edge tiles are cut to the raster
     etag = response.headers["etag"]

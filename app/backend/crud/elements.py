@@ -1,7 +1,9 @@
 """Map elements with versions: create, bulk proposals, bbox query, update, soft delete.
 
 Every change bumps the version (the ORM's optimistic lock) and appends an `EditLog` row in the same
-transaction, so nothing is changed without a record of who, when, before and after.
+transaction, so nothing is changed without a record of who, when, before and after. Every change of an existing
+element (update, delete, review, restore) loads it through `element_for_write`, the one place for the rules all
+of them share: approved work, leases held by others, and the version.
 """
 
 import logging
@@ -13,14 +15,19 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.exc import StaleDataError
 
+from app.backend.crud.leases import check_lease
 from app.backend.crud.sites import cached_extent, get_site, site_extent
 from app.backend.crud.users import utc_now
-from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
+from app.backend.errors import ConflictError, ForbiddenError, InvalidInputError, NotFoundError
 from app.backend.models import EditLog, Element, Site
 from app.backend.schemas import ElementCreate, ElementPublic, ElementUpdate, Extent, Point, check_element
 from app.backend.vma_loop import qa_sample
 
 logger = logging.getLogger(__name__)
+
+FINAL_STATES = frozenset({"approved"})
+"""A lead's final decision: only a lead (or admin) may edit or delete an element in these states; an annotator's
+edit is refused (403), not taken as a reopening: a lead returns the element first."""
 
 
 def public(element: Element) -> ElementPublic:
@@ -226,6 +233,24 @@ def check_version(element: Element, version: int) -> None:
         )
 
 
+def element_for_write(
+    *, session: Session, site_id: int, element_id: int, version: int, username: str, role: str, action: str
+) -> Element:
+    """The element `action` (update, delete, review or restore) may change, checked in this order: it exists in
+    the site (404); an annotator may not update or delete approved work (403; review and restore apply their
+    own state rules); no other user's unexpired lease holds it (409 naming the holder and expiry; leads and
+    admins override); `version` is the stored one (409 with the current element)."""
+    element = get_element(session=session, site_id=site_id, element_id=element_id)
+    if action in ("update", "delete") and element.state in FINAL_STATES and role not in ("lead", "admin"):
+        raise ForbiddenError(
+            f"state: element {element_id} is {element.state}; only a lead may {action} approved work "
+            "(a lead may return it to annotators)"
+        )
+    check_lease(session, element, username=username, role=role, action=action)
+    check_version(element, version)
+    return element
+
+
 def commit_change(
     session: Session, element: Element, *, username: str, action: str, before: dict[str, Any]
 ) -> Element:
@@ -247,11 +272,26 @@ def commit_change(
 
 
 def update_element(
-    *, session: Session, site_id: int, element_id: int, update: ElementUpdate, username: str, margin_m: float
+    *,
+    session: Session,
+    site_id: int,
+    element_id: int,
+    update: ElementUpdate,
+    username: str,
+    role: str,
+    margin_m: float,
 ) -> Element:
-    """Change class, points and/or confidence of the current version; the merged element is validated."""
-    element = get_element(session=session, site_id=site_id, element_id=element_id)
-    check_version(element, update.version)
+    """Change class, points and/or confidence of the current version; the merged element is validated. The
+    review state is kept (see `element_for_write` for who may change what)."""
+    element = element_for_write(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        version=update.version,
+        username=username,
+        role=role,
+        action="update",
+    )
     if element.deleted:
         raise ConflictError(f"element {element_id} is deleted; restore a version first")
     cls = update.cls or element.cls
@@ -269,11 +309,18 @@ def update_element(
 
 
 def delete_element(
-    *, session: Session, site_id: int, element_id: int, version: int, username: str
+    *, session: Session, site_id: int, element_id: int, version: int, username: str, role: str
 ) -> Element:
     """Soft delete: the element is marked deleted (and logged), never removed."""
-    element = get_element(session=session, site_id=site_id, element_id=element_id)
-    check_version(element, version)
+    element = element_for_write(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        version=version,
+        username=username,
+        role=role,
+        action="delete",
+    )
     if element.deleted:
         raise ConflictError(f"element {element_id} is already deleted")
     before = snapshot(element)

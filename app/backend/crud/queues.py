@@ -17,7 +17,9 @@ first; each element gets its own lease, so reviews, expiry and release work as f
 
 The guard against two annotators getting one element is the UNIQUE `leases.active_element_id`: an insert that
 loses a race fails with IntegrityError and the next candidate is tried. Expired leases are reclaimed (their
-`active_element_id` cleared) at the start of each request, so an abandoned item is free again.
+`active_element_id` cleared) at the start of each request, so an abandoned item is free again. While a lease
+holds an element, only its holder (or a lead) may change it: `crud.leases.check_lease`, which every element write
+passes.
 """
 
 import logging
@@ -29,9 +31,10 @@ from sqlalchemy import ColumnElement, Select, func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from app.backend.crud import leases as lease_rules
 from app.backend.crud.elements import public
 from app.backend.crud.sites import get_site
-from app.backend.crud.users import as_utc, utc_now
+from app.backend.crud.users import as_utc
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element, User
 from app.backend.models_review import Lease
@@ -40,8 +43,6 @@ from app.backend.schemas_review import LeasePublic
 
 logger = logging.getLogger(__name__)
 
-clock: Callable[[], datetime] = utc_now
-"""The time source for leases (tests replace it to make leases expire without sleeping)."""
 CANDIDATES_PER_TRY = 16
 """How many candidates one attempt considers before looking again."""
 MAX_ATTEMPTS = 8
@@ -99,7 +100,7 @@ def lease_public(
     lint: Sequence[LintFindingPublic] = (),
 ) -> LeasePublic:
     """The API view of a lease with its element (and the lint findings involving it, when given)."""
-    now = now or clock()
+    now = now or lease_rules.clock()
     element = session.get(Element, lease.element_id)
     if element is None:
         raise NotFoundError(f"element {lease.element_id} of lease {lease.id} not found")
@@ -208,7 +209,7 @@ def _lease_next(
     request took one of its elements first; (that candidate, the leases), None when there is no work left."""
     get_site(session=session, site_id=site_id)
     for _attempt in range(MAX_ATTEMPTS):
-        now = clock()
+        now = lease_rules.clock()
         _reclaim_expired(session, site_id=site_id, now=now)
         candidates = _candidates(session, site_id=site_id, username=username, flagged_ids=flagged_ids)
         if not candidates:
@@ -316,7 +317,7 @@ def release_lease(*, session: Session, lease_id: int, username: str, role: str) 
     """Give the element back; the holder, a lead or an admin may release. Releasing twice is a no-op."""
     lease = read_lease(session=session, lease_id=lease_id, username=username, role=role)
     if lease.released_at is None:
-        lease.released_at = clock()
+        lease.released_at = lease_rules.clock()
         lease.active_element_id = None
         session.commit()
         logger.info("lease %s released by %s", lease_id, username)
@@ -328,7 +329,7 @@ def renew_lease(*, session: Session, lease_id: int, username: str, lease_s: int)
     lease = get_lease(session=session, lease_id=lease_id)
     if lease.username != username:
         raise ForbiddenError(f"lease {lease_id} belongs to {lease.username!r}; only its holder may renew it")
-    now = clock()
+    now = lease_rules.clock()
     result = session.execute(
         update(Lease)
         .where(Lease.id == lease_id, Lease.active_element_id.is_not(None), Lease.expires_at > now)

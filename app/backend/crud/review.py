@@ -5,7 +5,7 @@ import logging
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
-from app.backend.crud.elements import _set_points, check_version, commit_change, get_element, snapshot
+from app.backend.crud.elements import _set_points, commit_change, element_for_write, get_element, snapshot
 from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element
@@ -21,8 +21,10 @@ ANNOTATOR_TRANSITIONS: dict[str, frozenset[str]] = {
 LEAD_TRANSITIONS: dict[str, frozenset[str]] = {
     "accepted": frozenset({"approved", "returned"}),
     "fixed": frozenset({"approved", "returned"}),
+    "approved": frozenset({"returned"}),
 }
-"""Leads approve or return what annotators verified."""
+"""Leads approve or return what annotators verified, and reopen approved work by returning it: annotators may
+not change approved work themselves (`crud.elements.element_for_write`)."""
 LEAD_STATES = frozenset({"approved", "returned"})
 VERIFIED_STATES = frozenset({"accepted", "fixed", "rejected"})
 """An annotator's verdict: the work item is done, so its lease ends with the review."""
@@ -42,8 +44,15 @@ def review_element(
     """Move an element to `target`; 403 for a lead-only state asked by an annotator, 409 for an invalid move."""
     if target in LEAD_STATES and role not in ("lead", "admin"):
         raise ForbiddenError(f"state: only a lead may set {target!r}")
-    element = get_element(session=session, site_id=site_id, element_id=element_id)
-    check_version(element, version)
+    element = element_for_write(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        version=version,
+        username=username,
+        role=role,
+        action="review",
+    )
     if element.deleted:
         raise ConflictError(f"element {element_id} is deleted; restore a version first")
     if target not in allowed_targets(element.state, role):
@@ -84,8 +93,15 @@ def restore_version(
 
     Only a lead (or admin) may restore across a lead's decision: an annotator can neither undo an approval or
     return nor bring one back, as the review transitions forbid the same moves."""
-    element = get_element(session=session, site_id=site_id, element_id=element_id)
-    check_version(element, version)
+    element = element_for_write(
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        version=version,
+        username=username,
+        role=role,
+        action="restore",
+    )
     entry = session.scalar(
         select(EditLog).where(EditLog.element_id == element_id, EditLog.version == restore)
     )

@@ -25,7 +25,11 @@ from app.backend.schemas import (
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}/elements", tags=["elements"])
 CONFLICT: dict[int | str, dict[str, Any]] = {
-    409: {"model": ConflictBody, "description": "Stale version: the body holds the current element."}
+    403: {"description": "An annotator's change to approved work (only a lead may change it)."},
+    409: {
+        "model": ConflictBody,
+        "description": "Stale version (the body holds the current element), or leased to another user.",
+    },
 }
 
 
@@ -145,13 +149,17 @@ def update_element(
     settings: SettingsDep,
     user: CurrentUser,
 ) -> Response:
-    """Change class, points or confidence; 409 with the current element when `version` is stale."""
+    """Change class, points or confidence; the review state is kept. 409 with the current element when
+    `version` is stale; 409 naming the holder and expiry when another user's lease holds the element (leads
+    override); 403 for an annotator's change to an approved element: approval is a lead's final decision, so
+    the edit is refused rather than reopening the element (a lead returns it first)."""
     element = crud.update_element(
         session=session,
         site_id=site_id,
         element_id=element_id,
         update=update,
         username=user.username,
+        role=user.role,
         margin_m=settings.extent_margin_m,
     )
     return element_response(element)
@@ -165,8 +173,14 @@ def delete_element(
     session: SessionDep,
     user: CurrentUser,
 ) -> Response:
-    """Soft delete (kept and logged; restore an earlier version to undo)."""
+    """Soft delete (kept and logged; restore an earlier version to undo). The same rules as `PATCH`: 409 for a
+    stale version or another user's lease, 403 for an annotator's delete of an approved element."""
     element = crud.delete_element(
-        session=session, site_id=site_id, element_id=element_id, version=version, username=user.username
+        session=session,
+        site_id=site_id,
+        element_id=element_id,
+        version=version,
+        username=user.username,
+        role=user.role,
     )
     return element_response(element)

@@ -30,7 +30,9 @@ from app.backend.tiles.layers import load_layer
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}", tags=["rasters"])
 _STATE_LOCK = threading.Lock()
-TILE_CACHE_CONTROL = "public, max-age=31536000, immutable"
+TILE_CACHE_CONTROL = "private, max-age=31536000, immutable"
+"""Tiles change only with their pyramid's fingerprint (in the ETag), so browsers keep them; `private`: they are
+answers to authenticated requests, which no shared cache may keep (every other API answer is `no-store`)."""
 PNG: dict[int | str, dict[str, object]] = {
     200: {"content": {"image/png": {}}, "description": "An RGBA PNG tile."},
     304: {"description": "Not modified (If-None-Match matched the ETag)."},

@@ -13,7 +13,11 @@ from app.backend.schemas import ConflictBody, EditLogPublic, ElementPublic, Revi
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}/elements/{element_id}", tags=["review"])
 CONFLICT: dict[int | str, dict[str, Any]] = {
-    409: {"model": ConflictBody, "description": "Stale version or invalid transition."}
+    403: {"description": "A lead's state or decision asked by an annotator."},
+    409: {
+        "model": ConflictBody,
+        "description": "Stale version, invalid transition, or leased to another user.",
+    },
 }
 
 
@@ -27,8 +31,9 @@ def review(
     settings: SettingsDep,
     http: Request,
 ) -> ElementPublic:
-    """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned.
-    Enough new accepted/fixed corrections start a retrain job (when the server is configured for it)."""
+    """Annotators: proposed|returned -> accepted|fixed|rejected; leads also accepted|fixed -> approved|returned
+    and approved -> returned (reopening approved work, which annotators may not change). Another user's unexpired lease on the element refuses the move with 409 naming the holder and expiry (leads
+    override). Enough new accepted/fixed corrections start a retrain job (when the server is configured for it)."""
     element = crud.review_element(
         session=session,
         site_id=site_id,
@@ -63,7 +68,7 @@ def restore(
     user: CurrentUser,
 ) -> ElementPublic:
     """Make an earlier version's content current again, as a new version (across a lead's approve/return:
-    leads only, 403 otherwise)."""
+    leads only, 403 otherwise; another user's lease: 409, leads override)."""
     element = crud.restore_version(
         session=session,
         site_id=site_id,
