@@ -37,7 +37,7 @@ RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
 def run(site: Path, proposal_files: list[Path], rasters: Path | None = None) -> dict[str, Any]:
     truths = observed_true_polylines(site, rasters) if rasters else true_polylines(site)
-    with local_backend() as (admin, annotator):
+    with local_backend(site) as (admin, annotator):
         started = time.perf_counter()
         scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)
         out: dict[str, Any] = {"from_scratch": {**scratch.as_dict(), "wall_s": time.perf_counter() - started}}

@@ -3,9 +3,11 @@ without a worker-thread hop (both cost more than the rest of a small request).
 
 A token's user is read again from the database at most every `AUTH_CACHE_TTL_S` seconds (environment variable
 CAMA_AUTH_CACHE_TTL_S; 0 turns the cache off), and the token's expiry is checked on every request. Through the
-API neither tokens nor users change once created (there is no logout, deactivation or role change), so nothing
-cached can go stale; a change made directly in the database takes effect within the TTL. Unknown tokens are
-never cached, so junk tokens cannot fill it.
+API users do not change once created (no deactivation or role change), and the one change to tokens, logout,
+goes through `revoke`: the token leaves the cache at once and cannot be cached again by a request that read it
+from the database just before it was deleted. A change made directly in the database (or a logout through another
+server process on the same database) takes effect within the TTL. Unknown tokens are never cached, so junk
+tokens cannot fill it.
 """
 
 import logging
@@ -42,6 +44,8 @@ class TokenCache:
 
     ttl_s: float = AUTH_CACHE_TTL_S
     entries: dict[str, CachedToken] = field(default_factory=dict)
+    revoked: dict[str, float] = field(default_factory=dict)
+    """Digests of tokens revoked within the TTL, with when: never cached again."""
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def __post_init__(self) -> None:
@@ -61,7 +65,19 @@ class TokenCache:
         """Remember a token resolved from the database just now (nothing when the TTL is 0)."""
         if self.ttl_s <= 0:
             return
+        digest = token_digest(token)
         with self.lock:
+            if digest in self.revoked:
+                return
             if len(self.entries) >= MAX_ENTRIES:
                 self.entries.clear()
-            self.entries[token_digest(token)] = CachedToken(user, expires_at, time.monotonic())
+            self.entries[digest] = CachedToken(user, expires_at, time.monotonic())
+
+    def revoke(self, token: str) -> None:
+        """Forget a token deleted from the database (logout), and refuse to cache it for the next TTL."""
+        digest = token_digest(token)
+        now = time.monotonic()
+        with self.lock:
+            self.entries.pop(digest, None)
+            self.revoked = {key: at for key, at in self.revoked.items() if now - at <= self.ttl_s}
+            self.revoked[digest] = now

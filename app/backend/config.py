@@ -14,6 +14,9 @@ DEFAULT_MAX_PAYLOAD_BYTES = 8 * 1024 * 1024
 DEFAULT_EXTENT_MARGIN_M = 50.0
 DEFAULT_SCRYPT_N = 2**14
 DEFAULT_QA_SHARE = 0.1
+DEFAULT_LOGIN_MAX_FAILURES = 5
+DEFAULT_LOGIN_MAX_FAILURES_PER_ADDRESS = 20
+DEFAULT_LOGIN_WINDOW_S = 300.0
 
 
 _REVIEW_URL = re.compile(r"https?://[^\s/?#]+(/[^\s?#]*)?|:\d{1,5}")
@@ -61,6 +64,15 @@ class Settings:
     review_site_id: int | None = None
     """The backend site the 3D review shows (the link carries the selected element only on that site);
     None: any site."""
+    data_roots: tuple[Path, ...] = ()
+    """Folders the server-side paths of requests (a site's `raster_dir` or `synthetic_dir`, an export's
+    `dataset_root`) must lie in, after symlinks and `..` are resolved; empty: `data_dir` only."""
+    login_max_failures: int = DEFAULT_LOGIN_MAX_FAILURES
+    """Failed logins of one user name within `login_window_s` before its logins are refused (429)."""
+    login_max_failures_per_address: int = DEFAULT_LOGIN_MAX_FAILURES_PER_ADDRESS
+    """Failed logins from one client address within `login_window_s` before its logins are refused (429)."""
+    login_window_s: float = DEFAULT_LOGIN_WINDOW_S
+    """The sliding window of the login limits, seconds: a failure counts for this long."""
 
     def __post_init__(self) -> None:
         """Validate the fields so that a bad environment fails at start, naming the variable."""
@@ -84,11 +96,23 @@ class Settings:
             raise ValueError(f"CAMA_REVIEW_URL: must be an http(s) URL or :<port>, got {self.review_url!r}")
         if self.review_site_id is not None and self.review_site_id < 1:
             raise ValueError(f"CAMA_REVIEW_SITE_ID: must be a site id >= 1, got {self.review_site_id}")
+        if self.login_max_failures < 1 or self.login_max_failures_per_address < 1:
+            raise ValueError(
+                "CAMA_LOGIN_MAX_FAILURES and CAMA_LOGIN_MAX_FAILURES_PER_ADDRESS: must be >= 1, got "
+                f"{self.login_max_failures} and {self.login_max_failures_per_address}"
+            )
+        if not self.login_window_s > 0:
+            raise ValueError(f"CAMA_LOGIN_WINDOW_S: must be positive, got {self.login_window_s}")
 
     @property
     def resolved_database_url(self) -> str:
         """The database URL, defaulting to a SQLite file in `data_dir`."""
         return self.database_url or f"sqlite:///{Path(self.data_dir).resolve() / 'cama.db'}"
+
+    @property
+    def allowed_data_roots(self) -> tuple[Path, ...]:
+        """`data_roots` (else `data_dir`) resolved: the folders request paths may lie in."""
+        return tuple(Path(root).resolve() for root in self.data_roots or (self.data_dir,))
 
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None, **overrides: object) -> "Settings":
@@ -121,4 +145,8 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "preaccept_threshold": float,
     "review_url": str,
     "review_site_id": int,
+    "data_roots": _paths,
+    "login_max_failures": int,
+    "login_max_failures_per_address": int,
+    "login_window_s": float,
 }

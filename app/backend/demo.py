@@ -11,6 +11,7 @@ restarts). Three demo accounts are made on first run, one per role, with the pas
 import json
 import logging
 import os
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -77,13 +78,15 @@ def load_site(
     name: str,
     *,
     margin_m: float,
+    roots: Sequence[Path],
     rasters: Path | None = None,
 ) -> tuple[Site, int]:
     """Register the site (once) and bulk-load its proposals (once); returns the site and how many were loaded."""
     existing = session.scalar(select(Site).where(Site.name == name))
     if existing is not None:
         return existing, 0
-    site = crud.create_site(session=session, site_in=site_request(site_dir, rasters, proposals, name))
+    site_in = site_request(site_dir, rasters, proposals, name)
+    site = crud.create_site(session=session, site_in=site_in, roots=roots)
     if proposals is None:
         return site, 0
     annotation_set = read_proposals(proposals)
@@ -125,14 +128,23 @@ def demo_command(
     from app.backend.serve import run_server
 
     password = os.environ.get("CAMA_DEMO_PASSWORD", DEFAULT_PASSWORD)
-    settings = Settings(data_dir=data_dir)
+    try:
+        settings = demo_settings(data_dir, site_dir, rasters)
+    except ValueError as err:  # a bad CAMA_* variable
+        raise bad_input(err) from err
     app = create_app(settings)
     try:
         with app.state.sessionmaker() as session:
             ensure_demo_users(session, password, settings.scrypt_n)
             name = site_dir.resolve().name + (" (reconstructed)" if rasters else "")
             site, loaded = load_site(
-                session, site_dir, proposals, name, margin_m=settings.extent_margin_m, rasters=rasters
+                session,
+                site_dir,
+                proposals,
+                name,
+                margin_m=settings.extent_margin_m,
+                roots=settings.allowed_data_roots,
+                rasters=rasters,
             )
             site_id = site.id
     except InvalidInputError as err:
@@ -148,6 +160,14 @@ def demo_command(
         # the review's site is known only once loaded; the editor's link reads these two fields per request
         app.state.settings = replace(settings, review_url=review_url(host, view_port), review_site_id=site_id)
     run_server(app, host=host, port=port, log_level="warning")
+
+
+def demo_settings(data_dir: Path, site_dir: Path, rasters: Path | None) -> Settings:
+    """The CAMA_* settings (as `cama serve` reads them) on the demo's data folder, with the demo's site folder
+    and raster folder added to the data roots (CAMA_DATA_ROOTS, else the data folder)."""
+    settings = Settings.from_env(data_dir=data_dir)
+    folders = (site_dir, *([rasters] if rasters is not None else []))
+    return replace(settings, data_roots=(*settings.allowed_data_roots, *(f.resolve() for f in folders)))
 
 
 def review_url(host: str, port: int) -> str:

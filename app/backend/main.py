@@ -18,7 +18,9 @@ from app.backend.errors import install_error_handlers
 from app.backend.jobs.kinds import JOB_KINDS
 from app.backend.jobs.runner import JobRunner
 from app.backend.jobs.vma import unavailable_kinds, vma_job_kinds
+from app.backend.login_limit import LoginLimiter
 from app.backend.middleware import BodySizeLimit, ResponseHeaders
+from app.backend.security import dummy_hash
 
 logger = logging.getLogger(__name__)
 
@@ -59,7 +61,8 @@ def create_app(settings: Settings) -> FastAPI:
     app = FastAPI(
         title="CAMA Studio",
         summary="HD-map annotation: sites, versioned vector elements, review and edit history.",
-        docs_url="/docs",
+        docs_url=None,  # served by the frontend router with local Swagger UI files (the product runs offline)
+        redoc_url=None,
         openapi_url="/openapi.json",
         lifespan=_lifespan,
     )
@@ -67,6 +70,8 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.engine = engine
     app.state.sessionmaker = sessions
     app.state.token_cache = TokenCache()
+    app.state.login_limiter = LoginLimiter.from_settings(settings)
+    dummy_hash(settings.scrypt_n)  # made now, so that the first unknown user's login is not slower either
     app.state.jobs = JobRunner(
         sessions=sessions,
         data_dir=settings.data_dir,

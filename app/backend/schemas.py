@@ -23,6 +23,10 @@ Point = Annotated[Sequence[float], Field(min_length=2, max_length=2)]
 STRICT = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, populate_by_name=True)
 """For request shapes: unknown fields, non-finite numbers and type coercions (strings or booleans as numbers)
 are refused."""
+MAX_ID = 2**63 - 1
+"""Largest value a database integer column holds (signed 64 bits)."""
+DbId = Annotated[int, Field(ge=1, le=MAX_ID)]
+"""An id or version sent in a request body: larger ones get 422 before any query (SQLite would overflow)."""
 
 
 def check_element(*, cls: str, points: Sequence[Point], source: str, confidence: float | None) -> None:
@@ -164,7 +168,7 @@ class ElementUpdate(BaseModel):
     """A change to an element; `version` must be the one last read (optimistic concurrency)."""
 
     model_config = STRICT
-    version: int = Field(ge=1)
+    version: DbId
     cls: ElementClass | None = Field(
         default=None, validation_alias=AliasChoices("class", "cls"), serialization_alias="class"
     )
@@ -212,14 +216,14 @@ class ReviewRequest(BaseModel):
 
     model_config = STRICT
     state: Literal["accepted", "fixed", "rejected", "approved", "returned"]
-    version: int = Field(ge=1)
+    version: DbId
 
 
 class VersionRequest(BaseModel):
     """Carries the version last read, for changes without other content (restore)."""
 
     model_config = STRICT
-    version: int = Field(ge=1)
+    version: DbId
 
 
 class EditLogPublic(BaseModel):

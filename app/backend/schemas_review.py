@@ -6,7 +6,7 @@ from typing import Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from app.backend.schemas import STRICT, ElementPublic, Point
+from app.backend.schemas import STRICT, DbId, ElementPublic, Point
 from app.backend.schemas_quality import LintFindingPublic
 
 logger = logging.getLogger(__name__)
@@ -82,7 +82,7 @@ class IssueCreate(BaseModel):
     reason: IssueReason
     comment: str = Field(min_length=1, max_length=10_000)
     point: Point | None = None
-    element_id: int | None = Field(default=None, ge=1)
+    element_id: DbId | None = None
 
     @model_validator(mode="after")
     def _pinned(self) -> Self:

@@ -1,6 +1,7 @@
 """Password hashing (standard-library scrypt) and opaque login tokens."""
 
 import base64
+import functools
 import hashlib
 import hmac
 import logging
@@ -32,6 +33,13 @@ def hash_password(password: str, *, n: int) -> str:
         password.encode("utf-8"), salt=salt, n=n, r=SCRYPT_R, p=SCRYPT_P, dklen=SCRYPT_DKLEN
     )
     return f"scrypt${n}${SCRYPT_R}${SCRYPT_P}${_b64(salt)}${_b64(digest)}"
+
+
+@functools.cache
+def dummy_hash(n: int) -> str:
+    """A hash of a random password at cost `n`: checking a login of an unknown user against it costs what
+    checking a real user's password costs, so the answer time does not tell which user names exist."""
+    return hash_password(secrets.token_urlsafe(TOKEN_BYTES), n=n)
 
 
 def verify_password(password: str, stored: str) -> bool:

@@ -22,11 +22,16 @@ _PASSWORD = "simulated-annotator"
 
 
 @contextmanager
-def local_backend() -> Iterator[tuple[ApiSession, ApiSession]]:
-    """(admin, annotator) sessions on a backend app that lives as long as the context."""
+def local_backend(*data_roots: Path) -> Iterator[tuple[ApiSession, ApiSession]]:
+    """(admin, annotator) sessions on a backend app that lives as long as the context; the sites it registers
+    must lie in `data_roots`."""
     with tempfile.TemporaryDirectory() as tmp:
         settings = Settings(
-            data_dir=Path(tmp), scrypt_n=2**4, admin_username="admin", admin_password=_PASSWORD
+            data_dir=Path(tmp),
+            data_roots=(Path(tmp), *data_roots),
+            scrypt_n=2**4,
+            admin_username="admin",
+            admin_password=_PASSWORD,
         )
         with TestClient(create_app(settings)) as client:
             admin = ApiSession(client, "admin", _PASSWORD)

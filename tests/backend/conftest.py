@@ -42,9 +42,11 @@ def database_url(request: pytest.FixtureRequest) -> str | None:
 
 @pytest.fixture
 def settings(tmp_path: Path, database_url: str | None) -> Settings:
-    """Settings on a temporary data folder with cheap password hashing and a small payload limit."""
+    """Settings on a temporary data folder with cheap password hashing and a small payload limit; request
+    paths may lie anywhere in the test's temporary folder (the site rasters are beside the data folder)."""
     return Settings(
         data_dir=tmp_path / "data",
+        data_roots=(tmp_path,),
         database_url=database_url,
         scrypt_n=2**4,
         max_payload_bytes=64 * 1024,

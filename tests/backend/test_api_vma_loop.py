@@ -34,6 +34,7 @@ def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Setti
     pre-accept at confidence 0.9 (the rule-based proposer's clean lines score 1.0) and half of those to QA."""
     return Settings(
         data_dir=tmp_path / "data",
+        data_roots=(tmp_path,),
         database_url=database_url,
         scrypt_n=2**4,
         extent_margin_m=10.0,

@@ -101,3 +101,22 @@ def test_demo_links_the_editor_to_its_3d_review(
         (":8091", 1),  # every address: the link takes the host the browser used
         ("", None),
     ]
+
+
+def test_demo_reads_the_cama_settings_and_adds_its_site_to_the_data_roots(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    served: list[Settings] = []
+    monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: served.append(app.state.settings))
+    monkeypatch.setenv("CAMA_EXTENT_MARGIN_M", "7.5")
+    monkeypatch.setenv("CAMA_TOKEN_TTL_S", "600")
+    monkeypatch.setenv("CAMA_DATA_ROOTS", str(tmp_path / "shared"))
+    args = ["demo", str(site_root), "--data-dir", str(tmp_path / "server"), "--view-port", "0"]
+    result = runner.invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    (settings,) = served
+    assert (settings.extent_margin_m, settings.token_ttl_s) == (7.5, 600)
+    assert settings.allowed_data_roots == ((tmp_path / "shared").resolve(), site_root.resolve())
+    monkeypatch.setenv("CAMA_TOKEN_TTL_S", "-1")
+    refused = runner.invoke(cli, args)
+    assert refused.exit_code == 2 and "CAMA_TOKEN_TTL_S" in refused.output

@@ -48,7 +48,8 @@ class ServerProcess:
     cpus: Sequence[int] | None = None
     """CPU cores the server may use (Linux affinity), e.g. (0, 1); None means all."""
     extra_env: dict[str, str] = field(default_factory=dict)
-    """Environment variables added for the server (e.g. PYTHONPATH to serve other sources)."""
+    """Environment variables added for the server (e.g. PYTHONPATH to serve other sources); CAMA_DATA_ROOTS
+    defaults to the data folder's parent, where the tests put their site rasters."""
     process: subprocess.Popen[bytes] | None = None
 
     @property
@@ -59,7 +60,13 @@ class ServerProcess:
     def start(self) -> "ServerProcess":
         """Spawn the server with a bootstrap admin and wait until `/openapi.json` answers."""
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        env = {**os.environ, **self.extra_env, "CAMA_ADMIN_USERNAME": ADMIN, "CAMA_ADMIN_PASSWORD": PASSWORD}
+        env = {
+            **os.environ,
+            "CAMA_DATA_ROOTS": str(self.data_dir.resolve().parent),
+            **self.extra_env,
+            "CAMA_ADMIN_USERNAME": ADMIN,
+            "CAMA_ADMIN_PASSWORD": PASSWORD,
+        }
         command = [str(cama_executable()), "serve", str(self.data_dir), "--port", str(self.port)]
         if self.database_url:
             command += ["--database-url", self.database_url]

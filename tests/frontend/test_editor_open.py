@@ -31,6 +31,17 @@ def test_login_rejects_a_wrong_password(page: Page, seeded: SeededServer) -> Non
     expect(page.locator(".form-error")).to_contain_text("wrong username or password")
 
 
+def test_log_out_revokes_the_token_on_the_server(page: Page, seeded: SeededServer) -> None:
+    log_in(page, seeded.base_url, "ann")
+    token = page.evaluate("sessionStorage.getItem('cama.token')")
+    with page.expect_response(lambda response: response.url.endswith("/api/auth/logout")) as logout:
+        page.click("#logout")
+    assert logout.value.status == 204
+    expect(page.locator("#username")).to_be_visible()
+    with seeded.client() as client:
+        assert client.get("/api/auth/me", headers={"Authorization": f"Bearer {token}"}).status_code == 401
+
+
 def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) -> None:
     tiles: list[int] = []
     page.on("response", lambda r: tiles.append(r.status) if "/tiles/" in r.url else None)

@@ -101,3 +101,24 @@ def test_cama_serve_refuses_a_bad_review_url_before_serving(tmp_path: Path) -> N
     result = CliRunner().invoke(app, ["serve", str(tmp_path / "data"), "--review-url", "localhost:8080"])
     assert result.exit_code == 2
     assert "CAMA_REVIEW_URL" in result.output
+
+
+def test_api_docs_load_swagger_ui_from_this_server_not_a_cdn(client: TestClient, dist: Path) -> None:
+    (dist / "docs").mkdir()
+    (dist / "docs" / "swagger-ui-bundle.js").write_text("window.SwaggerUIBundle = () => {};")
+    page = client.get("/docs")
+    assert page.status_code == 200 and "/openapi.json" in page.text
+    assert "/docs/swagger-ui-bundle.js" in page.text and "/docs/swagger-ui.css" in page.text
+    assert "http://" not in page.text and "https://" not in page.text, page.text
+    assert client.get("/docs/swagger-ui-bundle.js").status_code == 200
+    assert client.get("/docs/swagger-ui.css").status_code == 404  # not built here: 404, never elsewhere
+    assert client.get("/docs/..%2F..%2Fsecret.txt").status_code == 404
+    assert client.get("/redoc").status_code == 404  # ReDoc would come from a CDN: not served
+
+
+def test_the_build_ships_swagger_ui() -> None:
+    """The Vite build copies the files `/docs` serves (the setup step builds before the tests run)."""
+    for name in frontend.DOCS_ASSETS:
+        assert (frontend.DIST_DIR / "docs" / name).is_file(), (
+            f"{name}: run `make setup` (npm ci + vite build)"
+        )

@@ -30,7 +30,11 @@ TRUTH = [
 @pytest.fixture()
 def client(tmp_path: Path) -> Iterator[TestClient]:
     settings = Settings(
-        data_dir=tmp_path / "data", scrypt_n=2**4, admin_username="root", admin_password=PASSWORD
+        data_dir=tmp_path / "data",
+        data_roots=(tmp_path,),
+        scrypt_n=2**4,
+        admin_username="root",
+        admin_password=PASSWORD,
     )
     with TestClient(create_app(settings)) as test_client:
         yield test_client

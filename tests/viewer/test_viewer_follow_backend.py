@@ -45,7 +45,11 @@ def _flat_surface(z_m: float = 3.0) -> Surface:
 def backend(tmp_path: Path) -> Iterator[tuple[TestClient, dict[str, str], int]]:
     """An in-process backend (SQLite) with the site registered: (client, admin headers, site id)."""
     settings = Settings(
-        data_dir=tmp_path / "data", scrypt_n=2**4, admin_username="root", admin_password=PASSWORD
+        data_dir=tmp_path / "data",
+        data_roots=(tmp_path,),
+        scrypt_n=2**4,
+        admin_username="root",
+        admin_password=PASSWORD,
     )
     rasters = tmp_path / "data" / "bev"  # inside the data folder: the server's only data root
     rasters.mkdir(parents=True)

@@ -16,6 +16,7 @@ from app.backend.auth_cache import TokenCache
 from app.backend.config import Settings
 from app.backend.crud.quality import LintCache
 from app.backend.models import User
+from app.backend.schemas import MAX_ID
 
 logger = logging.getLogger(__name__)
 
@@ -39,8 +40,6 @@ async def get_session(request: Request) -> AsyncIterator[Session]:
         yield session
 
 
-MAX_ID = 2**63 - 1
-"""Largest id a database integer key holds; larger path ids are rejected with 422 before any query."""
 IdPath = Annotated[int, Path(ge=1, le=MAX_ID)]
 VersionPath = Annotated[int, Path(ge=1, le=MAX_ID)]
 

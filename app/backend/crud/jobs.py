@@ -2,6 +2,7 @@
 
 import logging
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 from pydantic import ValidationError
@@ -10,6 +11,7 @@ from sqlalchemy.orm import Session
 
 from app.backend.crud.sites import get_site
 from app.backend.crud.users import utc_now
+from app.backend.data_roots import ROOTS_CONTEXT
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.jobs.runner import JobRunner
 from app.backend.models_jobs import FINISHED_STATES, Job
@@ -29,8 +31,17 @@ def job_public(job: Job) -> JobPublic:
 _COLUMNS = tuple(name for name in JobPublic.model_fields if name != "download_url")
 
 
-def create_job(*, session: Session, runner: JobRunner, site_id: int, job_in: JobCreate, username: str) -> Job:
-    """Validate the kind and its params, store the job as queued and hand it to the runner."""
+def create_job(
+    *,
+    session: Session,
+    runner: JobRunner,
+    site_id: int,
+    job_in: JobCreate,
+    username: str,
+    roots: Sequence[Path],
+) -> Job:
+    """Validate the kind and its params (folders must lie inside the data `roots`), store the job as queued and
+    hand it to the runner."""
     get_site(session=session, site_id=site_id)
     if job_in.kind in runner.unavailable:
         raise InvalidInputError("kind", f"{job_in.kind!r} is {runner.unavailable[job_in.kind]}")
@@ -39,10 +50,21 @@ def create_job(*, session: Session, runner: JobRunner, site_id: int, job_in: Job
         known = sorted([*runner.kinds, *runner.unavailable])
         raise InvalidInputError("kind", f"unknown job kind {job_in.kind!r}; expected one of {known}")
     try:
-        params = kind.params.model_validate(job_in.params).model_dump(mode="json")
+        checked = kind.params.model_validate(job_in.params, context={ROOTS_CONTEXT: tuple(roots)})
     except ValidationError as error:
-        raise InvalidInputError("params", str(error)) from None
+        raise InvalidInputError("params", _problems(error)) from None
+    params = checked.model_dump(mode="json")
     return runner.enqueue(session, site_id=site_id, kind=job_in.kind, params=params, username=username)
+
+
+def _problems(error: ValidationError) -> str:
+    """The params' validation errors by field, without the values given (they may be server paths)."""
+    problems = []
+    for item in error.errors(include_url=False, include_input=False, include_context=False):
+        field = ".".join(str(part) for part in item["loc"]) or "params"
+        message = str(item["msg"]).removeprefix("Value error, ")
+        problems.append(message if message.startswith(f"{field}:") else f"{field}: {message}")
+    return "; ".join(problems)
 
 
 def get_job(*, session: Session, job_id: int) -> Job:

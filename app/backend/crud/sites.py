@@ -3,6 +3,7 @@
 import json
 import logging
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 from weakref import WeakKeyDictionary
@@ -13,6 +14,7 @@ from sqlalchemy.orm import Session
 
 from annotations.schema import Georeference
 from app.backend.crud.users import utc_now
+from app.backend.data_roots import data_folder
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import Element, Site
 from app.backend.schemas import Extent, SiteCreate
@@ -27,31 +29,36 @@ _EXTENTS_LOCK = threading.Lock()
 
 
 def _read_synthetic(folder: Path) -> tuple[tuple[float, float], dict[str, Any], Path]:
-    """Site origin, raster georeference and raster folder of a `cama synth` site folder."""
+    """Site origin, raster georeference and raster folder of a `cama synth` site folder (messages name the
+    files relative to it: the folder's place on the server is not the caller's business)."""
     manifest_path = folder / "manifest.json"
     geo_path = folder / "ground_truth" / "bev" / "georeference.json"
     for path in (manifest_path, geo_path):
         if not path.is_file():
-            raise InvalidInputError("synthetic_dir", f"{path} not found; is this a `cama synth` folder?")
+            name = path.relative_to(folder).as_posix()
+            raise InvalidInputError("synthetic_dir", f"{name} not found; is this a `cama synth` folder?")
     try:
         origin = json.loads(manifest_path.read_text(encoding="utf-8"))["config"]["site_origin_xy"]
         origin_xy = (float(origin[0]), float(origin[1]))
         georeference = Georeference.from_raster_file(geo_path, site_origin_xy=origin_xy)
-    except (KeyError, IndexError, TypeError, ValueError) as error:
-        raise InvalidInputError("synthetic_dir", f"{manifest_path}: unreadable site: {error}") from error
+    except (OSError, KeyError, IndexError, TypeError, ValueError) as error:
+        logger.warning("%s: unreadable site: %s", folder, error)
+        raise InvalidInputError(
+            "synthetic_dir", "unreadable site: manifest.json or ground_truth/bev/georeference.json"
+        ) from error
     return origin_xy, georeference.raster_json(), geo_path.parent
 
 
-def create_site(*, session: Session, site_in: SiteCreate) -> Site:
-    """Register a site; InvalidInputError naming the field for a missing folder or bad georeference."""
+def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path]) -> Site:
+    """Register a site from folders inside the data `roots` (resolved); InvalidInputError naming the field for
+    a folder that is missing, unreadable or outside them, or a bad georeference."""
     if site_in.synthetic_dir is not None:
-        origin_xy, geo, raster_dir = _read_synthetic(Path(site_in.synthetic_dir).expanduser().resolve())
+        folder = data_folder(site_in.synthetic_dir, roots=roots, field="synthetic_dir")
+        origin_xy, geo, raster_dir = _read_synthetic(folder)
     else:
         origin_xy = site_in.site_origin_xy  # type: ignore[assignment]  # checked by SiteCreate
         geo = site_in.georeference.model_dump()  # type: ignore[union-attr]
-        raster_dir = Path(site_in.raster_dir or "").expanduser().resolve()
-        if not raster_dir.is_dir():
-            raise InvalidInputError("raster_dir", f"{raster_dir} is not a folder")
+        raster_dir = data_folder(site_in.raster_dir or "", roots=roots, field="raster_dir")
     site = Site(
         name=site_in.name,
         site_origin_x=origin_xy[0],

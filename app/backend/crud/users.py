@@ -9,7 +9,7 @@ from sqlalchemy.orm import Session
 
 from app.backend.errors import ConflictError
 from app.backend.models import Token, User
-from app.backend.security import hash_password, new_token, token_digest, verify_password
+from app.backend.security import dummy_hash, hash_password, new_token, token_digest, verify_password
 
 logger = logging.getLogger(__name__)
 
@@ -55,12 +55,21 @@ def ensure_admin(*, session: Session, username: str, password: str, scrypt_n: in
     return create_user(session=session, username=username, password=password, role="admin", scrypt_n=scrypt_n)
 
 
-def authenticate(*, session: Session, username: str, password: str) -> User | None:
-    """The active user with these credentials, or None."""
+def authenticate(*, session: Session, username: str, password: str, scrypt_n: int) -> User | None:
+    """The active user with these credentials, or None. An unknown or inactive user's login costs the same
+    scrypt work (a dummy hash at cost `scrypt_n`), so the time of a refusal does not tell which names exist."""
     user = session.scalar(select(User).where(User.username == username))
-    if user is None or not user.is_active:
+    matches = verify_password(password, user.password_hash if user is not None else dummy_hash(scrypt_n))
+    if user is None or not user.is_active or not matches:
         return None
-    return user if verify_password(password, user.password_hash) else None
+    return user
+
+
+def revoke_token(*, session: Session, token: str) -> bool:
+    """Delete a login token (logout); whether it existed."""
+    result = session.execute(delete(Token).where(Token.token_hash == token_digest(token)))
+    session.commit()
+    return bool(getattr(result, "rowcount", 0))
 
 
 def issue_token(*, session: Session, user: User, ttl_s: int) -> tuple[str, datetime]:

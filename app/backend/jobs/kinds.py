@@ -8,26 +8,29 @@ import os
 import shutil
 import zipfile
 from pathlib import Path
-from typing import Literal, Self
+from typing import Annotated, Literal, Self
 
 import numpy as np
-from pydantic import BaseModel, Field, model_validator
+from pydantic import AfterValidator, BaseModel, Field, model_validator
 from sqlalchemy import select
 
 from annotations.cama_format import export_cama
 from annotations.lift import DEFAULT_MAX_SPACING_M, DEFAULT_SEARCH_RADIUS_M, lift_points
 from annotations.maptr_format import export_maptr
 from annotations.schema import AnnotationSet, Georeference, MapElement
+from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.models import Element, Site
 from app.backend.schemas import STRICT
-from cama_pipeline.data import load_dataset
+from cama_pipeline.data import Dataset, load_dataset
 
 logger = logging.getLogger(__name__)
 
 ELEVATION_FILE = "elevation.npy"
 LIFTED_FILE = "lifted.json"
 EXPORT_ZIP = "export.zip"
+EXPORT_FOLDER = "export"
+PARTIAL_SUFFIX = ".partial"
 _FLAG_REPORT_LIMIT = 10
 
 
@@ -46,8 +49,11 @@ class ExportParams(BaseModel):
 
     model_config = STRICT
     format: Literal["cama", "maptr"] = "cama"
-    dataset_root: str | None = Field(default=None, max_length=4096)
-    """Data set folder (tables, poses) the MapTR samples are cut from; required for `maptr`."""
+    dataset_root: Annotated[str | None, AfterValidator(data_folder_validator)] = Field(
+        default=None, max_length=4096
+    )
+    """Data set folder (tables, poses) the MapTR samples are cut from; required for `maptr`. It must lie inside
+    the server's data roots; stored resolved."""
 
     @model_validator(mode="after")
     def _maptr_needs_dataset(self) -> Self:
@@ -148,7 +154,7 @@ def run_lift(context: JobContext, params: LiftParams) -> JobResult:
 def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:
     """Zip every file under `folder` (names relative to it) into `archive`, written atomically."""
     files = sorted(path for path in folder.rglob("*") if path.is_file())
-    partial = archive.with_name(archive.name + ".partial")
+    partial = archive.with_name(archive.name + PARTIAL_SUFFIX)
     with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as bundle:
         for index, path in enumerate(files):
             bundle.write(path, path.relative_to(folder).as_posix())
@@ -157,11 +163,23 @@ def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:
     return archive
 
 
+def _dataset(root: str) -> Dataset:
+    """The data set of a MapTR export; a ValueError that names no path or folder content when unusable (the
+    job's message is shown to API callers; the server log has the details)."""
+    try:
+        return load_dataset(Path(root))
+    except (OSError, ValueError) as error:  # DatasetError is a ValueError
+        logger.warning("export: data set %s unusable: %s", root, error)
+        raise ValueError(
+            "dataset_root: not a readable data set (tables and poses); see the server log"
+        ) from None
+
+
 def run_export(context: JobContext, params: ExportParams) -> JobResult:
     """Export the live elements to `<job>/export/` and zip it into `<job>/export.zip`."""
     annotations, raster_dir, name = site_annotations(context)
     context.report(0.2, f"exporting {len(annotations.elements)} elements ({params.format})", force=True)
-    folder = context.workdir / "export"
+    folder = context.workdir / EXPORT_FOLDER
     shutil.rmtree(folder, ignore_errors=True)
     if params.format == "cama":
         try:
@@ -171,7 +189,7 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
             elevation = None
         export_cama(annotations, context.workdir, name=folder.name, elevation=elevation)
     else:
-        dataset = load_dataset(Path(params.dataset_root or "").expanduser())
+        dataset = _dataset(params.dataset_root or "")
         context.report(0.5, "building MapTR samples", force=True)
         export_maptr(annotations, dataset, folder / "maptr.json")
     context.report(0.8, "packing the archive", force=True)
@@ -179,8 +197,19 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
     return JobResult(archive, f"exported {len(annotations.elements)} elements of {name} ({params.format})")
 
 
+def clean_export(workdir: Path) -> None:
+    """Remove an export's unzipped folder and a half-written archive; the finished `export.zip` stays."""
+    shutil.rmtree(workdir / EXPORT_FOLDER, ignore_errors=True)
+    (workdir / (EXPORT_ZIP + PARTIAL_SUFFIX)).unlink(missing_ok=True)
+
+
 JOB_KINDS: dict[str, JobKind] = {
     "lift": JobKind(LiftParams, run_lift, "Lift every live element to 3D through the elevation raster."),
-    "export": JobKind(ExportParams, run_export, "Export the live elements (cama, or maptr with a data set)."),
+    "export": JobKind(
+        ExportParams,
+        run_export,
+        "Export the live elements (cama, or maptr with a data set).",
+        cleanup=clean_export,
+    ),
 }
 """The kinds a new runner starts with (the runner copies it)."""

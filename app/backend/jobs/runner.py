@@ -50,6 +50,9 @@ class JobKind:
     params: type[BaseModel]
     run: Callable[["JobContext", Any], JobResult]
     description: str
+    cleanup: Callable[[Path], None] | None = None
+    """Removes a job's intermediate files from its work folder (never its result): called when a job of the
+    kind ends, however it ends, and on start for every job of the kind (what a killed server left)."""
 
 
 class JobContext:
@@ -189,7 +192,32 @@ class JobRunner:
         count = int(getattr(result, "rowcount", 0) or 0)
         if count:
             logger.warning("%d job(s) interrupted by the previous server run marked failed", count)
+        self.clean_up_workdirs()
         return count
+
+    def clean_up_workdirs(self) -> int:
+        """Run each kind's `cleanup` on the work folders of its jobs (at start: no job is running); how many
+        folders were looked at."""
+        with self._sessions() as session:
+            jobs = session.execute(select(Job.id, Job.kind)).all()
+        cleaned = 0
+        for job_id, kind_name in jobs:
+            kind = self.kinds.get(kind_name)
+            workdir = self.workdir(job_id)
+            if kind is not None and kind.cleanup is not None and workdir.is_dir():
+                self._clean(kind, workdir)
+                cleaned += 1
+        return cleaned
+
+    @staticmethod
+    def _clean(kind: JobKind, workdir: Path) -> None:
+        """A kind's cleanup of one folder; a failure is logged, never raised (the job's outcome stands)."""
+        if kind.cleanup is None:
+            return
+        try:
+            kind.cleanup(workdir)
+        except OSError:
+            logger.exception("cleaning up %s failed", workdir)
 
     def shutdown(self) -> None:
         """Stop running jobs at their next step, drop queued ones, and mark both failed as interrupted."""
@@ -239,7 +267,10 @@ class JobRunner:
         )
         logger.info("job %d (%s) of site %d started", job_id, job.kind, job.site_id)
         try:
-            result = kind.run(context, kind.params.model_validate(job.params))
+            try:
+                result = kind.run(context, kind.params.model_validate(job.params))
+            finally:
+                self._clean(kind, workdir)  # before the outcome is visible: a finished job is tidy
         except JobCancelled as reason:
             self._finish(job_id, state="cancelled", message=f"cancelled: {reason}")
         except Exception as error:

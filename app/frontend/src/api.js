@@ -122,7 +122,11 @@ export class Api {
     return this.me;
   }
 
+  /** Revoke the token on the server (best effort: it may already be invalid) and forget it here. */
   logout() {
+    if (this.token) {
+      fetch("/api/auth/logout", { method: "POST", headers: this.authHeaders() }).catch(() => {});
+    }
     this.setToken(null);
     this.me = null;
   }

@@ -1,5 +1,6 @@
-"""The built browser editor (`app/frontend/dist`, made by the Vite build of the set-up step) at `/`, and the
-small settings the page reads on start (`/api/frontend/config`: where the 3D review is served).
+"""The built browser editor (`app/frontend/dist`, made by the Vite build of the set-up step) at `/`, the
+small settings the page reads on start (`/api/frontend/config`: where the 3D review is served), and the API docs
+page at `/docs` with Swagger UI from the same build (`dist/docs`, from the swagger-ui-dist package: no CDN).
 
 Only `index.html` and the hashed files under `assets/` are served; the page gets a strict Content-Security-Policy
 (scripts from this origin only), so even a rendering mistake could not run injected script.
@@ -9,7 +10,8 @@ import logging
 from pathlib import Path
 
 from fastapi import APIRouter
-from fastapi.responses import FileResponse
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import FileResponse, HTMLResponse
 from pydantic import BaseModel, Field
 
 from app.backend.api.deps import SettingsDep
@@ -69,3 +71,33 @@ def editor_asset(name: str) -> FileResponse:
     if path.parent != assets or not path.is_file():
         raise NotFoundError(f"no editor asset {name!r}")
     return FileResponse(path, headers={"Cache-Control": ASSET_CACHE_CONTROL})
+
+
+DOCS_ASSETS = ("swagger-ui-bundle.js", "swagger-ui.css", "favicon-32x32.png")
+"""Swagger UI's files the build copies to `dist/docs` (vite.config.js)."""
+
+
+@router.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+def docs_page() -> HTMLResponse:
+    """Swagger UI over `/openapi.json`, its script and style served from this server."""
+    return get_swagger_ui_html(
+        openapi_url="/openapi.json",
+        title="CAMA Studio - API docs",
+        swagger_js_url="/docs/swagger-ui-bundle.js",
+        swagger_css_url="/docs/swagger-ui.css",
+        swagger_favicon_url="/docs/favicon-32x32.png",
+        swagger_ui_parameters={"validatorUrl": None},  # no online validator badge: nothing leaves this server
+    )
+
+
+@router.get("/docs/{name}", response_class=FileResponse, include_in_schema=False)
+def docs_asset(name: str) -> FileResponse:
+    """One of Swagger UI's files; 404 explaining how to build them when the build output is missing."""
+    if name not in DOCS_ASSETS:
+        raise NotFoundError(f"no docs asset {name!r}")
+    path = DIST_DIR / "docs" / name
+    if not path.is_file():
+        raise NotFoundError(
+            f"the API docs page is not built: run `make setup` (npm ci + vite build) for {name}"
+        )
+    return FileResponse(path, headers={"Cache-Control": "public, max-age=86400"})

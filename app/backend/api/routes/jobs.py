@@ -6,7 +6,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
-from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.crud import jobs
 from app.backend.jobs.runner import JobRunner
 from app.backend.schemas_jobs import JobCreate, JobPublic
@@ -36,11 +36,22 @@ def _runner(request: Request) -> JobRunner:
     responses=ONE_RETRAIN,
 )
 def create_job(
-    site_id: IdPath, job_in: JobCreate, request: Request, session: SessionDep, user: LeadUser
+    site_id: IdPath,
+    job_in: JobCreate,
+    request: Request,
+    session: SessionDep,
+    settings: SettingsDep,
+    user: LeadUser,
 ) -> JobPublic:
-    """Leads: queue a `lift` or `export` job; poll `GET /api/jobs/{id}` for its progress."""
+    """Leads: queue a `lift` or `export` job; poll `GET /api/jobs/{id}` for its progress. A MapTR export's
+    `dataset_root` must lie inside the server's data roots (CAMA_DATA_ROOTS)."""
     job = jobs.create_job(
-        session=session, runner=_runner(request), site_id=site_id, job_in=job_in, username=user.username
+        session=session,
+        runner=_runner(request),
+        site_id=site_id,
+        job_in=job_in,
+        username=user.username,
+        roots=settings.allowed_data_roots,
     )
     return jobs.job_public(job)
 

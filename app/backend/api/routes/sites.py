@@ -5,7 +5,7 @@ import logging
 from fastapi import APIRouter, status
 
 from app.backend import crud
-from app.backend.api.deps import CurrentUser, IdPath, LeadUser, SessionDep
+from app.backend.api.deps import CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.models import Site
 from app.backend.schemas import SiteCreate, SiteDetail, SitePublic
 
@@ -24,9 +24,12 @@ def _public(site: Site) -> SitePublic:
 
 
 @router.post("", response_model=SiteDetail, status_code=status.HTTP_201_CREATED)
-def create_site(site_in: SiteCreate, session: SessionDep, _lead: LeadUser) -> SiteDetail:
-    """Register a site from a `cama synth` folder or from a georeference and a raster folder."""
-    site = crud.create_site(session=session, site_in=site_in)
+def create_site(
+    site_in: SiteCreate, session: SessionDep, settings: SettingsDep, _lead: LeadUser
+) -> SiteDetail:
+    """Register a site from a `cama synth` folder or from a georeference and a raster folder; the folder must
+    lie inside the server's data roots (CAMA_DATA_ROOTS)."""
+    site = crud.create_site(session=session, site_in=site_in, roots=settings.allowed_data_roots)
     return read_site(site.id, session, _lead)
 
 
