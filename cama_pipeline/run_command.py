@@ -19,9 +19,12 @@ def run_command(
         int | None, typer.Option(help="SIFT keypoints per image (features stage default if omitted).")
     ] = None,
     proposer: Annotated[str, typer.Option(help="learned (the checkpoint) or rule.")] = "learned",
-    checkpoint: Annotated[Path, typer.Option(help="VMA checkpoint registry or version folder.")] = Path(
-        "models/vma/checkpoints"
-    ),
+    checkpoint: Annotated[
+        Path | None,
+        typer.Option(
+            help="VMA checkpoint registry or version folder; default: the model shipped with the package."
+        ),
+    ] = None,
     stop_after: Annotated[str, typer.Option(help="Last stage to run.")] = "propose",
     overwrite: Annotated[bool, typer.Option(help="Recompute every stage even if up to date.")] = False,
 ) -> None:
@@ -58,3 +61,7 @@ def run_command(
         console.print(f"  {stage:<10} {seconds:8.1f} s")
     for site_id, path in result.proposals.items():
         console.print(f"[green]proposals[/green] {site_id}: {path}")
+    if result.checkpoint is not None:
+        from models.vma.shipped import checkpoint_label  # torch: only once a learned proposer ran
+
+        console.print(f"  VMA checkpoint {checkpoint_label(result.checkpoint)}")

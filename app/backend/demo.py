@@ -26,6 +26,7 @@ from app.backend.config import Settings
 from app.backend.errors import InvalidInputError
 from app.backend.models import Site, User
 from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
+from app.backend.vma_loop import with_shipped_registry
 from cama_pipeline.console import bad_input
 
 logger = logging.getLogger(__name__)
@@ -128,9 +129,15 @@ def demo_command(
     from app.backend.serve import run_server
 
     password = os.environ.get("CAMA_DEMO_PASSWORD", DEFAULT_PASSWORD)
+    # the operator's own paths are checked here, by name; the API's data-roots rule hides them from its callers
+    for label, folder in (("SITE_DIR", site_dir), ("--rasters", rasters)):
+        if folder is not None and not folder.is_dir():
+            raise bad_input(f"{label}: {folder}: not a folder")
+    if proposals is not None and not proposals.is_file():
+        raise bad_input(f"--proposals: {proposals}: not a file")
     try:
-        settings = demo_settings(data_dir, site_dir, rasters)
-    except ValueError as err:  # a bad CAMA_* variable
+        settings = with_shipped_registry(demo_settings(data_dir, site_dir, rasters))
+    except ValueError as err:  # a bad CAMA_* variable; a data folder whose vma-registry is not a registry
         raise bad_input(err) from err
     app = create_app(settings)
     try:

@@ -9,6 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from app.backend.config import Settings
+from app.backend.vma_loop import with_shipped_registry
 from cama_pipeline.console import bad_input, failure
 
 logger = logging.getLogger(__name__)
@@ -32,7 +33,8 @@ def serve_command(
     vma_registry: Annotated[
         Path | None,
         typer.Option(
-            help="VMA checkpoint registry for retrain and proposal-refresh jobs (CAMA_VMA_REGISTRY)."
+            help="VMA checkpoint registry for retrain and proposal-refresh jobs (CAMA_VMA_REGISTRY); default "
+            "DATA_DIR/vma-registry, seeded with the shipped model on first start."
         ),
     ] = None,
     validation_site: Annotated[
@@ -51,13 +53,15 @@ def serve_command(
     from app.backend.poll_log import quiet_change_polls
 
     try:
-        settings = Settings.from_env(
-            data_dir=data_dir,
-            database_url=database_url,
-            admin_username=admin_username,
-            vma_registry=vma_registry,
-            vma_validation_sites=tuple(validation_site) if validation_site else None,
-            review_url=review_url,
+        settings = with_shipped_registry(
+            Settings.from_env(
+                data_dir=data_dir,
+                database_url=database_url,
+                admin_username=admin_username,
+                vma_registry=vma_registry,
+                vma_validation_sites=tuple(validation_site) if validation_site else None,
+                review_url=review_url,
+            )
         )
     except ValueError as error:
         raise bad_input(error) from error

@@ -15,8 +15,11 @@ def surface_command(
     dataset: DatasetArg,
     workspace: WorkspaceOpt = None,
     poses: Annotated[
-        str, typer.Option(help="Pose source: wigo (site manifest), sfm (after `cama sfm`) or ground_truth.")
-    ] = "wigo",
+        str,
+        typer.Option(
+            help="Pose source: sfm (after `cama sfm`, as `cama run` does), wigo (site manifest) or ground_truth."
+        ),
+    ] = "sfm",
     resolution_m: Annotated[float, typer.Option(help="Mesh vertex spacing and raster resolution.")] = 0.1,
     epochs: Annotated[
         int, typer.Option(help="Mesh optimisation passes over the keyframe images.")

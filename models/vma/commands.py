@@ -19,12 +19,12 @@ from models.vma.infer import InferenceConfig, predict_site
 from models.vma.propose import propose
 from models.vma.retrain import Corrections, RetrainConfig, gate_checkpoint, retrain_from_corrections
 from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.shipped import checkpoint_label, resolve_checkpoint, seed_registry
 from models.vma.split import SplitConfig, split_dataset
 from models.vma.train import train
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_REGISTRY = Path("models/vma/checkpoints")
 _ERRORS = (ValueError, FileNotFoundError, CheckpointError, EvaluationInputError)
 
 
@@ -44,30 +44,42 @@ def propose_command(
     out: Annotated[Path, typer.Option(help="Proposals JSON (an annotation set) to write.")] = Path(
         "proposals.json"
     ),
-    proposer: Annotated[str, typer.Option(help="learned (needs --checkpoint) or rule.")] = "learned",
+    proposer: Annotated[
+        str, typer.Option(help="learned (the shipped model unless --checkpoint) or rule.")
+    ] = "learned",
     checkpoint: Annotated[
-        Path, typer.Option(help="Checkpoint version folder or registry.")
-    ] = DEFAULT_REGISTRY,
+        Path | None,
+        typer.Option(
+            help="Checkpoint version folder or registry; default: the model shipped with the package."
+        ),
+    ] = None,
     min_confidence: Annotated[float, typer.Option(help="Drop proposals scoring lower.")] = 0.1,
     boundary_source: Annotated[
         str,
-        typer.Option(help="curb (generator rasters) or road_edge (reconstructed rasters, smeared curbs)."),
-    ] = "curb",
+        typer.Option(
+            help="auto (road_edge on a surface stage's rasters, as `cama run` does; else curb), curb (generator "
+            "rasters) or road_edge (reconstructed rasters, smeared curbs)."
+        ),
+    ] = "auto",
     overwrite: Annotated[bool, typer.Option(help="Propose again even if the output is up to date.")] = False,
 ) -> None:
     """Propose map vectors with confidence for a whole site from its BEV rasters."""
     try:
         if proposer not in ("learned", "rule"):
             raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
-        if boundary_source not in ("curb", "road_edge"):
-            raise ValueError(f"--boundary-source must be 'curb' or 'road_edge', got {boundary_source!r}")
+        if boundary_source not in ("auto", "curb", "road_edge"):
+            raise ValueError(
+                f"--boundary-source must be 'auto', 'curb' or 'road_edge', got {boundary_source!r}"
+            )
         result = propose(
             site,
             out,
             proposer="rule" if proposer == "rule" else "learned",
             checkpoint=checkpoint,
             min_confidence=min_confidence,
-            rule=RuleConfig(boundary_source="road_edge" if boundary_source == "road_edge" else "curb"),
+            rule=None
+            if boundary_source == "auto"
+            else RuleConfig(boundary_source="road_edge" if boundary_source == "road_edge" else "curb"),
             overwrite=overwrite,
         )
     except _ERRORS as err:
@@ -78,9 +90,18 @@ def propose_command(
         else f"{result.count} proposals in {result.seconds:.1f} s"
     )
     console.print(f"[green]proposals[/green] {result.out} ({state})")
+    if result.checkpoint is not None:
+        console.print(f"  VMA checkpoint {checkpoint_label(result.checkpoint)}")
 
 
 def train_command(
+    registry: Annotated[
+        Path,
+        typer.Option(
+            help="Checkpoint registry to add the new version to (models/vma/checkpoints in a checkout: the "
+            "shipped model)."
+        ),
+    ],
     site: Annotated[
         list[Path] | None, typer.Option(help="Training site folder with vector_map.json (repeatable).")
     ] = None,
@@ -90,9 +111,6 @@ def train_command(
     bev_root: Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")] = Path(
         "data/vma/train"
     ),
-    registry: Annotated[
-        Path, typer.Option(help="Checkpoint registry to add the new version to.")
-    ] = DEFAULT_REGISTRY,
     init: Annotated[
         Path | None, typer.Option(help="Continue from this checkpoint (same model config).")
     ] = None,
@@ -154,8 +172,12 @@ def retrain_command(
     ],
     val: Annotated[list[Path], typer.Option(help="Validation site with ground truth (repeatable).")],
     registry: Annotated[
-        Path, typer.Option(help="Checkpoint registry (its promoted version is fine-tuned).")
-    ] = DEFAULT_REGISTRY,
+        Path,
+        typer.Option(
+            help="Checkpoint registry (its promoted version is fine-tuned, the new version added); an empty or "
+            "missing folder is first seeded with a copy of the shipped model."
+        ),
+    ],
     steps: Annotated[int, typer.Option(help="Fine-tuning batches.")] = 300,
     tolerance: Annotated[float, typer.Option(help="Promote when mAP >= current mAP - tolerance.")] = 0.0,
 ) -> None:
@@ -168,6 +190,7 @@ def retrain_command(
             site, annotations = pair.split("=", 1)
             items.append(Corrections(Path(site), AnnotationSet.read_json(Path(annotations))))
         config = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4), tolerance=tolerance)
+        registry = seed_registry(registry)
         result = retrain_from_corrections(registry, items, val, config, show_progress=True)
     except _ERRORS as err:
         raise bad_input(err) from err
@@ -182,14 +205,19 @@ def vma_eval_command(
     site: Annotated[list[Path], typer.Argument(help="Site folders with ground truth (vector_map.json).")],
     proposer: Annotated[str, typer.Option(help="learned or rule.")] = "learned",
     checkpoint: Annotated[
-        Path, typer.Option(help="Checkpoint version folder or registry.")
-    ] = DEFAULT_REGISTRY,
+        Path | None,
+        typer.Option(
+            help="Checkpoint version folder or registry; default: the model shipped with the package."
+        ),
+    ] = None,
     out: Annotated[Path, typer.Option(help="JSON report to write.")] = Path("vma_eval.json"),
 ) -> None:
     """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer."""
     try:
         if proposer == "learned":
-            model = load_checkpoint(checkpoint).model
+            version = resolve_checkpoint(checkpoint)
+            console.print(f"VMA checkpoint {checkpoint_label(version)}")
+            model = load_checkpoint(version).model
             report = evaluate_proposer(lambda r: predict_site(model, r, InferenceConfig()), site)
         elif proposer == "rule":
             report = evaluate_proposer(propose_rule_based, site)
