@@ -60,7 +60,7 @@ demo: $(STAMP) frontend
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy annotations app cama_pipeline models
+	$(BIN)/mypy annotations app cama_pipeline models cama_studio
 
 test: $(STAMP) frontend chromium postgresql
 	$(MAKE) lint

@@ -53,12 +53,12 @@ from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, loa
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from cama_pipeline.pairs.cameras import CameraView, site_views
-from cama_pipeline.pipeline import PipelineConfig, proposals_path, surface_rasters
-from cama_pipeline.pipeline import run as run_pipeline
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_studio.pipeline import PipelineConfig, proposals_path, surface_rasters
+from cama_studio.pipeline import run as run_pipeline
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
 from models.vma.vectors import Vector, read_vectors, vectors_from_annotations

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from cama_pipeline.pipeline import PipelineConfig, PipelineResult
-from cama_pipeline.pipeline import run as run_pipeline
 from cama_pipeline.synthetic.config import SynthConfig, preset
 from cama_pipeline.synthetic.generate import SynthResult, run
+from cama_studio.pipeline import PipelineConfig, PipelineResult
+from cama_studio.pipeline import run as run_pipeline
 
 pytest_plugins = ["dependency_policy"]
 

@@ -8,8 +8,8 @@ import pytest
 from rich.table import Table
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.console import PIPE_WIDTH, CliConsole
+from cama_studio.cli import app
 
 NARROW = {"COLUMNS": "40"}
 

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.console import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from cama_studio.cli import app
 
 runner = CliRunner()
 
@@ -106,14 +106,14 @@ def test_a_bad_option_value_exits_2() -> None:
 
 
 def test_run_exits_1_when_a_stage_breaks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from cama_pipeline.pipeline import STAGES
     from cama_pipeline.sfm.errors import SfmError
+    from cama_studio.pipeline import STAGES
 
     def broken_sfm() -> None:
         raise SfmError("every clip failed (scene-0001: no verified matches)")
 
     calls = {stage: (lambda: None) for stage in STAGES[:-1]} | {"sfm": broken_sfm}
-    monkeypatch.setattr("cama_pipeline.pipeline._stage_calls", lambda *args: calls)
+    monkeypatch.setattr("cama_studio.pipeline._stage_calls", lambda *args: calls)
     result = runner.invoke(app, ["run", str(tmp_path), "--stop-after", "sfm"])
     assert result.exit_code == EXIT_FAILURE, result.output
     assert any("stage sfm failed" in e and "every clip failed" in e for e in error_lines(result.output))

@@ -11,7 +11,7 @@ from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.backend.config import Settings
 from app.backend.main import create_app
 from app.backend.models import Element, Site
-from cama_pipeline.cli import app as cli
+from cama_studio.cli import app as cli
 
 runner = CliRunner()
 

@@ -14,7 +14,6 @@ from typer.testing import CliRunner
 sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
 from site_workspace import build_site_workspace  # noqa: E402
 
-from cama_pipeline.cli import app  # noqa: E402
 from cama_pipeline.data import load_dataset  # noqa: E402
 from cama_pipeline.features import stage  # noqa: E402
 from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
@@ -26,6 +25,7 @@ from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
 from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
 from cama_pipeline.semantics import Semantic  # noqa: E402
 from cama_pipeline.site.workspace import WorkspaceError, read_site_manifest  # noqa: E402
+from cama_studio.cli import app  # noqa: E402
 
 KEYFRAMES_PER_SCENE = 2
 runner = CliRunner()

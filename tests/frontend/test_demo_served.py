@@ -13,7 +13,7 @@ from playwright.sync_api import Page
 from system_helpers import PASSWORD, cama_executable, free_port
 
 from annotations.schema import AnnotationSet
-from cama_pipeline.pipeline import PipelineResult
+from cama_studio.pipeline import PipelineResult
 
 
 @pytest.mark.slow

@@ -96,7 +96,7 @@ def test_the_review_settings_come_from_the_environment() -> None:
 def test_cama_serve_refuses_a_bad_review_url_before_serving(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from cama_pipeline.cli import app
+    from cama_studio.cli import app
 
     result = CliRunner().invoke(app, ["serve", str(tmp_path / "data"), "--review-url", "localhost:8080"])
     assert result.exit_code == 2

@@ -4,13 +4,13 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.data import load_dataset
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
 from cama_pipeline.site.workspace import read_keyframes
 from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
+from cama_studio.cli import app
 
 runner = CliRunner()
 

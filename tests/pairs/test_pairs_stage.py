@@ -6,10 +6,10 @@ import pytest
 from site_workspace import build_site_workspace
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.io import read_pairs
 from cama_pipeline.pairs.stage import run
+from cama_studio.cli import app
 
 runner = CliRunner()
 

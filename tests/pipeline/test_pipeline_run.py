@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
-from cama_pipeline.pipeline import STAGES, PipelineError, PipelineResult, proposals_path, run
+from cama_studio.cli import app
+from cama_studio.pipeline import STAGES, PipelineError, PipelineResult, proposals_path, run
 
 
 def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(

@@ -14,9 +14,9 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline import pipeline
-from cama_pipeline.cli import app
 from cama_pipeline.site.workspace import sites_index_path, write_sites_index
+from cama_studio import pipeline
+from cama_studio.cli import app
 from models.vma.propose import ProposeResult
 
 STAGE_PACKAGES = {

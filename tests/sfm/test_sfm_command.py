@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
+from cama_studio.cli import app
 
 runner = CliRunner()
 

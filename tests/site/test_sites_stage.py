@@ -5,7 +5,6 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.data import load_dataset
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
@@ -14,6 +13,7 @@ from cama_pipeline.site.stage import run as run_sites
 from cama_pipeline.site.workspace import read_site_manifest, read_sites_index
 from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
+from cama_studio.cli import app
 
 runner = CliRunner()
 

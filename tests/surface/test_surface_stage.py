@@ -13,13 +13,13 @@ from typer.testing import CliRunner
 sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
 from site_workspace import build_site_workspace  # noqa: E402
 
-from cama_pipeline.cli import app  # noqa: E402
 from cama_pipeline.data import load_dataset  # noqa: E402
 from cama_pipeline.semantics import Semantic  # noqa: E402
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path  # noqa: E402
 from cama_pipeline.surface import SiteSurface, SurfaceConfig, run  # noqa: E402
 from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip  # noqa: E402
 from cama_pipeline.surface.poses import posed_views  # noqa: E402
+from cama_studio.cli import app  # noqa: E402
 from models.vma.rasters import load_site_rasters  # noqa: E402
 
 FAST = SurfaceConfig(

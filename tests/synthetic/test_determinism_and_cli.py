@@ -3,8 +3,8 @@
 from synth_helpers import file_digests, micro_config
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.synthetic.generate import run
+from cama_studio.cli import app
 
 
 def test_same_seed_gives_identical_files_whatever_the_worker_count(tmp_path):

@@ -9,9 +9,9 @@ import pytest
 from synth_helpers import file_digests, micro_config
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR
 from cama_pipeline.synthetic.generate import MANIFEST, fingerprint, run
+from cama_studio.cli import app
 
 PIXEL_DIRS = ("samples", "sweeps", SEMANTIC_DIR, INSTANCE_DIR)
 

@@ -121,7 +121,7 @@ def test_follow_keeps_the_last_vectors_when_the_source_breaks(view_site, server,
 
 
 def test_view_command_names_a_missing_workspace(tmp_path: Path) -> None:
-    from cama_pipeline.cli import app
+    from cama_studio.cli import app
 
     result = CliRunner().invoke(app, ["view", str(tmp_path / "nowhere"), "--port", str(_free_port())])
     assert result.exit_code == 2

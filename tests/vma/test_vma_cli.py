@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 from vma_test_sites import drawn_semantic, write_raster_site
 
 from annotations import AnnotationSet
-from cama_pipeline.cli import app
+from cama_studio.cli import app
 from models.vma.propose import propose
 from models.vma.rule_based import RuleConfig
 

@@ -13,7 +13,7 @@ from annotations import AnnotationSet
 from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
 from app.backend.vma_loop import with_shipped_registry
-from cama_pipeline.pipeline import PipelineConfig
+from cama_studio.pipeline import PipelineConfig
 from models.vma.checkpoint import CURRENT, CheckpointError
 from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
 
@@ -47,7 +47,7 @@ def test_cama_propose_from_a_temporary_directory_uses_and_names_the_shipped_mode
     workdir.mkdir()
     env = {**os.environ, "COLUMNS": "60"}
     done = subprocess.run(
-        [sys.executable, "-m", "cama_pipeline.cli", "propose", str(drawn_site), "--out", "p.json"],
+        [sys.executable, "-m", "cama_studio.cli", "propose", str(drawn_site), "--out", "p.json"],
         cwd=workdir,
         env=env,
         capture_output=True,

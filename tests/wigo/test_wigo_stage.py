@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline.cli import app
 from cama_pipeline.data import load_dataset
 from cama_pipeline.evaluate.inputs import load_true_poses
 from cama_pipeline.site.workspace import default_workspace, read_wigo
 from cama_pipeline.wigo import WigoConfig, run
+from cama_studio.cli import app
 
 runner = CliRunner()
 

@@ -29,7 +29,7 @@ def run_command(
     overwrite: Annotated[bool, typer.Option(help="Recompute every stage even if up to date.")] = False,
 ) -> None:
     """Run every stage in order, each skipping what is up to date; print the time per stage."""
-    from cama_pipeline.pipeline import STAGES, PipelineConfig, PipelineError, run
+    from cama_studio.pipeline import STAGES, PipelineConfig, PipelineError, run
 
     try:
         if executor not in ("local", "ray"):

@@ -86,11 +86,11 @@ def _register_stage_commands() -> None:
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.pairs.command import pairs_command
-    from cama_pipeline.run_command import run_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.surface.command import surface_command
     from cama_pipeline.wigo.command import wigo_command
+    from cama_studio.run_command import run_command
     from models.vma.commands import (
         propose_command,
         retrain_command,
