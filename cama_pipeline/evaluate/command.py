@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from cama_pipeline.cli_options import DatasetArg
 from cama_pipeline.console import bad_input, console
 from cama_pipeline.data import DatasetError, load_dataset
 from cama_pipeline.evaluate.inputs import EvaluationInputError, load_true_poses, load_vector_map
@@ -29,7 +30,7 @@ class PoseSource(StrEnum):
 
 
 def eval_command(
-    dataset: Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")],
+    dataset: DatasetArg,
     vector_map: Annotated[
         Path, typer.Argument(help="Vector map JSON ({'elements': [...]}, 3D or 2D points).")
     ],

@@ -5,11 +5,11 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.keyframes.stage import run
 from cama_pipeline.site.workspace import read_keyframes
-from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 
 
 def keyframes_command(

@@ -4,12 +4,12 @@ from typing import Annotated
 
 import typer
 
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console, failure
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import EXECUTORS
 from cama_pipeline.sfm.stage import run
-from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def sfm_command(

@@ -4,10 +4,10 @@ from typing import Annotated
 
 import typer
 
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.site.config import SiteConfig
 from cama_pipeline.site.stage import run
-from cama_pipeline.wigo.command import DatasetArg, OverwriteOpt, WorkspaceOpt
 
 
 def sites_command(

@@ -1,20 +1,13 @@
 """`cama wigo`: fuse wheel, IMU and GNSS of every scene into ego poses at the camera timestamps."""
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.wigo.config import RobustKernel, WigoConfig
 from cama_pipeline.wigo.stage import run
-
-DatasetArg = Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")]
-WorkspaceOpt = Annotated[
-    Path | None, typer.Option(help="Workspace folder; default <data set root's parent>/workspace.")
-]
-ScenesOpt = Annotated[list[str] | None, typer.Option("--scene", help="Only this scene (repeatable).")]
-OverwriteOpt = Annotated[bool, typer.Option(help="Recompute even when the outputs are up to date.")]
 
 
 def wigo_command(

@@ -7,6 +7,7 @@ from typing import Annotated
 import typer
 
 from annotations import AnnotationSet
+from cama_pipeline.cli_options import DatasetArg
 from cama_pipeline.console import bad_input, console
 from cama_pipeline.data import DatasetError
 from cama_pipeline.evaluate.inputs import EvaluationInputError
@@ -232,7 +233,7 @@ def vma_eval_command(
 
 
 def vma_split_command(
-    dataset: Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")],
+    dataset: DatasetArg,
     out: Annotated[Path, typer.Option(help="Split JSON to write.")] = Path("split.json"),
     val_share: Annotated[float, typer.Option(help="Target share of scenes in validation.")] = 0.25,
     overlap_m: Annotated[
