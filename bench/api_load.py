@@ -45,10 +45,15 @@ from typing import Any
 import httpx
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "backend_system"))
-sys.path.insert(0, str(ROOT / "tests" / "backend"))
-from postgres_server import PostgresServer, find_bin_dir  # noqa: E402
-from system_helpers import ServerProcess, create_elements, divider_points, login, register_site  # noqa: E402
+sys.path.insert(0, str(ROOT))  # the test helpers, `tests` a package at the repository root
+from tests.backend.postgres_server import PostgresServer, find_bin_dir  # noqa: E402
+from tests.backend_system.system_helpers import (  # noqa: E402
+    ServerProcess,
+    create_elements,
+    divider_points,
+    login,
+    register_site,
+)
 
 RESULTS = Path(__file__).parent / "results"
 MAX_RETRIES = 20

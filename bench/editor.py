@@ -30,8 +30,9 @@ from typing import Any
 import httpx
 from playwright.sync_api import Page, ViewportSize, sync_playwright
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "frontend"))
-from editor_browser_helpers import (  # noqa: E402
+# the test helpers: `tests` is a package at the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.frontend.editor_browser_helpers import (  # noqa: E402
     SITE_SIZE_M,
     SeededServer,
     launch_chromium,

@@ -18,7 +18,7 @@ from cama_pipeline.synthetic.generate import SynthResult, run
 from cama_studio.pipeline import PipelineConfig, PipelineResult
 from cama_studio.pipeline import run as run_pipeline
 
-pytest_plugins = ["dependency_policy"]
+pytest_plugins = ["tests.dependency_policy"]
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ def local(monkeypatch: pytest.MonkeyPatch) -> None:
 def inner_test_needing_the_module(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(
         f"""
-        from dependency_policy import require_module
+        from tests.dependency_policy import require_module
 
         def test_needs_it():
             require_module("{NO_SUCH_MODULE}")
@@ -58,7 +58,7 @@ def test_a_module_level_requirement_skips_the_module_locally_and_is_a_collection
 ) -> None:
     pytester.makepyfile(
         f"""
-        from dependency_policy import require_module
+        from tests.dependency_policy import require_module
 
         module = require_module("{NO_SUCH_MODULE}")
 
@@ -80,7 +80,7 @@ def test_a_missing_program_skips_locally_and_fails_under_ci_naming_it(
     pytester.makepyfile(
         """
         import pytest
-        from dependency_policy import require_program
+        from tests.dependency_policy import require_program
 
         @pytest.fixture
         def tool():
@@ -122,9 +122,9 @@ def test_the_safety_net_fails_any_skip_under_ci_but_not_locally_and_leaves_xfail
         """,
     )
     monkeypatch.delenv("CI", raising=False)
-    pytester.runpytest("-p", "dependency_policy").assert_outcomes(skipped=3, xfailed=1)
+    pytester.runpytest("-p", "tests.dependency_policy").assert_outcomes(skipped=3, xfailed=1)
     monkeypatch.setenv("CI", "true")
-    result = pytester.runpytest("-p", "dependency_policy", "--continue-on-collection-errors")
+    result = pytester.runpytest("-p", "tests.dependency_policy", "--continue-on-collection-errors")
     result.assert_outcomes(failed=2, errors=1, xfailed=1)
     result.stdout.fnmatch_lines(
         [
@@ -136,4 +136,4 @@ def test_the_safety_net_fails_any_skip_under_ci_but_not_locally_and_leaves_xfail
 
 def test_the_suite_runs_under_the_policy(pytestconfig: pytest.Config) -> None:
     """tests/conftest.py registers the safety net for every test of the suite."""
-    assert pytestconfig.pluginmanager.has_plugin("dependency_policy")
+    assert pytestconfig.pluginmanager.has_plugin("tests.dependency_policy")

@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
-from annotation_helpers import RESOLUTION_M, SITE_ORIGIN_XY, SIZE_PX, plane_z
 
 from annotations import Georeference
+from tests.annotations.annotation_helpers import RESOLUTION_M, SITE_ORIGIN_XY, SIZE_PX, plane_z
 
 
 @pytest.fixture()

@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from annotation_helpers import SQUARE
 from shapely.geometry import Polygon
 
 from annotations import (
@@ -14,6 +13,7 @@ from annotations import (
     simplify,
     validate_geometry,
 )
+from tests.annotations.annotation_helpers import SQUARE
 
 
 def test_validate_geometry_returns_array_and_rejects_bad_shapes() -> None:

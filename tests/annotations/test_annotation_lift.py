@@ -4,10 +4,10 @@ import logging
 
 import numpy as np
 import pytest
-from annotation_helpers import RESOLUTION_M, element_kwargs, plane_z
 
 from annotations import Georeference, LiftError, MapElement, lift_element, lift_points
 from cama_pipeline.semantics import Semantic
+from tests.annotations.annotation_helpers import RESOLUTION_M, element_kwargs, plane_z
 
 LINE = [[1.3, 2.7], [15.2, 17.9], [8.1, 5.05]]
 

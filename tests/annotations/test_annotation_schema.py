@@ -5,10 +5,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from annotation_helpers import SQUARE, element_kwargs
 from pydantic import ValidationError
 
 from annotations import AnnotationSet, Georeference, MapElement
+from tests.annotations.annotation_helpers import SQUARE, element_kwargs
 
 NAN = float("nan")
 

@@ -1,13 +1,11 @@
 """CAMA release layout: lossless export -> import, the type table, pixel convention, bad files, schema files."""
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import typer
-from annotation_helpers import SQUARE, element_kwargs, plane_z
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement, lift_element
@@ -20,12 +18,9 @@ from annotations.cama_format import (
 )
 from annotations.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
 from annotations.transforms import pixel_from_site_points
-
-sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
-
-from nuscenes_fixture import write_nuscenes_fixture  # noqa: E402
-
-from cama_pipeline.data import load_dataset  # noqa: E402
+from cama_pipeline.data import load_dataset
+from tests.annotations.annotation_helpers import SQUARE, element_kwargs, plane_z
+from tests.data.nuscenes_fixture import write_nuscenes_fixture
 
 
 def _set(georef: Georeference, elevation: np.ndarray) -> AnnotationSet:

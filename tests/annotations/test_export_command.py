@@ -1,19 +1,15 @@
 """`cama export` / `cama import` through a small Typer app: CAMA and MapTR round trips, errors exit 2."""
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import typer
-from annotation_helpers import element_kwargs
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement
 from annotations.export_command import export_command, import_command
-
-sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
-
-from nuscenes_fixture import write_nuscenes_fixture  # noqa: E402
+from tests.annotations.annotation_helpers import element_kwargs
+from tests.data.nuscenes_fixture import write_nuscenes_fixture
 
 app = typer.Typer()
 app.command("export")(export_command)

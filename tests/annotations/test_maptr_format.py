@@ -1,20 +1,16 @@
 """MapTR vectors export: clipping at the perception range, 20 points, metadata, import back, bad files."""
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from annotation_helpers import element_kwargs
 
 from annotations import MAPTR_RANGE, AnnotationSet, Georeference, MapElement, resample_fixed
 from annotations.maptr_format import export_maptr, import_maptr, read_maptr
 from cama_pipeline.data import Dataset, load_dataset
-
-sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
-
-from nuscenes_fixture import write_nuscenes_fixture  # noqa: E402
+from tests.annotations.annotation_helpers import element_kwargs
+from tests.data.nuscenes_fixture import write_nuscenes_fixture
 
 INSIDE = [(5.0, 2.0, 3.0), (10.0, 3.0, 3.1), (15.0, 1.0, 3.2)]
 CROSSING = [(-10.0, -5.0, 3.0), (60.0, -5.0, 3.0)]

@@ -7,13 +7,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import GEOREFERENCE, PASSWORD, divider, login, register_site
-from dependency_policy import missing
 from fastapi.testclient import TestClient
-from postgres_server import PostgresServer, find_bin_dir
 
 from app.backend.config import Settings
 from app.backend.main import create_app
+from tests.backend.backend_helpers import GEOREFERENCE, PASSWORD, divider, login, register_site
+from tests.backend.postgres_server import PostgresServer, find_bin_dir
+from tests.dependency_policy import missing
 
 
 @pytest.fixture(scope="session")

@@ -5,8 +5,9 @@ import math
 from pathlib import Path
 
 import pytest
-from backend_helpers import PASSWORD, divider
 from fastapi.testclient import TestClient
+
+from tests.backend.backend_helpers import PASSWORD, divider
 
 
 def test_unauthenticated_is_401(client: TestClient, site_id: int) -> None:

@@ -9,11 +9,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import crosswalk, divider, register_site
 from fastapi.testclient import TestClient
 
 from app.backend.models import EditLog
 from app.backend.poll_log import QuietChangePolls
+from tests.backend.backend_helpers import crosswalk, divider, register_site
 
 Headers = dict[str, dict[str, str]]
 MakeElement = Callable[..., dict[str, Any]]

@@ -6,10 +6,10 @@ import os
 from pathlib import Path
 
 import pytest
-from backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
+from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD
 
 Headers = dict[str, dict[str, str]]
 

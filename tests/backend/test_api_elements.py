@@ -4,8 +4,9 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from backend_helpers import crosswalk, divider
 from fastapi.testclient import TestClient
+
+from tests.backend.backend_helpers import crosswalk, divider
 
 Headers = dict[str, dict[str, str]]
 MakeElement = Callable[..., dict[str, Any]]

@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from backend_helpers import divider
 from fastapi.testclient import TestClient
 from pydantic import BaseModel
 
@@ -19,6 +18,7 @@ from app.backend.crud.users import utc_now
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.main import create_app
 from app.backend.models_jobs import Job
+from tests.backend.backend_helpers import divider
 
 Headers = dict[str, dict[str, str]]
 POLL_TIMEOUT_S = 5.0

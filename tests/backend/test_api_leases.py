@@ -6,12 +6,12 @@ from datetime import timedelta
 from typing import Any
 
 import pytest
-from backend_helpers import PASSWORD, divider, login
 from fastapi.testclient import TestClient
 
 from app.backend.crud import leases
 from app.backend.crud.users import utc_now
 from app.backend.schemas_review import DEFAULT_LEASE_S
+from tests.backend.backend_helpers import PASSWORD, divider, login
 
 Headers = dict[str, dict[str, str]]
 Write = Callable[[TestClient, str, int, dict[str, str]], Any]

@@ -7,7 +7,6 @@ from datetime import timedelta
 from typing import Any
 
 import pytest
-from backend_helpers import PASSWORD, login
 from fastapi.testclient import TestClient
 
 from app.backend.auth_cache import TokenCache
@@ -15,6 +14,7 @@ from app.backend.config import Settings
 from app.backend.crud.users import utc_now
 from app.backend.login_limit import LoginLimiter
 from app.backend.models import User
+from tests.backend.backend_helpers import PASSWORD, login
 
 
 class FakeClock:

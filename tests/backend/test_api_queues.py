@@ -5,12 +5,12 @@ from datetime import timedelta
 from typing import Any
 
 import pytest
-from backend_helpers import PASSWORD, crosswalk, divider, login
 from fastapi.testclient import TestClient
 
 from app.backend.crud import leases
 from app.backend.crud.users import utc_now
 from app.backend.schemas_review import DEFAULT_LEASE_S
+from tests.backend.backend_helpers import PASSWORD, crosswalk, divider, login
 
 Headers = dict[str, dict[str, str]]
 

@@ -6,10 +6,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from backend_helpers import GEOREFERENCE, ORIGIN_XY, register_site
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
+from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY, register_site
 
 Headers = dict[str, dict[str, str]]
 SLOPE_X, SLOPE_Y, BASE_M = 0.01, 0.02, 5.0

@@ -2,8 +2,9 @@
 
 from typing import Any
 
-from backend_helpers import PASSWORD, divider, login
 from fastapi.testclient import TestClient
+
+from tests.backend.backend_helpers import PASSWORD, divider, login
 
 Headers = dict[str, dict[str, str]]
 

@@ -6,10 +6,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import GEOREFERENCE, ORIGIN_XY, divider
 from fastapi.testclient import TestClient
 
 from app.backend.api.routes import frontend
+from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY, divider
 
 Headers = dict[str, dict[str, str]]
 MakeElement = Callable[..., dict[str, Any]]

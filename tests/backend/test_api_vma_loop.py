@@ -8,11 +8,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import PASSWORD, divider, register_site
 from fastapi.testclient import TestClient
-from vma_loop_site import DIVIDER_Y, ROAD_Y, write_registry, write_site
 
 from app.backend.config import Settings
+from tests.backend.backend_helpers import PASSWORD, divider, register_site
+from tests.backend.vma_loop_site import DIVIDER_Y, ROAD_Y, write_registry, write_site
 
 Headers = dict[str, dict[str, str]]
 HANG_S = 600.0

@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from backend_helpers import divider
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
@@ -15,6 +14,7 @@ from app.backend.jobs import kinds
 from app.backend.jobs.runner import JobContext
 from app.backend.main import create_app
 from app.backend.models_jobs import Job
+from tests.backend.backend_helpers import divider
 
 Headers = dict[str, dict[str, str]]
 POLL_TIMEOUT_S = 10.0

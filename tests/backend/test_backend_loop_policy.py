@@ -4,11 +4,11 @@ import json
 from pathlib import Path
 
 import pytest
-from vma_loop_site import write_registry
 
 from app.backend.config import Settings
 from app.backend.vma_loop import preaccept_threshold, qa_sample, should_retrain
 from models.vma.loop import THRESHOLD_KEY
+from tests.backend.vma_loop_site import write_registry
 
 
 def test_qa_sample_is_reproducible_and_sized_by_share() -> None:

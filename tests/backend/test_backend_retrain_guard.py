@@ -8,7 +8,6 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from backend_helpers import divider
 from fastapi.testclient import TestClient
 from pydantic import BaseModel
 from sqlalchemy.orm import Session, sessionmaker
@@ -19,6 +18,7 @@ from app.backend.db import make_engine, make_sessionmaker
 from app.backend.errors import ConflictError
 from app.backend.jobs.runner import JobContext, JobKind, JobResult, JobRunner
 from app.backend.models_jobs import Job
+from tests.backend.backend_helpers import divider
 
 Headers = dict[str, dict[str, str]]
 

@@ -9,13 +9,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from backend_helpers import GEOREFERENCE, ORIGIN_XY
 
 from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.semantics import Semantic
 from models.vma.checkpoint import promote, save_version
 from models.vma.config import ModelConfig
 from models.vma.model import VmaNet
+from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY
 
 TINY = ModelConfig(
     resolution_m=1.0, patch_px=64, num_queries=4, num_points=4, dim=16, decoder_layers=1, heads=2

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from system_helpers import ServerProcess, login, register_site
+
+from tests.backend_system.system_helpers import ServerProcess, login, register_site
 
 
 @pytest.fixture

@@ -15,11 +15,11 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from system_helpers import ADMIN, GEOREFERENCE, ORIGIN_XY, PASSWORD, divider_points
 
 from app.backend import data_roots
 from app.backend.config import Settings
 from app.backend.main import create_app
+from tests.backend_system.system_helpers import ADMIN, GEOREFERENCE, ORIGIN_XY, PASSWORD, divider_points
 
 SECRET = "hunter2-Secret-Pw"
 """The password the login cases send: it must never come back."""

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 
 import httpx
 import pytest
-from system_helpers import ServerProcess, create_elements, divider_points, history
+
+from tests.backend_system.system_helpers import ServerProcess, create_elements, divider_points, history
 
 N_CLIENTS = 20
 N_ELEMENTS = 4

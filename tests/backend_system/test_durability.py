@@ -7,7 +7,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from system_helpers import ServerProcess, create_elements, divider_points, history, login
+
+from tests.backend_system.system_helpers import ServerProcess, create_elements, divider_points, history, login
 
 N_ELEMENTS = 5
 MIN_ACKS_BEFORE_KILL = 40

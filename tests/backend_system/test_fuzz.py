@@ -10,15 +10,15 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from dependency_policy import require_module
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from system_helpers import ADMIN, GEOREFERENCE, ORIGIN_XY, PASSWORD, divider_points
 
 from app.backend.config import Settings
 from app.backend.main import create_app
+from tests.backend_system.system_helpers import ADMIN, GEOREFERENCE, ORIGIN_XY, PASSWORD, divider_points
+from tests.dependency_policy import require_module
 
 schemathesis = require_module("schemathesis")
 

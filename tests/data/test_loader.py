@@ -10,22 +10,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from nuscenes_fixture import (
-    CAMERA_ROTATION,
-    LIDAR_CHANNEL,
-    N_GNSS,
-    N_IMU,
-    N_WHEEL,
-    T0_US,
-    NuScenesFixture,
-    camera_intrinsic,
-    camera_translation,
-    ego_rotation,
-    ego_translation,
-    image_timestamp_us,
-    sample_data_token,
-    write_nuscenes_fixture,
-)
 
 from cama_pipeline.data import (
     DatasetError,
@@ -45,6 +29,22 @@ from cama_pipeline.data.schema import (
     WHEEL_MESSAGE,
 )
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
+from tests.data.nuscenes_fixture import (
+    CAMERA_ROTATION,
+    LIDAR_CHANNEL,
+    N_GNSS,
+    N_IMU,
+    N_WHEEL,
+    T0_US,
+    NuScenesFixture,
+    camera_intrinsic,
+    camera_translation,
+    ego_rotation,
+    ego_translation,
+    image_timestamp_us,
+    sample_data_token,
+    write_nuscenes_fixture,
+)
 
 
 @pytest.fixture(scope="session")

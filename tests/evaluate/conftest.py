@@ -1,13 +1,10 @@
 """Shared fixtures of the evaluation tests: a hand-written nuScenes-layout data set from tests/data."""
 
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent.parent / "data"))  # the loader tests' data-set writer
-
-from nuscenes_fixture import NuScenesFixture, write_nuscenes_fixture  # noqa: E402
+from tests.data.nuscenes_fixture import NuScenesFixture, write_nuscenes_fixture
 
 
 @pytest.fixture()

@@ -1,16 +1,9 @@
 """Ground-truth co-visibility: hand-made cameras on a flat surface, and the neighbour shortcut changes nothing."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))  # the pair tests' hand-made cameras
-
-from pair_views import view  # noqa: E402
-
-from cama_pipeline.evaluate.covisibility import (  # noqa: E402
+from cama_pipeline.evaluate.covisibility import (
     NEIGHBOUR_MARGIN_M,
     CameraStack,
     ElevationSurface,
@@ -19,6 +12,7 @@ from cama_pipeline.evaluate.covisibility import (  # noqa: E402
     neighbours,
     seen_share,
 )
+from tests.pairs.pair_views import view
 
 RANGE_M = 25.0
 GRID = (12, 48)

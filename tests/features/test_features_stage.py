@@ -3,7 +3,6 @@
 import json
 import pickle
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,21 +10,19 @@ import pycolmap
 import pytest
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
-from site_workspace import build_site_workspace  # noqa: E402
-
-from cama_pipeline.data import load_dataset  # noqa: E402
-from cama_pipeline.features import stage  # noqa: E402
-from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
-from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs  # noqa: E402
-from cama_pipeline.features.sift import SiftExtractor  # noqa: E402
-from cama_pipeline.features.stage import extract_missing, features_dir, run  # noqa: E402
-from cama_pipeline.pairs.cameras import site_views  # noqa: E402
-from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
-from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
-from cama_pipeline.semantics import Semantic  # noqa: E402
-from cama_pipeline.site.workspace import WorkspaceError, read_site_manifest  # noqa: E402
-from cama_studio.cli import app  # noqa: E402
+from cama_pipeline.data import load_dataset
+from cama_pipeline.features import stage
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
+from cama_pipeline.features.sift import SiftExtractor
+from cama_pipeline.features.stage import extract_missing, features_dir, run
+from cama_pipeline.pairs.cameras import site_views
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.stage import run as run_pairs
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.workspace import WorkspaceError, read_site_manifest
+from cama_studio.cli import app
+from tests.pairs.site_workspace import build_site_workspace
 
 KEYFRAMES_PER_SCENE = 2
 runner = CliRunner()

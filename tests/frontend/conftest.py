@@ -3,10 +3,11 @@
 from collections.abc import Iterator
 
 import pytest
-from dependency_policy import require_program
-from editor_browser_helpers import CHROMIUM_PATH, SeededServer, launch_chromium, seeded_server
 from playwright.sync_api import Browser, Page, ViewportSize, expect, sync_playwright
-from system_helpers import free_port
+
+from tests.backend_system.system_helpers import free_port
+from tests.dependency_policy import require_program
+from tests.frontend.editor_browser_helpers import CHROMIUM_PATH, SeededServer, launch_chromium, seeded_server
 
 VIEWPORT: ViewportSize = {"width": 1440, "height": 900}
 expect.set_options(timeout=10_000)  # the machine is shared: give slow renders room

@@ -5,7 +5,6 @@ crosswalk at x 40..48 m, a gentle elevation slope; proposals lie on the painted 
 """
 
 import json
-import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -19,8 +18,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Browser, Page, Playwright
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backend_system"))
-from system_helpers import PASSWORD, ServerProcess, login  # noqa: E402
+from tests.backend_system.system_helpers import PASSWORD, ServerProcess, login
 
 CHROMIUM_PATH = "/usr/bin/chromium"
 CHROMIUM_ARGS = [

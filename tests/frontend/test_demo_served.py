@@ -8,12 +8,12 @@ from pathlib import Path
 
 import httpx
 import pytest
-from editor_browser_helpers import log_in, screenshot
 from playwright.sync_api import Page
-from system_helpers import PASSWORD, cama_executable, free_port
 
 from annotations.schema import AnnotationSet
 from cama_studio.pipeline import PipelineResult
+from tests.backend_system.system_helpers import PASSWORD, cama_executable, free_port
+from tests.frontend.editor_browser_helpers import log_in, screenshot
 
 
 @pytest.mark.slow

@@ -3,8 +3,16 @@
 from typing import Any
 
 import pytest
-from editor_browser_helpers import SeededServer, centre_on, drag, open_editor, page_xy, select_at
 from playwright.sync_api import Page, expect
+
+from tests.frontend.editor_browser_helpers import (
+    SeededServer,
+    centre_on,
+    drag,
+    open_editor,
+    page_xy,
+    select_at,
+)
 
 pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 

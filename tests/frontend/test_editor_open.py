@@ -6,7 +6,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from editor_browser_helpers import (
+from playwright.sync_api import Page, expect
+
+from tests.frontend.editor_browser_helpers import (
     PROPOSALS,
     SITE_ORIGIN_XY,
     SeededServer,
@@ -18,7 +20,6 @@ from editor_browser_helpers import (
     screenshot,
     select_at,
 )
-from playwright.sync_api import Page, expect
 
 pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 

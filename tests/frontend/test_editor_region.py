@@ -5,8 +5,9 @@ import re
 from typing import Any
 
 import pytest
-from editor_browser_helpers import SeededServer, log_in, polyline, screenshot
 from playwright.sync_api import Page, expect
+
+from tests.frontend.editor_browser_helpers import SeededServer, log_in, polyline, screenshot
 
 pytestmark = pytest.mark.slow  # a few seconds each; the shared server and browser start once
 

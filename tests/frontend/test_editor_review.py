@@ -1,8 +1,17 @@
 """Conflicts between two clients, the annotator queue's "next", findings and issue threads (text, never HTML)."""
 
 import pytest
-from editor_browser_helpers import SeededServer, centre_on, drag, open_editor, page_xy, screenshot, select_at
 from playwright.sync_api import Page, expect
+
+from tests.frontend.editor_browser_helpers import (
+    SeededServer,
+    centre_on,
+    drag,
+    open_editor,
+    page_xy,
+    screenshot,
+    select_at,
+)
 
 pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 

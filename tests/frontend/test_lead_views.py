@@ -1,11 +1,11 @@
 """Lead views: the confidence queue (order, filters, approve/return, open in the editor), figures, jobs."""
 
 import pytest
-from editor_browser_helpers import SeededServer, log_in, screenshot
 from playwright.sync_api import Page, expect
 
 from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
+from tests.frontend.editor_browser_helpers import SeededServer, log_in, screenshot
 
 UNAVAILABLE_KINDS = unavailable_kinds(Settings.from_env())
 """What the served backend (same environment) refuses: retrain without a configured VMA registry."""

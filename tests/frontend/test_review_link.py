@@ -11,14 +11,21 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 import pytest
 import viser
-from editor_browser_helpers import SeededServer, centre_on, open_editor, polyline, screenshot, select_at
 from playwright.sync_api import Page, expect
-from system_helpers import PASSWORD
 
 from app.viewer.content import load_surface, local_frame_of, road_mesh
 from app.viewer.review import show_vectors
 from app.viewer.scene import ReviewScene
 from app.viewer.sources import ApiVectorSource
+from tests.backend_system.system_helpers import PASSWORD
+from tests.frontend.editor_browser_helpers import (
+    SeededServer,
+    centre_on,
+    open_editor,
+    polyline,
+    screenshot,
+    select_at,
+)
 
 LINK_PROPOSALS: list[dict[str, Any]] = [
     {"class": "divider", "points": polyline(10, 30, 40, 5), "confidence": 0.4},

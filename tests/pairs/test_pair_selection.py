@@ -3,7 +3,6 @@
 import math
 
 import pytest
-from pair_views import view
 
 from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
@@ -11,6 +10,7 @@ from cama_pipeline.pairs.hsp import knn_candidates, spatial_pairs
 from cama_pipeline.pairs.repeats import repeated_views
 from cama_pipeline.pairs.sequential import overlapping_channels, sequential_pairs
 from cama_pipeline.pairs.stage import select_pairs
+from tests.pairs.pair_views import view
 
 RIG = {"CAM_FRONT": 0.0, "CAM_FRONT_LEFT": 55.0, "CAM_BACK": 180.0}
 

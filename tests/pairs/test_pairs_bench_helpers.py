@@ -1,23 +1,35 @@
 """bench/pairs.py on an image-free site: matching is estimated from a measured site, labelled, and the results
 file keeps the other sites' entries only when they were made with the same config."""
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
-sys.path.append(str(Path(__file__).parents[2] / "bench"))  # bench/pairs.py, after everything else
+from tests.pairs.pair_views import view
 
-from pair_views import view  # noqa: E402
-from pairs import (  # noqa: E402
-    STRATEGIES,
-    estimated_matching,
-    has_images,
-    measured_reference,
-    previous_results,
-    ratios,
-)
+
+def _load_bench_pairs() -> ModuleType:
+    """bench/pairs.py, a script rather than a package module, loaded from its file."""
+    path = Path(__file__).parents[2] / "bench" / "pairs.py"
+    spec = importlib.util.spec_from_file_location("bench_pairs", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the file runs
+    spec.loader.exec_module(module)
+    return module
+
+
+_bench = _load_bench_pairs()
+STRATEGIES = _bench.STRATEGIES
+estimated_matching = _bench.estimated_matching
+has_images = _bench.has_images
+measured_reference = _bench.measured_reference
+previous_results = _bench.previous_results
+ratios = _bench.ratios
 
 
 def _measured_entry(cpu_blas: float) -> dict:

@@ -3,13 +3,13 @@
 from pathlib import Path
 
 import pytest
-from site_workspace import build_site_workspace
 from typer.testing import CliRunner
 
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.io import read_pairs
 from cama_pipeline.pairs.stage import run
 from cama_studio.cli import app
+from tests.pairs.site_workspace import build_site_workspace
 
 runner = CliRunner()
 

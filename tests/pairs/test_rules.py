@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-from pair_views import view
 
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.footprint import footprint_overlap, ground_footprint
 from cama_pipeline.pairs.rules import face_to_face, height_compatible, view_cones_overlap
+from tests.pairs.pair_views import view
 
 CONFIG = PairsConfig()
 

@@ -1,12 +1,10 @@
 """Fixtures of the SfM tests: the tiny site's SfM inputs, built once per session."""
 
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs, build_sfm_inputs  # noqa: E402
+from tests.sfm.sfm_fixture import SfmInputs, build_sfm_inputs
 
 
 @pytest.fixture(scope="session")

@@ -5,22 +5,19 @@ fixture `sfm_inputs` in `tests/sfm/conftest.py` builds it once per test session.
 """
 
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
-from site_workspace import build_site_workspace  # noqa: E402
-
-from cama_pipeline.data import Pose, load_dataset  # noqa: E402
-from cama_pipeline.features.config import FeaturesConfig  # noqa: E402
-from cama_pipeline.features.stage import run as run_features  # noqa: E402
-from cama_pipeline.pairs.cameras import CameraView, site_views  # noqa: E402
-from cama_pipeline.pairs.config import PairsConfig  # noqa: E402
-from cama_pipeline.pairs.stage import run as run_pairs  # noqa: E402
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path  # noqa: E402
+from cama_pipeline.data import Pose, load_dataset
+from cama_pipeline.features.config import FeaturesConfig
+from cama_pipeline.features.stage import run as run_features
+from cama_pipeline.pairs.cameras import CameraView, site_views
+from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.pairs.stage import run as run_pairs
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from tests.pairs.site_workspace import build_site_workspace
 
 SITE_ID = "site-001"
 

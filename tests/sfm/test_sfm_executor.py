@@ -5,11 +5,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from dependency_policy import require_module
 
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.executor import LocalExecutor, RayExecutor, make_executor
 from cama_pipeline.sfm.stage import ClipTask, reconstruct_clip
+from tests.dependency_policy import require_module
 
 
 def test_local_pool_returns_results_in_task_order_and_reports_each() -> None:

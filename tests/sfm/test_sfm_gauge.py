@@ -1,20 +1,15 @@
 """The gauge fit: a model with a perfect shape but a wrong placement is moved onto noisy odometry, so that
 the odometry's per-clip drifts average out instead of being inherited."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs  # noqa: E402
-
-from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.gauge import GaugeSigmas, apply_gauge, fit_gauge
+from cama_pipeline.sfm.guided import reconstruct_views
+from tests.sfm.sfm_fixture import SfmInputs
 
 SIGMAS = GaugeSigmas(position_m=0.15, tilt_deg=0.035, heading_deg=0.25)
 

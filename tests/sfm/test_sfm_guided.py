@@ -4,20 +4,17 @@ reconstructed raise SfmError naming them; bad inputs are named."""
 import dataclasses
 import math
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
 import pycolmap
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs, pose_errors  # noqa: E402
-
-from cama_pipeline.pairs.cameras import CameraView  # noqa: E402
-from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.errors import SfmError  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views, refined_views  # noqa: E402
+from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.errors import SfmError
+from cama_pipeline.sfm.guided import reconstruct_views, refined_views
+from tests.sfm.sfm_fixture import SfmInputs, pose_errors
 
 pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 

@@ -1,16 +1,11 @@
 """Iterative BA (Algorithm 1) stops by its rule: changed-observation ratio at or under the threshold, or
 the iteration limit, with every iteration in the report."""
 
-import sys
-from pathlib import Path
-
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs  # noqa: E402
-
-from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.guided import reconstruct_views
+from tests.sfm.sfm_fixture import SfmInputs
 
 pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 

@@ -1,17 +1,12 @@
 """Odometry priors in BA: one relative prior per consecutive keyframe pair, one absolute prior per keyframe,
 and the priors (not a held keyframe) keep the model where the odometry put it."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs, relative_pose_errors  # noqa: E402
-
-from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views  # noqa: E402
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.guided import reconstruct_views
+from tests.sfm.sfm_fixture import SfmInputs, relative_pose_errors
 
 pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 

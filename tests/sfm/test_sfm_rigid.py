@@ -1,20 +1,16 @@
 """Rigid BA: every keyframe's cameras keep the calibrated relative transforms; plain BA lets them drift."""
 
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pycolmap
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from sfm_fixture import SfmInputs  # noqa: E402
-
-from cama_pipeline.pairs.cameras import CameraView  # noqa: E402
-from cama_pipeline.sfm.config import SfmConfig  # noqa: E402
-from cama_pipeline.sfm.guided import reconstruct_views, refined_views  # noqa: E402
-from cama_pipeline.sfm.model import matrix_from_rigid  # noqa: E402
+from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.sfm.config import SfmConfig
+from cama_pipeline.sfm.guided import reconstruct_views, refined_views
+from cama_pipeline.sfm.model import matrix_from_rigid
+from tests.sfm.sfm_fixture import SfmInputs
 
 pytestmark = pytest.mark.slow  # the shared SfM inputs take ~30 s to build (pairs, features)
 

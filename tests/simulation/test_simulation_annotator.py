@@ -1,6 +1,5 @@
 """The scripted annotator against the real backend app: it empties the queue through the HTTP API and books time."""
 
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,9 +11,7 @@ from app.backend.config import Settings
 from app.backend.main import create_app
 from app.simulation.annotator import ApiSession, SimulationError, correct_proposals, draw_from_scratch
 from app.simulation.plan import Polyline
-
-sys.path.insert(0, str(Path(__file__).parent.parent / "backend"))
-from backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD  # noqa: E402
+from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD
 
 TRUTH = [
     Polyline("boundary", np.array([[1010.0, 2010.0], [1090.0, 2010.0]])),

@@ -2,7 +2,6 @@
 skip, a site without road points and a bad pose source give clear errors, the CLI runs."""
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -10,17 +9,15 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
-from site_workspace import build_site_workspace  # noqa: E402
-
-from cama_pipeline.data import load_dataset  # noqa: E402
-from cama_pipeline.semantics import Semantic  # noqa: E402
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path  # noqa: E402
-from cama_pipeline.surface import SiteSurface, SurfaceConfig, run  # noqa: E402
-from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip  # noqa: E402
-from cama_pipeline.surface.poses import posed_views  # noqa: E402
-from cama_studio.cli import app  # noqa: E402
-from models.vma.rasters import load_site_rasters  # noqa: E402
+from cama_pipeline.data import load_dataset
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.surface import SiteSurface, SurfaceConfig, run
+from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip
+from cama_pipeline.surface.poses import posed_views
+from cama_studio.cli import app
+from models.vma.rasters import load_site_rasters
+from tests.pairs.site_workspace import build_site_workspace
 
 FAST = SurfaceConfig(
     resolution_m=0.5, region_radius_m=12.0, elevation_iterations=150, epochs=1, images_per_batch=8

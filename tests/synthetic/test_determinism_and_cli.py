@@ -1,10 +1,10 @@
 """Same seed, same bytes; different seed, different site; and the `cama synth` command."""
 
-from synth_helpers import file_digests, micro_config
 from typer.testing import CliRunner
 
 from cama_pipeline.synthetic.generate import run
 from cama_studio.cli import app
+from tests.synthetic.synth_helpers import file_digests, micro_config
 
 
 def test_same_seed_gives_identical_files_whatever_the_worker_count(tmp_path):

@@ -6,12 +6,12 @@ import shutil
 from pathlib import Path
 
 import pytest
-from synth_helpers import file_digests, micro_config
 from typer.testing import CliRunner
 
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR
 from cama_pipeline.synthetic.generate import MANIFEST, fingerprint, run
 from cama_studio.cli import app
+from tests.synthetic.synth_helpers import file_digests, micro_config
 
 PIXEL_DIRS = ("samples", "sweeps", SEMANTIC_DIR, INSTANCE_DIR)
 

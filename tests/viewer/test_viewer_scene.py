@@ -1,7 +1,6 @@
 """The 3D review on the tiny site: every layer present, vectors follow their source, clicks select."""
 
 import socket
-import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -15,9 +14,7 @@ from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.viewer.review import ViewInputs, follow, open_review
 from app.viewer.sources import FileVectorSource, VectorSourceError
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
-
-sys.path.insert(0, str(Path(__file__).parent.parent / "pairs"))
-from site_workspace import build_site_workspace  # noqa: E402
+from tests.pairs.site_workspace import build_site_workspace
 
 
 def _free_port() -> int:

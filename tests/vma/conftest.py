@@ -4,9 +4,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vma_test_sites import hand_drawn_site
 
 from models.vma.bev_sites import write_bev_site
+from tests.vma.vma_test_sites import hand_drawn_site
 
 
 @pytest.fixture()

@@ -5,13 +5,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vma_test_sites import drawn_semantic, write_raster_site
 
 from models.vma.checkpoint import CheckpointError, load_checkpoint, save_version
 from models.vma.config import ModelConfig, config_fingerprint
 from models.vma.model import VmaNet
 from models.vma.rasters import SiteInputError, load_site_rasters
 from models.vma.vectors import read_vectors
+from tests.vma.vma_test_sites import drawn_semantic, write_raster_site
 
 TINY = ModelConfig(patch_px=64, num_queries=6, num_points=5, dim=32, decoder_layers=1, heads=2)
 

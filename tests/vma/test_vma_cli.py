@@ -4,12 +4,12 @@ from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
-from vma_test_sites import drawn_semantic, write_raster_site
 
 from annotations import AnnotationSet
 from cama_studio.cli import app
 from models.vma.propose import propose
 from models.vma.rule_based import RuleConfig
+from tests.vma.vma_test_sites import drawn_semantic, write_raster_site
 
 runner = CliRunner()
 

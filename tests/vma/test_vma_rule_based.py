@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from shapely.geometry import LineString, Polygon
-from vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 
 from cama_pipeline.semantics import Semantic
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import load_site_rasters
 from models.vma.rule_based import RuleConfig, drop_kinks, propose_rule_based, trim_hooks
+from tests.vma.vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 
 
 def test_drawn_site_gives_the_drawn_vectors(drawn_site: Path) -> None:

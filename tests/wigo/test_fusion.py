@@ -5,13 +5,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from wigo_sim_inputs import drive, heading_rmse_deg, position_rmse, simulate, with_gnss_jumps
 
 from cama_pipeline.data import GnssSeries, ImuSeries, WheelSeries
 from cama_pipeline.synthetic.sensors import SensorNoiseConfig
 from cama_pipeline.wigo import WigoConfig, checked_inputs, fuse_clip
 from cama_pipeline.wigo.fusion import graph_span
 from cama_pipeline.wigo.odometry import dead_reckon, integration_grid
+from tests.wigo.wigo_sim_inputs import drive, heading_rmse_deg, position_rmse, simulate, with_gnss_jumps
 
 GNSS_ONLY = WigoConfig(logged_pose_sigmas=(0.0, 0.0, 0.0, 0.0))
 """Wheel + IMU + GNSS without the logged pose, so GNSS effects are not masked."""
