@@ -1,8 +1,10 @@
-"""Atomic file writes: every output is written to a temporary file beside it, then renamed."""
+"""Atomic file writes (every output is written to a temporary file beside it, then renamed) and checked reads
+of the pipeline's JSON files (a schema tag, typed fields, errors naming the file and field)."""
 
 import json
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -51,3 +53,33 @@ def atomic_write_npy(path: Path, array: np.ndarray) -> None:
     except BaseException:
         Path(tmp_name).unlink(missing_ok=True)
         raise
+
+
+class WorkspaceError(ValueError):
+    """A workspace file that is missing a stage's output or breaks its schema; names file and field."""
+
+
+def read_json(path: Path, schema: str, stage_hint: str) -> dict[str, Any]:
+    """A JSON object whose `schema` field is `schema`; FileNotFoundError says which command writes it,
+    WorkspaceError names the file when it is not valid JSON or of another schema."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: not found; run `{stage_hint}` first")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise WorkspaceError(f"{path}: not valid JSON ({err})") from None
+    if not isinstance(data, dict) or data.get("schema") != schema:
+        found = data.get("schema") if isinstance(data, dict) else type(data).__name__
+        raise WorkspaceError(f"{path}: field 'schema' must be {schema!r}, got {found!r}")
+    return data
+
+
+def field(
+    data: Mapping[str, Any], name: str, kind: type | tuple[type, ...], path: Path, where: str = ""
+) -> Any:
+    """data[name] checked to be of `kind` (a bool is not an int), else a WorkspaceError naming the file and the
+    field (`where` prefixes it, e.g. "poses[3].")."""
+    if name not in data or not isinstance(data[name], kind) or isinstance(data[name], bool) and kind is int:
+        raise WorkspaceError(f"{path}: field {where}{name!r} missing or not {kind}")
+    return data[name]
