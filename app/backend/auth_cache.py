@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime
 
-from app.backend.crud.users import as_utc, utc_now
+from app.backend.clock import as_utc, utc_now
 from app.backend.models import User
 from app.backend.security import token_digest
 

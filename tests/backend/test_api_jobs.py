@@ -13,8 +13,8 @@ import pytest
 from fastapi.testclient import TestClient
 from pydantic import BaseModel
 
+from app.backend.clock import utc_now
 from app.backend.config import Settings
-from app.backend.crud.users import utc_now
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.main import create_app
 from app.backend.models_jobs import Job

@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from app.backend.clock import utc_now
 from app.backend.crud import leases
-from app.backend.crud.users import utc_now
 from app.backend.schemas_review import DEFAULT_LEASE_S
 from tests.backend.backend_helpers import PASSWORD, divider, login
 

@@ -10,8 +10,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.backend.auth_cache import TokenCache
+from app.backend.clock import utc_now
 from app.backend.config import Settings
-from app.backend.crud.users import utc_now
 from app.backend.login_limit import LoginLimiter
 from app.backend.models import User
 from tests.backend.backend_helpers import PASSWORD, login

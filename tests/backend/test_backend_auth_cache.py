@@ -7,7 +7,7 @@ from datetime import timedelta
 import pytest
 
 from app.backend.auth_cache import TokenCache
-from app.backend.crud.users import utc_now
+from app.backend.clock import utc_now
 from app.backend.models import User
 
 

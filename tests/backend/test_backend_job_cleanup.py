@@ -8,8 +8,8 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from app.backend.clock import utc_now
 from app.backend.config import Settings
-from app.backend.crud.users import utc_now
 from app.backend.jobs import kinds
 from app.backend.jobs.runner import JobContext
 from app.backend.main import create_app

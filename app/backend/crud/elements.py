@@ -15,9 +15,9 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.exc import StaleDataError
 
+from app.backend.clock import utc_now
 from app.backend.crud.leases import check_lease
 from app.backend.crud.sites import cached_extent, get_site, site_extent
-from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, ForbiddenError, InvalidInputError, NotFoundError
 from app.backend.models import EditLog, Element, Site
 from app.backend.schemas import ElementCreate, ElementPublic, ElementUpdate, Extent, Point, check_element

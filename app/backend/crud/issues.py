@@ -9,9 +9,9 @@ import logging
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from app.backend.clock import as_utc, utc_now
 from app.backend.crud.elements import check_in_site, get_element
 from app.backend.crud.sites import get_site
-from app.backend.crud.users import as_utc, utc_now
 from app.backend.errors import ConflictError, NotFoundError
 from app.backend.models_review import IssueComment, ReviewIssue
 from app.backend.schemas_review import CommentPublic, IssueCreate, IssuePublic

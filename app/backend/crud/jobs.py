@@ -9,8 +9,8 @@ from pydantic import ValidationError
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
+from app.backend.clock import utc_now
 from app.backend.crud.sites import get_site
-from app.backend.crud.users import utc_now
 from app.backend.data_roots import ROOTS_CONTEXT
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.jobs.runner import JobRunner

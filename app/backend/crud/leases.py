@@ -14,7 +14,7 @@ from datetime import datetime
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from app.backend.crud.users import as_utc, utc_now
+from app.backend.clock import as_utc, utc_now
 from app.backend.errors import ConflictError
 from app.backend.models import Element
 from app.backend.models_review import Lease

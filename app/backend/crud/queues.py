@@ -31,10 +31,10 @@ from sqlalchemy import ColumnElement, Select, func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from app.backend.clock import as_utc
 from app.backend.crud import leases as lease_rules
 from app.backend.crud.elements import public
 from app.backend.crud.sites import get_site
-from app.backend.crud.users import as_utc
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element, User
 from app.backend.models_review import Lease

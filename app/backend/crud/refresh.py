@@ -21,6 +21,7 @@ from sqlalchemy import ColumnElement, and_, or_, select, update
 from sqlalchemy.orm import Session
 
 from annotations.schema import AnnotationSet
+from app.backend.clock import utc_now
 from app.backend.crud.elements import (
     Preaccept,
     check_in_site,
@@ -30,7 +31,6 @@ from app.backend.crud.elements import (
     snapshot,
 )
 from app.backend.crud.sites import get_site
-from app.backend.crud.users import utc_now
 from app.backend.errors import InvalidInputError
 from app.backend.models import EditLog, Element, Site
 from app.backend.models_review import Lease

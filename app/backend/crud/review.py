@@ -5,8 +5,8 @@ import logging
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
+from app.backend.clock import utc_now
 from app.backend.crud.elements import _set_points, commit_change, element_for_write, get_element, snapshot
-from app.backend.crud.users import utc_now
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
 from app.backend.models import EditLog, Element
 from app.backend.models_review import Lease

@@ -13,7 +13,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from annotations.schema import Georeference
-from app.backend.crud.users import utc_now
+from app.backend.clock import utc_now
 from app.backend.data_roots import data_folder
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import Element, Site

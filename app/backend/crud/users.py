@@ -1,27 +1,18 @@
 """Users and login tokens: create, authenticate, resolve a bearer token."""
 
 import logging
-from datetime import UTC, datetime, timedelta
+from datetime import datetime, timedelta
 
 from sqlalchemy import delete, func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from app.backend.clock import as_utc, utc_now
 from app.backend.errors import ConflictError
 from app.backend.models import Token, User
 from app.backend.security import dummy_hash, hash_password, new_token, token_digest, verify_password
 
 logger = logging.getLogger(__name__)
-
-
-def utc_now() -> datetime:
-    """The current time, timezone-aware UTC."""
-    return datetime.now(UTC)
-
-
-def as_utc(value: datetime) -> datetime:
-    """A stored time as aware UTC (SQLite returns naive datetimes)."""
-    return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
 
 
 def create_user(*, session: Session, username: str, password: str, role: str, scrypt_n: int) -> User:

@@ -20,7 +20,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from app.backend.crud.users import utc_now
+from app.backend.clock import utc_now
 from app.backend.errors import ConflictError
 from app.backend.models_jobs import Job
 
