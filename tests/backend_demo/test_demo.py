@@ -91,7 +91,7 @@ def test_demo_links_the_editor_to_its_3d_review(
 ) -> None:
     served: list[Settings] = []
     monkeypatch.setattr("uvicorn.run", lambda app, **kwargs: served.append(app.state.settings))
-    monkeypatch.setattr("app.backend.demo._start_review", lambda *args: None)
+    monkeypatch.setattr("app.demo._start_review", lambda *args: None)
     args = ["demo", str(site_root), "--data-dir", str(tmp_path / "server"), "--view-port", "8091"]
     assert runner.invoke(cli, args).exit_code == 0
     assert runner.invoke(cli, [*args, "--host", "0.0.0.0"]).exit_code == 0
