@@ -52,12 +52,14 @@ from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
-from cama_studio.pipeline import PipelineConfig, proposals_path, surface_rasters
+from cama_studio.config import PipelineConfig
+from cama_studio.pipeline import proposals_path, surface_rasters
 from cama_studio.pipeline import run as run_pipeline
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
@@ -330,10 +332,15 @@ def main() -> None:
     workspace = site / "workspace"
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:
+        features = (
+            FeaturesConfig()
+            if args.max_features is None
+            else FeaturesConfig(max_num_features=args.max_features)
+        )
         result = run_pipeline(
             site / "nuscenes",
             workspace,
-            PipelineConfig(proposer=args.proposer, max_features=args.max_features),
+            PipelineConfig(proposer=args.proposer, features=features),
             on_stage=lambda s: print(f"== {s}", flush=True),
         )
         stage_seconds = {k: round(v, 1) for k, v in result.seconds.items()}

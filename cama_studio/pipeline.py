@@ -9,12 +9,13 @@ Outputs are the stages' own files in the workspace; the proposals of site `s` ar
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.site.workspace import default_workspace, read_sites_index, sites_index_path
+from cama_pipeline.workspace import Workspace
+from cama_studio.config import PipelineConfig
 
 logger = logging.getLogger(__name__)
 
@@ -46,22 +47,6 @@ def _is_bad_input(stage: str, err: Exception) -> bool:
     return False
 
 
-@dataclass(frozen=True)
-class PipelineConfig:
-    """Choices of the whole path (each stage keeps its own defaults)."""
-
-    executor: Literal["local", "ray"] = "local"
-    """Where SfM clips run."""
-    workers: int = 2
-    max_features: int | None = None
-    """SIFT keypoints per image; None keeps the features stage's default."""
-    proposer: Literal["learned", "rule"] = "learned"
-    checkpoint: Path | None = None
-    """VMA checkpoint registry or version folder for the learned proposer; None: the model shipped with the
-    package (`models.vma.shipped`), found from any working directory."""
-    surface_poses: Literal["sfm", "wigo"] = "sfm"
-
-
 @dataclass
 class PipelineResult:
     """Seconds per stage and where the outputs are."""
@@ -84,38 +69,33 @@ def surface_rasters(workspace: Path, site_id: str) -> Path:
 def _stage_calls(
     dataset_root: Path, workspace: Path, config: PipelineConfig, overwrite: bool
 ) -> dict[str, Callable[[], object]]:
-    """One zero-argument call per reconstruction stage, imported lazily so `cama run --help` stays fast."""
-    from cama_pipeline.features.config import FeaturesConfig
+    """One zero-argument call per reconstruction stage, each with its table of `config`; imported lazily so
+    `cama run --help` stays fast."""
     from cama_pipeline.features.stage import run as run_features
-    from cama_pipeline.keyframes import KeyframeConfig
     from cama_pipeline.keyframes import run as run_keyframes
-    from cama_pipeline.pairs.config import PairsConfig
     from cama_pipeline.pairs.stage import run as run_pairs
-    from cama_pipeline.sfm.config import SfmConfig
     from cama_pipeline.sfm.stage import run as run_sfm
-    from cama_pipeline.site.config import SiteConfig
     from cama_pipeline.site.stage import run as run_sites
-    from cama_pipeline.surface import SurfaceConfig
     from cama_pipeline.surface import run as run_surface
-    from cama_pipeline.wigo import WigoConfig
     from cama_pipeline.wigo import run as run_wigo
 
-    features_config = FeaturesConfig()
-    if config.max_features is not None:
-        features_config = replace(features_config, max_num_features=config.max_features)
-    root, ws = dataset_root, workspace
+    root, ws, c = dataset_root, workspace, config
     return {
-        "wigo": lambda: run_wigo(WigoConfig(), root, ws, overwrite=overwrite),
-        "keyframes": lambda: run_keyframes(KeyframeConfig(), root, ws, overwrite=overwrite),
-        "sites": lambda: run_sites(SiteConfig(), root, ws, overwrite=overwrite),
-        "pairs": lambda: run_pairs(PairsConfig(), root, ws, overwrite=overwrite),
-        "features": lambda: run_features(features_config, root, ws, overwrite=overwrite),
+        "wigo": lambda: run_wigo(c.wigo, root, ws, overwrite=overwrite),
+        "keyframes": lambda: run_keyframes(c.keyframes, root, ws, overwrite=overwrite),
+        "sites": lambda: run_sites(c.sites, root, ws, overwrite=overwrite),
+        "pairs": lambda: run_pairs(c.pairs, root, ws, overwrite=overwrite),
+        "features": lambda: run_features(c.features, root, ws, overwrite=overwrite),
         "sfm": lambda: run_sfm(
-            SfmConfig(), root, ws, executor=config.executor, workers=config.workers, overwrite=overwrite
+            c.sfm,
+            root,
+            ws,
+            executor=c.executor,
+            workers=c.workers,
+            merge_config=c.sfm_merge,
+            overwrite=overwrite,
         ),
-        "surface": lambda: run_surface(
-            SurfaceConfig(), root, ws, poses=config.surface_poses, overwrite=overwrite
-        ),
+        "surface": lambda: run_surface(c.surface, root, ws, poses=c.surface_poses, overwrite=overwrite),
     }
 
 
@@ -130,6 +110,9 @@ def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool, res
             proposals_path(workspace, site_id),
             proposer=config.proposer,
             checkpoint=config.checkpoint if config.proposer == "learned" else None,
+            min_confidence=config.propose.min_confidence,
+            inference=config.propose.inference,
+            rule=config.propose.rule_for(Workspace(workspace).surface_bev(site_id)),
             overwrite=overwrite,
         )
         result.proposals[site_id] = proposed.out

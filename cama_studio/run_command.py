@@ -1,24 +1,43 @@
 """`cama run`: the whole reconstruction path (wigo ... VMA proposals) for a nuScenes-layout data set."""
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from cama_pipeline.console import bad_input, console, failure
 
+if TYPE_CHECKING:
+    from cama_studio.config import PipelineConfig
+
 
 def run_command(
-    dataset: Annotated[Path, typer.Argument(help="Data set root (nuScenes layout).")],
+    dataset: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Data set root (nuScenes layout); not needed with --print-config.", show_default=False
+        ),
+    ] = None,
     workspace: Annotated[
         Path | None, typer.Option(help="Workspace folder; default <data set root's parent>/workspace.")
     ] = None,
-    executor: Annotated[str, typer.Option(help="Where SfM clips run: local or ray.")] = "local",
-    workers: Annotated[int, typer.Option(min=1, help="SfM processes.")] = 2,
-    max_features: Annotated[
-        int | None, typer.Option(help="SIFT keypoints per image (features stage default if omitted).")
+    config_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--config",
+            help="TOML (or YAML) file setting run choices and any stage parameter ([wigo], [sfm], ... tables); "
+            "see --print-config for every key. The options below override it.",
+        ),
     ] = None,
-    proposer: Annotated[str, typer.Option(help="learned (the checkpoint) or rule.")] = "learned",
+    print_config: Annotated[
+        bool, typer.Option(help="Print the effective configuration as TOML (a --config file) and exit.")
+    ] = False,
+    executor: Annotated[str | None, typer.Option(help="Where SfM clips run: local or ray.")] = None,
+    workers: Annotated[int | None, typer.Option(min=1, help="SfM processes.")] = None,
+    max_features: Annotated[
+        int | None, typer.Option(help="SIFT keypoints per image (sets features.max_num_features).")
+    ] = None,
+    proposer: Annotated[str | None, typer.Option(help="learned (the checkpoint) or rule.")] = None,
     checkpoint: Annotated[
         Path | None,
         typer.Option(
@@ -28,21 +47,19 @@ def run_command(
     stop_after: Annotated[str, typer.Option(help="Last stage to run.")] = "propose",
     overwrite: Annotated[bool, typer.Option(help="Recompute every stage even if up to date.")] = False,
 ) -> None:
-    """Run every stage in order, each skipping what is up to date; print the time per stage."""
-    from cama_studio.pipeline import STAGES, PipelineConfig, PipelineError, run
+    """Run every stage in order, each skipping what is up to date; print the time per stage.
+
+    Without --config every stage runs with its defaults (local executor, 2 workers, the learned proposer)."""
+    from cama_studio.config import dump_toml
+    from cama_studio.pipeline import STAGES, PipelineError, run
 
     try:
-        if executor not in ("local", "ray"):
-            raise ValueError(f"--executor must be local or ray, got {executor!r}")
-        if proposer not in ("learned", "rule"):
-            raise ValueError(f"--proposer must be learned or rule, got {proposer!r}")
-        config = PipelineConfig(
-            executor="ray" if executor == "ray" else "local",
-            workers=workers,
-            max_features=max_features,
-            proposer="rule" if proposer == "rule" else "learned",
-            checkpoint=checkpoint,
-        )
+        config = effective_config(config_file, executor, workers, max_features, proposer, checkpoint)
+        if print_config:
+            console.out(dump_toml(config), end="", highlight=False)
+            return
+        if dataset is None:
+            raise ValueError("missing argument DATASET (the data set root)")
         result = run(
             dataset,
             workspace,
@@ -65,3 +82,38 @@ def run_command(
         from models.vma.shipped import checkpoint_label  # torch: only once a learned proposer ran
 
         console.print(f"  VMA checkpoint {checkpoint_label(result.checkpoint)}")
+
+
+def effective_config(
+    config_file: Path | None,
+    executor: str | None,
+    workers: int | None,
+    max_features: int | None,
+    proposer: str | None,
+    checkpoint: Path | None,
+) -> "PipelineConfig":
+    """The --config file's configuration (the defaults without one), with the options given on top; ValueError
+    naming the option or the file and key at fault."""
+    from dataclasses import replace
+
+    from cama_studio.config import PipelineConfig, load_config
+
+    config = load_config(config_file) if config_file is not None else PipelineConfig()
+    if executor is not None:
+        if executor not in ("local", "ray"):
+            raise ValueError(f"--executor must be local or ray, got {executor!r}")
+        config = replace(config, executor="ray" if executor == "ray" else "local")
+    if proposer is not None:
+        if proposer not in ("learned", "rule"):
+            raise ValueError(f"--proposer must be learned or rule, got {proposer!r}")
+        config = replace(config, proposer="rule" if proposer == "rule" else "learned")
+    if workers is not None:
+        config = replace(config, workers=workers)
+    if checkpoint is not None:
+        config = replace(config, checkpoint=checkpoint)
+    if max_features is not None:
+        try:
+            config = replace(config, features=replace(config.features, max_num_features=max_features))
+        except ValueError as err:
+            raise ValueError(f"--max-features: {err}") from None
+    return config

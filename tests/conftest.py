@@ -13,9 +13,11 @@ from pathlib import Path
 
 import pytest
 
+from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.synthetic.config import SynthConfig, preset
 from cama_pipeline.synthetic.generate import SynthResult, run
-from cama_studio.pipeline import PipelineConfig, PipelineResult
+from cama_studio.config import PipelineConfig
+from cama_studio.pipeline import PipelineResult
 from cama_studio.pipeline import run as run_pipeline
 
 pytest_plugins = ["tests.dependency_policy"]
@@ -47,5 +49,5 @@ def site_root(tiny_site: GeneratedSite) -> Path:
 def whole_path(tiny_site: GeneratedSite, tmp_path_factory: pytest.TempPathFactory) -> PipelineResult:
     """`cama run` on the tiny site once (rule-based proposals, 1024 SIFT features): every stage's outputs."""
     workspace = tmp_path_factory.mktemp("whole-path") / "workspace"
-    config = PipelineConfig(proposer="rule", max_features=1024)
+    config = PipelineConfig(proposer="rule", features=FeaturesConfig(max_num_features=1024))
     return run_pipeline(tiny_site.result.out_dir / "nuscenes", workspace, config)

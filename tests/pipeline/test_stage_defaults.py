@@ -2,11 +2,14 @@
 
 A user who runs `cama wigo`, `cama keyframes`, ... `cama propose` one by one must get what `cama run` makes. Each
 stage's `run` (and `propose`) is replaced by a recorder; the pipeline and then each command are driven with their
-defaults, and the recorded calls, bound to the real signature with its defaults applied, must be equal.
+defaults, and the recorded calls, bound to the real signature with its defaults applied (a config left None
+as its default config), must be equal.
 """
 
+import dataclasses
 import importlib
 import inspect
+import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -40,6 +43,7 @@ class Recorder:
 
     def __init__(self, real: Callable[..., Any], returns: Any = None) -> None:
         self.signature = inspect.signature(real)
+        self.hints = typing.get_type_hints(real)
         self.returns = returns
         self.calls: list[dict[str, Any]] = []
         self.stop = False
@@ -47,10 +51,25 @@ class Recorder:
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         bound = self.signature.bind(*args, **kwargs)
         bound.apply_defaults()
-        self.calls.append({name: _comparable(value) for name, value in bound.arguments.items()})
+        arguments = {
+            name: _default_config(self.hints.get(name), value) for name, value in bound.arguments.items()
+        }
+        self.calls.append({name: _comparable(value) for name, value in arguments.items()})
         if self.stop:
             raise _Recorded
         return self.returns
+
+
+def _default_config(annotation: Any, value: Any) -> Any:
+    """A config argument left None (`X | None`, None meaning `X()`) as that default config: `cama run` passes every
+    stage its effective configs (`merge_config=MergeConfig()`, `inference=InferenceConfig()`), a command may
+    leave them None, and both mean the same call."""
+    configs = [
+        a
+        for a in typing.get_args(annotation)
+        if dataclasses.is_dataclass(a) and a.__name__.endswith("Config")
+    ]
+    return configs[0]() if value is None and len(configs) == 1 else value
 
 
 def _comparable(value: Any) -> Any:

@@ -13,7 +13,7 @@ from annotations import AnnotationSet
 from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
 from app.backend.vma_loop import with_shipped_registry
-from cama_studio.pipeline import PipelineConfig
+from cama_studio.config import PipelineConfig
 from models.vma.checkpoint import CURRENT, CheckpointError
 from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
 
