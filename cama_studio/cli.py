@@ -79,8 +79,8 @@ def synth(
 def _register_stage_commands() -> None:
     """Commands whose implementation lives beside their stage (imported here, registered by name)."""
     from annotations.export_command import export_command, import_command
-    from app.demo import demo_command
     from app.backend.serve import serve_command
+    from app.demo import demo_command
     from app.viewer.command import view_command
     from cama_pipeline.evaluate.command import eval_command
     from cama_pipeline.features.command import features_command
