@@ -19,9 +19,15 @@ is queueing by Little's law, clients / throughput).
 With `--baseline-ref REF` the same runs are also made, in the same conditions and interleaved, against a server
 started from the sources of git commit REF (`git archive`): a before/after comparison.
 
-Usage: .venv/bin/python bench/api_load.py [--clients 50] [--duration-s 15] [--think-ms 1000]
-       [--server-cpus 1] [--client-cpus 0] [--baseline-ref HEAD~1] [--postgres-url URL]
-Prints the figures and writes them to bench/results/api_load.json (with the command line).
+The `lint` case (issue 21, point 3) loads the probe's site, 60 dividers x 5,000 vertices (wavy, 1.6 m apart:
+every neighbour pair is narrow), in one bulk request to a SQLite server, then times `GET /lint`: the first build,
+warm answers, and the lint after each of `--lint-edits` edits of one divider. The server runs with
+CAMA_LINT_BUDGET_S=600 so that the first build is measured whole.
+
+Usage: .venv/bin/python bench/api_load.py [--cases load lint] [--clients 50] [--duration-s 15] [--think-ms 1000]
+       [--server-cpus 1] [--client-cpus 0] [--baseline-ref HEAD~1] [--postgres-url URL] [--lint-edits 5]
+Prints the figures and writes them to bench/results/api_load.json (with the command line); running some of the
+cases replaces their figures there and keeps the others'.
 """
 
 import argparse
@@ -43,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the test helpers, `tests` a package at the repository root
@@ -59,8 +66,9 @@ RESULTS = Path(__file__).parent / "results"
 MAX_RETRIES = 20
 IDLE_RECONNECT_S = 4.0
 """A client idle this long opens a new connection (uvicorn closes keep-alive connections idle for 5 s)."""
-SOURCE_PACKAGES = ("app", "cama_pipeline", "annotations", "models")
-"""What a baseline server needs from its commit (the rest of the environment is shared)."""
+SOURCE_PACKAGES = ("app", "cama_pipeline", "annotations", "models", "cama_studio")
+"""What a baseline server needs from its commit, those of them the commit has (the rest of the environment is
+shared)."""
 
 
 @dataclass
@@ -219,8 +227,19 @@ def server_cpu_s(server: ServerProcess) -> float:
 
 def export_tree(ref: str, folder: Path) -> Path:
     """The source packages of git commit `ref`, unpacked under `folder`."""
+    listed = subprocess.run(
+        ["git", "-C", str(ROOT), "ls-tree", "--name-only", ref], check=True, capture_output=True, text=True
+    ).stdout.split()
     archive = subprocess.run(
-        ["git", "-C", str(ROOT), "archive", "--format=tar", ref, *SOURCE_PACKAGES],
+        [
+            "git",
+            "-C",
+            str(ROOT),
+            "archive",
+            "--format=tar",
+            ref,
+            *[p for p in SOURCE_PACKAGES if p in listed],
+        ],
         check=True,
         capture_output=True,
     ).stdout
@@ -289,9 +308,118 @@ def bench_postgres(args: argparse.Namespace, baseline: Path | None) -> dict[str,
     return {"database": "throwaway cluster: Unix socket, fsync off, fresh database per server run", **figures}
 
 
+LINT_SITE = (60, 5000)
+"""The probe's site of issue 21: dividers x vertices per divider."""
+
+
+def probe_site_bodies(dividers: int, vertices: int) -> list[dict[str, Any]]:
+    """Wavy dividers 1.6 m apart across the 100 m site (as `tests/backend/test_lint_bounded.py` builds it)."""
+    x = np.linspace(0.0, 99.0, vertices)
+    return [
+        {"class": "divider", "points": np.c_[x, 2.0 + 1.6 * k + 0.2 * np.sin(x / 3.0)].round(4).tolist()}
+        for k in range(dividers)
+    ]
+
+
+def timed_get(client: httpx.Client, url: str, headers: dict[str, str]) -> tuple[float, Any]:
+    """Seconds a GET took, and its JSON; RuntimeError unless 200."""
+    started = time.perf_counter()
+    response = client.get(url, headers=headers)
+    elapsed_s = time.perf_counter() - started
+    if response.status_code != 200:
+        raise RuntimeError(f"GET {url}: {response.status_code} {response.text[:300]}")
+    return elapsed_s, response.json()
+
+
+def run_lint(server: ServerProcess, edits: int) -> dict[str, Any]:
+    """Load the probe's site, then time its lint: first build, warm, after each edit of one divider."""
+    load_before = os.getloadavg()[0]
+    with httpx.Client(base_url=server.base_url, timeout=1800.0) as client:
+        headers = login(client)
+        site_id = register_site(client, headers, server.data_dir / "bev", name=f"lint-{time.time_ns()}")
+        url = f"/api/sites/{site_id}"
+        started = time.perf_counter()
+        response = client.post(
+            f"{url}/elements/bulk", json={"elements": probe_site_bodies(*LINT_SITE)}, headers=headers
+        )
+        create_s = time.perf_counter() - started
+        if response.status_code != 201:
+            raise RuntimeError(f"bulk create: {response.status_code} {response.text[:300]}")
+        elements = response.json()
+        cpu_before = server_cpu_s(server)
+        first_s, first = timed_get(client, f"{url}/lint", headers)
+        first_cpu_s = server_cpu_s(server) - cpu_before
+        warm_s = [timed_get(client, f"{url}/lint", headers)[0] for _ in range(5)]
+        edit_s = []
+        for k in range(edits):
+            index = (29 + 7 * k) % len(elements)
+            element, dy = elements[index], 0.3 if k % 2 == 0 else -0.3
+            body = {"version": element["version"], "points": [[x, y + dy] for x, y in element["points"]]}
+            patched = client.patch(f"{url}/elements/{element['id']}", json=body, headers=headers)
+            if patched.status_code != 200:
+                raise RuntimeError(f"PATCH: {patched.status_code} {patched.text[:300]}")
+            elements[index] = patched.json()
+            edit_s.append(timed_get(client, f"{url}/lint", headers)[0])
+    return {
+        "create_s": round(create_s, 2),
+        "first_lint_s": round(first_s, 2),
+        "first_lint_server_cpu_s": round(first_cpu_s, 2),
+        "warm_lint_ms": round(1000.0 * statistics.median(warm_s), 1),
+        "edit_lint_ms": round(1000.0 * statistics.median(edit_s), 1) if edit_s else None,
+        "edit_lint_max_ms": round(1000.0 * max(edit_s), 1) if edit_s else None,
+        "findings": len(first["findings"]),
+        "pending_elements": first.get("pending_elements"),
+        "load_average_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
+    }
+
+
+def bench_lint(args: argparse.Namespace, source: Path | None) -> dict[str, Any]:
+    """The lint case on a SQLite server from `source` (else this checkout)."""
+    env = {"CAMA_LINT_BUDGET_S": "600", "CAMA_MAX_PAYLOAD_BYTES": str(32 * 1024 * 1024)}
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
+    with tempfile.TemporaryDirectory(prefix="cama-lint-") as folder:
+        server = ServerProcess(data_dir=Path(folder), cpus=args.server_cpus, extra_env=env).start()
+        try:
+            figures = run_lint(server, args.lint_edits)
+        finally:
+            server.stop()
+    print(f"lint {'baseline' if source else 'current'}: {json.dumps(figures)}", file=sys.stderr)
+    return figures
+
+
+def lint_case(args: argparse.Namespace, baseline: Path | None) -> dict[str, Any]:
+    """The lint case's record: its command and conditions, the current server's figures and the baseline's."""
+    dividers, vertices = LINT_SITE
+    record: dict[str, Any] = {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "config": {
+            "dividers": dividers,
+            "vertices_per_divider": vertices,
+            "edits": args.lint_edits,
+            "server_cpus": list(args.server_cpus) if args.server_cpus else "all",
+            "baseline_ref": args.baseline_ref or None,
+        },
+        "machine": machine(),
+    }
+    if baseline is not None:
+        record["baseline"] = bench_lint(args, baseline)
+    record["current"] = bench_lint(args, None)
+    return record
+
+
+def machine() -> dict[str, Any]:
+    """The machine the figures come from."""
+    return {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()}
+
+
 def parse_cpus(text: str) -> tuple[int, ...] | None:
     """`0,1` -> (0, 1); empty -> None (all cores)."""
     return tuple(int(part) for part in text.split(",")) if text else None
+
+
+CASES = ("load", "lint")
+"""`load`: concurrent edit round-trips (the top-level figures); `lint`: the probe's site (under "lint")."""
 
 
 def parse_args() -> argparse.Namespace:
@@ -314,6 +442,10 @@ def parse_args() -> argparse.Namespace:
         help="Mean pause between a client's edits in the paced run (an annotator's edit rhythm); "
         "a saturation run with no pause follows.",
     )
+    parser.add_argument(
+        "--cases", nargs="+", choices=CASES, default=list(CASES), help="Which cases to run (default: all)."
+    )
+    parser.add_argument("--lint-edits", type=int, default=5, help="Edits timed in the lint case.")
     parser.add_argument("--output", type=Path, default=RESULTS / "api_load.json")
     args = parser.parse_args()
     if args.clients < 1 or args.duration_s <= 0 or args.elements < 1:
@@ -321,11 +453,9 @@ def parse_args() -> argparse.Namespace:
     return args
 
 
-def main() -> None:
-    args = parse_args()
-    if args.client_cpus:
-        os.sched_setaffinity(0, set(args.client_cpus))
-    results: dict[str, Any] = {
+def load_case(args: argparse.Namespace, baseline: Path | None) -> dict[str, Any]:
+    """The load case's figures, with its command and conditions."""
+    return {
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "config": {
             "clients": args.clients,
@@ -336,16 +466,25 @@ def main() -> None:
             "client_cpus": list(args.client_cpus) if args.client_cpus else "all",
             "baseline_ref": args.baseline_ref or None,
         },
-        "machine": {
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "platform": platform.platform(),
-        },
+        "machine": machine(),
+        "sqlite": bench_database("sqlite", lambda: None, args, baseline),
+        "postgresql": bench_postgres(args, baseline),
     }
+
+
+def main() -> None:
+    args = parse_args()
+    if args.client_cpus:
+        os.sched_setaffinity(0, set(args.client_cpus))
+    results: dict[str, Any] = {}
+    if set(args.cases) != set(CASES) and args.output.exists():
+        results = json.loads(args.output.read_text())  # keep the figures of the cases not run
     with tempfile.TemporaryDirectory(prefix="cama-load-baseline-") as folder:
         baseline = export_tree(args.baseline_ref, Path(folder)) if args.baseline_ref else None
-        results["sqlite"] = bench_database("sqlite", lambda: None, args, baseline)
-        results["postgresql"] = bench_postgres(args, baseline)
+        if "load" in args.cases:
+            results.update(load_case(args, baseline))
+        if "lint" in args.cases:
+            results["lint"] = lint_case(args, baseline)
     print(json.dumps(results, indent=2))
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=2) + "\n")

@@ -324,6 +324,22 @@ def test_api_load_table() -> None:
         assert_shows(" | ".join(row(t, label)[1:]), expected, f"API row {label!r}")
 
 
+def test_api_lint_table() -> None:
+    t = table("lint, 60 x 5,000-vertex site")
+    assert_names_source(t, "api_load.json", "bench/api_load.py")
+    recorded = results("api_load.json")["lint"]
+    assert f"--baseline-ref {recorded['config']['baseline_ref']}" in t.context
+    rows = {"current": recorded["current"], f"commit {recorded['config']['baseline_ref']}": recorded["baseline"]}
+    for label, figures_of in rows.items():
+        expected = [
+            figures_of["first_lint_s"],
+            figures_of["first_lint_server_cpu_s"],
+            figures_of["warm_lint_ms"],
+            figures_of["edit_lint_ms"],
+        ]
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"lint row {label!r}")
+
+
 def test_end_to_end_measures_table() -> None:
     t = table("measure")
     assert_names_source(t, "end_to_end.json", "bench/end_to_end.py")

@@ -17,6 +17,9 @@ DEFAULT_QA_SHARE = 0.1
 DEFAULT_LOGIN_MAX_FAILURES = 5
 DEFAULT_LOGIN_MAX_FAILURES_PER_ADDRESS = 20
 DEFAULT_LOGIN_WINDOW_S = 300.0
+DEFAULT_MAX_ELEMENT_VERTICES = 10_000
+DEFAULT_MAX_SITE_VERTICES = 500_000
+DEFAULT_LINT_BUDGET_S = 2.0
 
 
 _REVIEW_URL = re.compile(r"https?://[^\s/?#]+(/[^\s?#]*)?|:\d{1,5}")
@@ -73,6 +76,14 @@ class Settings:
     """Failed logins from one client address within `login_window_s` before its logins are refused (429)."""
     login_window_s: float = DEFAULT_LOGIN_WINDOW_S
     """The sliding window of the login limits, seconds: a failure counts for this long."""
+    max_element_vertices: int = DEFAULT_MAX_ELEMENT_VERTICES
+    """Most vertices of one element; a create, bulk create or update with more gets 422 naming the limit."""
+    max_site_vertices: int = DEFAULT_MAX_SITE_VERTICES
+    """Most vertices of a site's live elements together; a write that would pass it gets 422 naming the limit.
+    The lint's first build of a site and the memory its cache holds grow with this."""
+    lint_budget_s: float = DEFAULT_LINT_BUDGET_S
+    """Most seconds one request spends bringing a site's lint up to date; the elements left are linted by the
+    next requests, and lint reports count them as `pending_elements` (0: one element per request)."""
 
     def __post_init__(self) -> None:
         """Validate the fields so that a bad environment fails at start, naming the variable."""
@@ -103,6 +114,13 @@ class Settings:
             )
         if not self.login_window_s > 0:
             raise ValueError(f"CAMA_LOGIN_WINDOW_S: must be positive, got {self.login_window_s}")
+        if not 2 <= self.max_element_vertices <= self.max_site_vertices:
+            raise ValueError(
+                "CAMA_MAX_ELEMENT_VERTICES and CAMA_MAX_SITE_VERTICES: expected 2 <= per element <= per site, "
+                f"got {self.max_element_vertices} and {self.max_site_vertices}"
+            )
+        if not self.lint_budget_s >= 0:
+            raise ValueError(f"CAMA_LINT_BUDGET_S: must be >= 0, got {self.lint_budget_s}")
 
     @property
     def resolved_database_url(self) -> str:
@@ -149,4 +167,7 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "login_max_failures": int,
     "login_max_failures_per_address": int,
     "login_window_s": float,
+    "max_element_vertices": int,
+    "max_site_vertices": int,
+    "lint_budget_s": float,
 }

@@ -146,7 +146,9 @@ class ElementCreate(BaseModel):
 
     model_config = STRICT
     cls: ElementClass = Field(validation_alias=AliasChoices("class", "cls"), serialization_alias="class")
-    points: list[Point] = Field(max_length=10_000, description="[x, y] site metres; crosswalks closed.")
+    points: list[Point] = Field(
+        description="[x, y] site metres; crosswalks closed; at most CAMA_MAX_ELEMENT_VERTICES (10,000) points."
+    )
     confidence: float | None = Field(default=None, ge=0.0, le=1.0)
     source: Source = "human"
 
@@ -172,7 +174,9 @@ class ElementUpdate(BaseModel):
     cls: ElementClass | None = Field(
         default=None, validation_alias=AliasChoices("class", "cls"), serialization_alias="class"
     )
-    points: list[Point] | None = Field(default=None, max_length=10_000)
+    points: list[Point] | None = Field(
+        default=None, description="At most CAMA_MAX_ELEMENT_VERTICES (10,000) points."
+    )
     confidence: float | None = Field(default=None, ge=0.0, le=1.0)
 
 

@@ -56,6 +56,11 @@ class LintReport(BaseModel):
     site_id: int
     element_count: int
     findings: list[LintFindingPublic]
+    pending_elements: int = Field(
+        default=0,
+        description="Elements changed since that this report has not linted yet (a request lints for at most "
+        "CAMA_LINT_BUDGET_S; the next requests go on); their previous findings are kept. 0: complete.",
+    )
 
 
 class ProposalDiffPublic(BaseModel):

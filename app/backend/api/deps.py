@@ -112,7 +112,8 @@ async def get_lint_cache(request: Request) -> LintCache:
     with _LINT_CACHE_LOCK:
         cache = getattr(request.app.state, "lint_cache", None)
         if cache is None:
-            cache = request.app.state.lint_cache = LintCache()
+            budget_s = request.app.state.settings.lint_budget_s
+            cache = request.app.state.lint_cache = LintCache(budget_s=budget_s)
     return cache
 
 

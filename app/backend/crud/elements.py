@@ -17,6 +17,7 @@ from sqlalchemy.orm.exc import StaleDataError
 
 from app.backend.clock import utc_now
 from app.backend.crud.leases import check_lease
+from app.backend.crud.limits import VertexLimits, check_vertex_limits
 from app.backend.crud.sites import cached_extent, get_site, site_extent
 from app.backend.errors import ConflictError, ForbiddenError, InvalidInputError, NotFoundError
 from app.backend.models import EditLog, Element, Site
@@ -167,10 +168,17 @@ def create_elements(
     username: str,
     margin_m: float,
     preaccept: Preaccept | None = None,
+    limits: VertexLimits | None = None,
 ) -> list[Element]:
     """Store new elements (all or none), each with a `create` log entry; confident proposals pre-accepted
-    when `preaccept` is given."""
+    when `preaccept` is given; 422 past the vertex `limits` when given."""
     site = get_site(session=session, site_id=site_id)
+    if limits is not None:
+        fields = (
+            ["points"] if len(elements_in) == 1 else [f"elements.{k}.points" for k in range(len(elements_in))]
+        )
+        counts = [len(element_in.points) for element_in in elements_in]
+        check_vertex_limits(session=session, site_id=site_id, limits=limits, counts=counts, fields=fields)
     for index, element_in in enumerate(elements_in):
         try:
             check_in_site(site=site, points=element_in.points, margin_m=margin_m)
@@ -280,9 +288,11 @@ def update_element(
     username: str,
     role: str,
     margin_m: float,
+    limits: VertexLimits | None = None,
 ) -> Element:
-    """Change class, points and/or confidence of the current version; the merged element is validated. The
-    review state is kept (see `element_for_write` for who may change what)."""
+    """Change class, points and/or confidence of the current version; the merged element is validated (422 past
+    the vertex `limits` when given). The review state is kept (see `element_for_write` for who may change
+    what)."""
     element = element_for_write(
         session=session,
         site_id=site_id,
@@ -295,6 +305,15 @@ def update_element(
     if element.deleted:
         raise ConflictError(f"element {element_id} is deleted; restore a version first")
     cls = update.cls or element.cls
+    if limits is not None and update.points is not None:
+        check_vertex_limits(
+            session=session,
+            site_id=site_id,
+            limits=limits,
+            counts=[len(update.points)],
+            fields=["points"],
+            replaced=len(element.points),
+        )
     points = update.points if update.points is not None else [(p[0], p[1]) for p in element.points]
     confidence = update.confidence if update.confidence is not None else element.confidence
     try:

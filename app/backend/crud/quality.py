@@ -1,32 +1,35 @@
-"""Map quality over the database: lint of a site's live elements (cached), proposal diffs and annotator figures.
+"""Map quality over the database: lint of a site's live elements (kept up to date per element), proposal diffs
+and annotator figures.
 
 Every function takes keyword-only arguments; none writes to the database.
 """
 
 import logging
 import threading
+import time
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from shapely.geometry import Polygon, box
+from shapely.geometry import box
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from app.backend.crud.elements import get_element
 from app.backend.crud.sites import get_site, site_extent
 from app.backend.errors import NotFoundError
-from app.backend.models import EditLog, Element, Site
+from app.backend.models import EditLog, Element
 from app.backend.quality import (
     AnnotatorFigures,
     ElementView,
     LintConfig,
     LintFinding,
+    LintWork,
     ProposalDiff,
     ReviewEvent,
+    SiteLint,
     annotator_figures,
-    lint,
     proposal_diff,
 )
 from app.backend.schemas_quality import ClassDiffSummary, LintFindingPublic, LintReport, ProposalDiffPublic
@@ -42,35 +45,55 @@ LintKey = tuple[int, int]
 """(elements ever stored, sum of their versions): every create, edit or delete changes it."""
 Box = tuple[float, float, float, float]
 """xmin, ymin, xmax, ymax in site metres."""
-INCREMENTAL_MAX_CHANGES = 64
-"""Up to this many changed elements, a cached report is patched around them instead of linting the site."""
+LOAD_CHUNK = 500
+"""Changed elements loaded per query (an IN list of ids)."""
 
 
-@dataclass(frozen=True)
-class CachedLint:
-    """A full-site report and the live elements (id -> version, bounding box) it was made from."""
+@dataclass
+class SiteLintEntry:
+    """One site's incremental lint: the element versions it holds, and its report for the state `key`."""
 
-    key: LintKey
-    elements: dict[int, tuple[int, Box]]
-    report: LintReport
+    state: SiteLint
+    extent: Box
+    config: LintConfig
+    versions: dict[int, int] = field(default_factory=dict)
+    """Version of each element as the state holds it (elements still pending are missing or older)."""
+    key: LintKey | None = None
+    """The database state the report is complete for; None while elements are pending."""
+    report: LintReport | None = None
+    work: LintWork = field(default_factory=LintWork)
+    """What the last catch-up linted."""
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    """Held while the entry catches up with the database: one request lints, the others wait for its report."""
 
 
 @dataclass
 class LintCache:
-    """The last full-site lint report per site; after edits it is patched around the changed elements."""
+    """Per site, the lint kept up to date element by element (`SiteLint`), and its last report.
 
-    entries: dict[int, CachedLint] = field(default_factory=dict)
+    `budget_s` bounds the linting one request does (None: no bound); what is left is linted by the next
+    requests, and reports say how many elements are pending.
+    """
+
+    budget_s: float | None = None
+    entries: dict[int, SiteLintEntry] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def get(self, site_id: int) -> CachedLint | None:
-        """The site's last full-site report, whatever state it was made for."""
+    def entry(self, site_id: int, extent: Box, config: LintConfig) -> SiteLintEntry:
+        """The site's entry; a new, empty one when there was none or the site extent or the config changed."""
         with self.lock:
-            return self.entries.get(site_id)
+            entry = self.entries.get(site_id)
+            if entry is None or entry.extent != extent or entry.config != config:
+                region = box(*extent)
+                entry = SiteLintEntry(SiteLint(config=config, region=region, rank=int), extent, config)
+                self.entries[site_id] = entry
+            return entry
 
-    def put(self, site_id: int, entry: CachedLint) -> None:
-        """Remember a full-site report."""
+    def last_work(self, site_id: int) -> LintWork | None:
+        """What the site's last catch-up linted (None before the first)."""
         with self.lock:
-            self.entries[site_id] = entry
+            entry = self.entries.get(site_id)
+        return None if entry is None or entry.report is None else entry.work
 
 
 def _lint_key(session: Session, site_id: int) -> LintKey:
@@ -79,24 +102,6 @@ def _lint_key(session: Session, site_id: int) -> LintKey:
         select(func.count(), func.coalesce(func.sum(Element.version), 0)).where(Element.site_id == site_id)
     ).one()
     return int(count), int(total)
-
-
-def _live_elements(session: Session, site_id: int) -> dict[int, tuple[int, Box]]:
-    """Version and bounding box of every live element of the site (no geometry loaded)."""
-    query = select(Element.id, Element.version, Element.xmin, Element.ymin, Element.xmax, Element.ymax).where(
-        Element.site_id == site_id, Element.deleted.is_(False)
-    )
-    return {row[0]: (row[1], (row[2], row[3], row[4], row[5])) for row in session.execute(query)}
-
-
-def _changed_box(before: dict[int, tuple[int, Box]], after: dict[int, tuple[int, Box]]) -> Box | None:
-    """The box around the old and new extent of every element added, changed or removed; None if none."""
-    boxes = [entry[1] for k, entry in before.items() if after.get(k) != entry]
-    boxes += [entry[1] for k, entry in after.items() if before.get(k) != entry]
-    if not boxes:
-        return None
-    corners = np.asarray(boxes)
-    return (corners[:, 0].min(), corners[:, 1].min(), corners[:, 2].max(), corners[:, 3].max())
 
 
 def _public_finding(finding: LintFinding) -> LintFindingPublic:
@@ -110,60 +115,85 @@ def _public_finding(finding: LintFinding) -> LintFindingPublic:
     )
 
 
-def _in_bbox(xy: Sequence[float], bbox: tuple[float, float, float, float]) -> bool:
+def _in_bbox(xy: Sequence[float], bbox: Box) -> bool:
     """Whether a point lies in xmin, ymin, xmax, ymax."""
     return bbox[0] <= xy[0] <= bbox[2] and bbox[1] <= xy[1] <= bbox[3]
 
 
-def _lint_findings(
-    session: Session, site: Site, bbox: Box | None, config: LintConfig
-) -> tuple[int, list[LintFindingPublic]]:
-    """Lint the live elements (those within reach of `bbox` when given, keeping only findings inside it);
-    the number of elements linted and the findings."""
-    query = select(Element.id, Element.cls, Element.points).where(
-        Element.site_id == site.id, Element.deleted.is_(False)
+def _load(session: Session, element_ids: Sequence[int]) -> list[tuple[ElementView, int]]:
+    """The live ones of these elements as views, with the version loaded."""
+    query = select(Element.id, Element.version, Element.cls, Element.points).where(
+        Element.id.in_(element_ids), Element.deleted.is_(False)
     )
-    if bbox is not None:
-        reach = _reach(config)
-        xmin, ymin, xmax, ymax = bbox[0] - reach, bbox[1] - reach, bbox[2] + reach, bbox[3] + reach
-        query = query.where(
-            Element.xmax >= xmin, Element.xmin <= xmax, Element.ymax >= ymin, Element.ymin <= ymax
-        )
-    views = [
-        ElementView(id=str(element_id), cls=cls, points=np.asarray(points, dtype=float))
-        for element_id, cls, points in session.execute(query.order_by(Element.id))
+    return [
+        (ElementView(id=str(element_id), cls=cls, points=np.asarray(points, dtype=float)), version)
+        for element_id, version, cls, points in session.execute(query.order_by(Element.id))
     ]
-    extent = site_extent(site)
-    region: Polygon = box(extent.xmin, extent.ymin, extent.xmax, extent.ymax)
-    findings = [_public_finding(finding) for finding in lint(views, config=config, region=region)]
-    if bbox is not None:
-        findings = [finding for finding in findings if _in_bbox(finding.location_xy, bbox)]
-    return len(views), findings
 
 
-def _reach(config: LintConfig) -> float:
-    """How far from an element a finding it takes part in may lie."""
-    return max(config.end_connect_m, config.spacing_search_m, config.break_gap_m)
+def _add_work(total: LintWork, work: LintWork) -> None:
+    total.elements += work.elements
+    total.pairs += work.pairs
+    total.divider_ends += work.divider_ends
 
 
-def _patched(
-    session: Session, site: Site, cached: CachedLint, elements: dict[int, tuple[int, Box]], config: LintConfig
-) -> list[LintFindingPublic] | None:
-    """The cached findings with those near changed elements linted again; None when too much changed.
+def _catch_up(
+    session: Session, site_id: int, entry: SiteLintEntry, key: LintKey, budget_s: float | None
+) -> LintReport:
+    """Bring the entry to the database's state: lint the changed elements (loaded LOAD_CHUNK at a time) and
+    what they can affect, until the budget runs out; its report, which counts the elements left pending."""
+    started = time.monotonic()
+    deadline = None if budget_s is None else started + budget_s
+    query = select(Element.id, Element.version).where(Element.site_id == site_id, Element.deleted.is_(False))
+    live = {element_id: version for element_id, version in session.execute(query)}
+    changed = sorted(i for i, version in live.items() if entry.versions.get(i) != version)
+    removed = [i for i in entry.versions if i not in live]
+    entry.work = entry.state.update([], removed=[str(i) for i in removed])
+    for element_id in removed:
+        del entry.versions[element_id]
+    linted = 0
+    for start in range(0, len(changed), LOAD_CHUNK):
+        if deadline is not None and linted and time.monotonic() >= deadline:
+            break
+        loaded = _load(session, changed[start : start + LOAD_CHUNK])
+        work = entry.state.update([view for view, _version in loaded], deadline=deadline)
+        _add_work(entry.work, work)
+        pending = set(work.pending)
+        entry.versions.update((int(view.id), version) for view, version in loaded if view.id not in pending)
+        linted += len(loaded) - len(pending)
+        if pending:
+            break
+    entry.work.pending = [str(i) for i in changed if entry.versions.get(i) != live[i]]
+    findings = [_public_finding(finding) for finding in entry.state.findings()]
+    entry.key = None if entry.work.pending else key
+    entry.report = LintReport(
+        site_id=site_id, element_count=len(live), findings=findings, pending_elements=len(entry.work.pending)
+    )
+    logger.info(
+        "lint site %d: %d findings over %d elements in %.0f ms (linted %d elements, %d pairs, %d divider "
+        "ends; %d pending)",
+        site_id,
+        len(findings),
+        len(live),
+        1000.0 * (time.monotonic() - started),
+        entry.work.elements,
+        entry.work.pairs,
+        entry.work.divider_ends,
+        len(entry.work.pending),
+    )
+    return entry.report
 
-    A finding involving a changed element lies within `_reach` of it, so re-linting the changed area grown by
-    that reach (old and new extents) and keeping the cached findings outside it gives the full-site result."""
-    changed = set(cached.elements.items()) ^ set(elements.items())
-    if len(changed) > 2 * INCREMENTAL_MAX_CHANGES:
-        return None
-    area = _changed_box(cached.elements, elements)
-    if area is None:
-        return cached.report.findings
-    reach = _reach(config)
-    grown = (area[0] - reach, area[1] - reach, area[2] + reach, area[3] + reach)
-    _count, fresh = _lint_findings(session, site, grown, config)
-    kept = [finding for finding in cached.report.findings if not _in_bbox(finding.location_xy, grown)]
-    return kept + fresh
+
+def _near(state: SiteLint, bbox: Box) -> int:
+    """How many elements lie within reach of `bbox` (the ones its findings can involve)."""
+    reach = max(state.reach_m, state.config.end_connect_m)
+    return sum(
+        view.bounds[2] >= bbox[0] - reach
+        and view.bounds[0] <= bbox[2] + reach
+        and view.bounds[3] >= bbox[1] - reach
+        and view.bounds[1] <= bbox[3] + reach
+        for view in state.views.values()
+    )
 
 
 def lint_site(
@@ -176,31 +206,27 @@ def lint_site(
 ) -> LintReport:
     """Lint the site's live elements (the site extent is the region where ends may stop).
 
-    A full-site report is cached; after edits it is patched around the changed elements (the whole site is
-    linted again only when many changed). With `bbox`, elements near it are linted and only findings located
-    inside it are returned (not cached).
+    The cache keeps each site's lint up to date element by element: the first call lints the whole site, later
+    ones only the elements changed since and what they can affect (`SiteLint.update`), and an unchanged site
+    answers from the last report. A call lints for at most the cache's `budget_s` (then the report counts the
+    elements left in `pending_elements`, and keeps their previous findings; the next call goes on). With
+    `bbox`, only findings located inside it are returned, and the count of elements within reach of it.
     """
     site = get_site(session=session, site_id=site_id)
-    if bbox is not None:
-        count, findings = _lint_findings(session, site, bbox, config)
-        return LintReport(site_id=site_id, element_count=count, findings=findings)
-    key = _lint_key(session, site_id)
-    cached = cache.get(site_id)
-    if cached is not None and cached.key == key:
-        return cached.report
-    elements = _live_elements(session, site_id)
-    patched = None if cached is None else _patched(session, site, cached, elements, config)
-    findings = patched if patched is not None else _lint_findings(session, site, None, config)[1]
-    report = LintReport(site_id=site_id, element_count=len(elements), findings=findings)
-    cache.put(site_id, CachedLint(key, elements, report))
-    logger.info(
-        "lint site %d (%s): %d findings over %d elements",
-        site_id,
-        "patched" if patched is not None else "full",
-        len(findings),
-        len(elements),
+    extent = site_extent(site)
+    entry = cache.entry(site_id, (extent.xmin, extent.ymin, extent.xmax, extent.ymax), config)
+    with entry.lock:
+        key = _lint_key(session, site_id)
+        report = entry.report
+        if entry.key != key or report is None:
+            report = _catch_up(session, site_id, entry, key, cache.budget_s)
+        if bbox is None:
+            return report
+        count = _near(entry.state, bbox)
+    findings = [finding for finding in report.findings if _in_bbox(finding.location_xy, bbox)]
+    return LintReport(
+        site_id=site_id, element_count=count, findings=findings, pending_elements=report.pending_elements
     )
-    return report
 
 
 def element_findings(

@@ -11,6 +11,7 @@ from annotations.schema import ElementClass, ReviewState
 from app.backend import crud
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.crud.elements import Preaccept
+from app.backend.crud.limits import VertexLimits
 from app.backend.errors import InvalidInputError
 from app.backend.models import Element
 from app.backend.schemas import (
@@ -110,6 +111,7 @@ def create_element(
         elements_in=[element_in],
         username=user.username,
         margin_m=settings.extent_margin_m,
+        limits=VertexLimits.of(settings),
     )
     return element_response(element, status.HTTP_201_CREATED)
 
@@ -130,6 +132,7 @@ def bulk_proposals(
         username=user.username,
         margin_m=settings.extent_margin_m,
         preaccept=preaccept,
+        limits=VertexLimits.of(settings),
     )
     return [crud.public(element) for element in elements]
 
@@ -161,6 +164,7 @@ def update_element(
         username=user.username,
         role=user.role,
         margin_m=settings.extent_margin_m,
+        limits=VertexLimits.of(settings),
     )
     return element_response(element)
 
