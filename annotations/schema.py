@@ -4,9 +4,8 @@ Coordinates are site metres (global - site_origin_xy); a `ped_crossing` is a clo
 last point), the other classes are open polylines. JSON uses the key "class" for `MapElement.cls`.
 """
 
-import json
 import logging
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal, Self
@@ -17,13 +16,16 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    SerializerFunctionWrapHandler,
     ValidationError,
     ValidationInfo,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
 from annotations.geometry import validate_geometry
+from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.io import atomic_write_bytes
 
 logger = logging.getLogger(__name__)
@@ -120,48 +122,39 @@ class MapElement(BaseModel):
         return MapElement.model_validate({**self.model_dump(by_alias=False), **changes})
 
 
-class Georeference(BaseModel):
+def _site_origin_first_in_schema(schema: dict[str, Any]) -> None:
+    """`required` lists site_origin_xy first, as the annotation formats always have."""
+    schema["required"] = [
+        "site_origin_xy",
+        *(name for name in schema["required"] if name != "site_origin_xy"),
+    ]
+
+
+class Georeference(RasterGeoreference):
     """Where a site and its BEV rasters sit in the global frame (DESIGN.md raster convention)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    # the rasters' georeference plus the site origin, serialised flat with `site_origin_xy` first (the docstring
+    # is the description in the committed export schemas)
+
+    model_config = ConfigDict(json_schema_extra=_site_origin_first_in_schema)
 
     site_origin_xy: tuple[float, float] = Field(
         description="Global metres of the site origin: site = global - this."
     )
-    origin_xy: tuple[float, float] = Field(description="Global metres of raster pixel (0, 0)'s centre.")
-    resolution: float = Field(gt=0.0, description="Metres per pixel.")
-    width: int = Field(ge=1, description="Raster columns.")
-    height: int = Field(ge=1, description="Raster rows.")
-    frame: Literal["global"] = "global"
-    row_axis: Literal["-y"] = "-y"
-    col_axis: Literal["+x"] = "+x"
 
-    @property
-    def shape(self) -> tuple[int, int]:
-        """Raster shape as numpy orders it: (height, width)."""
-        return (self.height, self.width)
+    # no return annotation: pydantic would take it for the serialisation schema instead of the model's
+    @model_serializer(mode="wrap")
+    def _site_origin_first(self, handler: SerializerFunctionWrapHandler):  # type: ignore[no-untyped-def]
+        """The site origin first, then the raster fields (the order of every file written so far)."""
+        data = handler(self)
+        if not isinstance(data, dict) or "site_origin_xy" not in data:
+            return data
+        return {"site_origin_xy": data.pop("site_origin_xy"), **data}
 
     @classmethod
-    def from_raster_json(
-        cls, raster: Mapping[str, Any], *, site_origin_xy: Iterable[float]
-    ) -> "Georeference":
-        """Build from a raster georeference dict (as written beside BEV rasters) plus the site origin."""
-        return cls.model_validate({**raster, "site_origin_xy": tuple(site_origin_xy)})
-
-    @classmethod
-    def from_raster_file(cls, path: Path, *, site_origin_xy: Iterable[float]) -> "Georeference":
-        """Read a `georeference.json` beside a BEV raster; ValueError naming the file when it is invalid."""
-        path = Path(path)
-        try:
-            return cls.from_raster_json(
-                json.loads(path.read_text(encoding="utf-8")), site_origin_xy=site_origin_xy
-            )
-        except (json.JSONDecodeError, ValidationError, TypeError) as error:
-            raise ValueError(f"{path}: invalid raster georeference: {error}") from error
-
-    def raster_json(self) -> dict[str, Any]:
-        """The raster georeference dict (without the site origin), as stored beside a BEV raster."""
-        return self.model_dump(exclude={"site_origin_xy"}, mode="json")
+    def of(cls, raster: RasterGeoreference, *, site_origin_xy: Iterable[float]) -> "Georeference":
+        """A raster georeference (e.g. `cama_pipeline.bev.read_georeference`) placed at a site origin."""
+        return cls.model_validate({**raster.to_json(), "site_origin_xy": tuple(site_origin_xy)})
 
 
 class AnnotationSet(BaseModel):

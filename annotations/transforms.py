@@ -92,16 +92,12 @@ def rotation_from_quaternion(quaternion_wxyz: ArrayLike) -> np.ndarray:
 
 def pixel_from_global_points(points: ArrayLike, georef: Georeference) -> np.ndarray:
     """Global x, y (z ignored) to BEV pixel (col, row), fractional; pixel centres are at integers."""
-    xy = _points(points)[:, :2]
-    x0, y0 = georef.origin_xy
-    return np.stack([(xy[:, 0] - x0) / georef.resolution, (y0 - xy[:, 1]) / georef.resolution], axis=1)
+    return georef.pixel_from_global(_points(points))
 
 
 def global_from_pixel_points(pixels: ArrayLike, georef: Georeference) -> np.ndarray:
     """BEV pixel (col, row) to global x, y in metres."""
-    colrow = _points(pixels, field="pixels", dims=(2,))
-    x0, y0 = georef.origin_xy
-    return np.stack([x0 + colrow[:, 0] * georef.resolution, y0 - colrow[:, 1] * georef.resolution], axis=1)
+    return georef.global_from_pixel(_points(pixels, field="pixels", dims=(2,)))
 
 
 def pixel_from_site_points(points: ArrayLike, georef: Georeference) -> np.ndarray:

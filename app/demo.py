@@ -8,7 +8,6 @@ restarts). Three demo accounts are made on first run, one per role, with the pas
 (default `cama-demo`): they are printed with the URL.
 """
 
-import json
 import logging
 import os
 from collections.abc import Sequence
@@ -27,6 +26,7 @@ from app.backend.errors import InvalidInputError
 from app.backend.models import Site, User
 from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
 from app.backend.vma_loop import with_shipped_registry
+from cama_pipeline.bev import read_georeference
 from cama_pipeline.console import bad_input
 
 logger = logging.getLogger(__name__)
@@ -57,17 +57,10 @@ def site_request(site_dir: Path, rasters: Path | None, proposals: Path | None, n
     of the proposals made from it: their site origin, else the raster's own origin)."""
     if rasters is None:
         return SiteCreate(name=name, synthetic_dir=str(site_dir))
-    path = rasters / "georeference.json"
     try:
-        georeference = GeoreferenceIn.model_validate(
-            {
-                k: v
-                for k, v in json.loads(path.read_text(encoding="utf-8")).items()
-                if k in GeoreferenceIn.model_fields
-            }
-        )
+        georeference = GeoreferenceIn.of(read_georeference(rasters))
     except (OSError, ValueError) as err:
-        raise InvalidInputError("rasters", f"{path}: {err}") from None
+        raise InvalidInputError("rasters", str(err)) from None
     origin = read_proposals(proposals).georeference.site_origin_xy if proposals else georeference.origin_xy
     return SiteCreate(name=name, site_origin_xy=origin, georeference=georeference, raster_dir=str(rasters))
 

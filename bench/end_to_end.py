@@ -32,11 +32,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import matplotlib
 import numpy as np
 from scipy.spatial.transform import Rotation
-from surface import load_bev, truth_at  # bench/surface.py: this script's folder is on sys.path
+from surface import truth_at  # bench/surface.py: this script's folder is on sys.path
 
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
@@ -48,6 +47,7 @@ from app.simulation.workbench import (
     observed_true_polylines,
     register_synthetic_site,
 )
+from cama_pipeline.bev import read_bev, read_layer
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
@@ -110,15 +110,15 @@ def pose_figures(site: Path, views: list[CameraView], workspace: Path, site_id: 
 def elevation_figures(site: Path, folder: Path) -> tuple[dict[str, Any], np.ndarray]:
     """RMSE of the reconstructed elevation over observed cells that are road in the truth; the error map.
     Cells are paired with the true raster as `bench/surface.py` pairs them."""
-    ours, truth = load_bev(folder), load_bev(site / "ground_truth" / "bev")
+    ours, truth = read_bev(folder), read_bev(site / "ground_truth" / "bev")
     inside, tr, tc = truth_at(ours, truth)
-    elevation = ours["elevation"].astype(np.float64)
-    true_sem = truth["semantic"][tr, tc]
+    elevation = ours.require("elevation").astype(np.float64)
+    true_sem = truth.require("semantic")[tr, tc]
     road = inside & (true_sem >= int(Semantic.ROAD)) & (true_sem != int(Semantic.UNOBSERVED))
-    observed = (ours["semantic"] != int(Semantic.UNOBSERVED)) & np.isfinite(elevation)
+    observed = (ours.require("semantic") != int(Semantic.UNOBSERVED)) & np.isfinite(elevation)
     use = road & observed
     error = np.full(elevation.shape, np.nan)
-    error[use] = elevation[use] - truth["elevation"][tr[use], tc[use]]
+    error[use] = elevation[use] - truth.require("elevation")[tr[use], tc[use]]
     values = error[use]
     figures = {
         "cells": int(use.sum()),
@@ -136,8 +136,9 @@ def proposal_vectors(path: Path) -> list[Any]:
 
 
 def observed_mask(rasters_folder: Path) -> ObservedMask:
-    bev = load_bev(rasters_folder)
-    return ObservedMask.from_semantic(bev["semantic"], bev["geo"]["origin_xy"], bev["geo"]["resolution"])
+    bev = read_bev(rasters_folder, ["semantic"])
+    geo = bev.georeference
+    return ObservedMask.from_semantic(bev.require("semantic"), geo.origin_xy, geo.resolution)
 
 
 def observed_truth(truths: list[Vector], mask: ObservedMask) -> list[Vector]:
@@ -166,10 +167,10 @@ def proposals_ap(site: Path, rasters_folder: Path, proposals: Path) -> dict[str,
 
 def lifted_map(vectors_xy: list[tuple[str, np.ndarray]], folder: Path) -> list[VectorElement]:
     """2D global vectors lifted through a raster folder's elevation (vertices without elevation dropped)."""
-    geo = Georeference.from_raster_file(folder / "georeference.json", site_origin_xy=(0.0, 0.0))
-    bev = load_bev(folder)
-    elevation = bev["elevation"].astype(np.float64)
-    unobserved = bev["semantic"] == int(Semantic.UNOBSERVED)
+    bev = read_bev(folder, ["semantic", "elevation"])
+    geo = Georeference.of(bev.georeference, site_origin_xy=(0.0, 0.0))
+    elevation = bev.require("elevation").astype(np.float64)
+    unobserved = bev.require("semantic") == int(Semantic.UNOBSERVED)
     out = []
     for k, (cls, points) in enumerate(vectors_xy):
         lifted = lift_points(points, elevation, geo, unobserved=unobserved, search_radius_m=2.0).points_3d
@@ -297,7 +298,7 @@ def plots(figures: dict[str, Any], error_map: np.ndarray, rasters_folder: Path, 
             vmax=10,
         )
     )
-    counts = cv2.imread(str(rasters_folder / "observation_count.png"), cv2.IMREAD_UNCHANGED).astype(float)
+    counts = read_layer(rasters_folder, "observation_count").astype(float)
     written.append(
         raster_plot(
             plots_dir,

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from cama_pipeline.bev import read_bev
 from cama_pipeline.data import load_dataset
 from cama_pipeline.evaluate.covisibility import ElevationSurface, covisibility_matrix
 from cama_pipeline.evaluate.inputs import load_true_poses
@@ -80,9 +81,9 @@ def true_views(views: list[CameraView], site: Path) -> list[CameraView]:
 
 def surface(site: Path) -> ElevationSurface:
     """The ground-truth elevation raster."""
-    bev = site / "ground_truth" / "bev"
-    geo = json.loads((bev / "georeference.json").read_text())
-    return ElevationSurface(np.load(bev / "elevation.npy"), tuple(geo["origin_xy"]), float(geo["resolution"]))
+    bev = read_bev(site / "ground_truth" / "bev", ["elevation"])
+    geo = bev.georeference
+    return ElevationSurface(bev.require("elevation"), geo.origin_xy, geo.resolution)
 
 
 def recalled(truth: set[Pair], selected: set[Pair], repeats: dict[int, int]) -> int:

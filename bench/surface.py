@@ -32,11 +32,11 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from scipy import ndimage
 
+from cama_pipeline.bev import BevRasters, read_bev
 from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
@@ -52,25 +52,14 @@ IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
 logger = logging.getLogger("bench.surface")
 
 
-def load_bev(folder: Path) -> dict[str, Any]:
-    """semantic, photometric (RGB), elevation and georeference of a raster folder."""
-    return {
-        "semantic": cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED),
-        "rgb": cv2.cvtColor(cv2.imread(str(folder / "photometric.png"), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB),
-        "elevation": np.load(folder / "elevation.npy"),
-        "geo": json.loads((folder / "georeference.json").read_text()),
-    }
-
-
-def truth_at(ours: dict[str, Any], truth: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def truth_at(ours: BevRasters, truth: BevRasters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows, cols) of our cells and the nearest true cells (-1 when outside the true raster)."""
-    geo, true_geo = ours["geo"], truth["geo"]
-    rows, cols = np.indices((geo["height"], geo["width"]))
-    x = geo["origin_xy"][0] + cols * geo["resolution"]
-    y = geo["origin_xy"][1] - rows * geo["resolution"]
-    tc = np.round((x - true_geo["origin_xy"][0]) / true_geo["resolution"]).astype(int)
-    tr = np.round((true_geo["origin_xy"][1] - y) / true_geo["resolution"]).astype(int)
-    inside = (tr >= 0) & (tr < true_geo["height"]) & (tc >= 0) & (tc < true_geo["width"])
+    geo, true_geo = ours.georeference, truth.georeference
+    rows, cols = np.indices(geo.shape)
+    xy = geo.global_from_pixel(np.column_stack([cols.ravel(), rows.ravel()]))
+    true_colrow = np.round(true_geo.pixel_from_global(xy)).astype(int)
+    tc, tr = true_colrow[:, 0].reshape(geo.shape), true_colrow[:, 1].reshape(geo.shape)
+    inside = (tr >= 0) & (tr < true_geo.height) & (tc >= 0) & (tc < true_geo.width)
     return inside, np.where(inside, tr, 0), np.where(inside, tc, 0)
 
 
@@ -90,15 +79,14 @@ def affine_fit(ours: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 
 def rmse_by_distance(
-    ours: dict[str, Any], road: np.ndarray, error: np.ndarray, trajectory_xy: np.ndarray
+    ours: BevRasters, road: np.ndarray, error: np.ndarray, trajectory_xy: np.ndarray
 ) -> dict[str, float | None]:
     """Elevation RMSE of the road cells in bands of distance (m) from the nearest keyframe position."""
-    geo = ours["geo"]
-    cols = np.round((trajectory_xy[:, 0] - geo["origin_xy"][0]) / geo["resolution"]).astype(int)
-    rows = np.round((geo["origin_xy"][1] - trajectory_xy[:, 1]) / geo["resolution"]).astype(int)
+    geo = ours.georeference
+    colrow = np.round(geo.pixel_from_global(trajectory_xy)).astype(int)
     free = np.ones(road.shape, bool)
-    free[rows, cols] = False
-    distance = ndimage.distance_transform_edt(free, sampling=geo["resolution"])
+    free[colrow[:, 1], colrow[:, 0]] = False
+    distance = ndimage.distance_transform_edt(free, sampling=geo.resolution)
     bands = {}
     for lo, hi in BANDS_M:
         band = road & (distance >= lo) & (distance < hi)
@@ -106,22 +94,23 @@ def rmse_by_distance(
     return bands
 
 
-def compare(ours: dict[str, Any], truth: dict[str, Any], trajectory_xy: np.ndarray) -> dict[str, Any]:
+def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> dict[str, Any]:
     """Elevation, semantic, photometric and coverage figures of `ours` against `truth`."""
     inside, tr, tc = truth_at(ours, truth)
-    true_sem = np.where(inside, truth["semantic"][tr, tc], 255)
-    observed = inside & (ours["semantic"] != 255)
+    semantic, true_semantic = ours.require("semantic"), truth.require("semantic")
+    true_sem = np.where(inside, true_semantic[tr, tc], 255)
+    observed = inside & (semantic != 255)
     both = observed & (true_sem != 255)
     road = observed & np.isin(true_sem, [int(c) for c in ROAD_CLASSES])
-    signed = ours["elevation"] - truth["elevation"][tr, tc]
+    signed = ours.require("elevation") - truth.require("elevation")[tr, tc]
     error = np.abs(signed[road])
     ious = {}
     for name, cls in IOU_CLASSES.items():
-        a, b = ours["semantic"][both] == int(cls), true_sem[both] == int(cls)
+        a, b = semantic[both] == int(cls), true_sem[both] == int(cls)
         ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
-    rgb, true_rgb = ours["rgb"][both], truth["rgb"][tr[both], tc[both]]
-    true_road = np.isin(truth["semantic"], [int(c) for c in ROAD_CLASSES]).sum()
-    scale = (ours["geo"]["resolution"] / truth["geo"]["resolution"]) ** 2
+    rgb, true_rgb = ours.require("photometric")[both], truth.require("photometric")[tr[both], tc[both]]
+    true_road = np.isin(true_semantic, [int(c) for c in ROAD_CLASSES]).sum()
+    scale = (ours.georeference.resolution / truth.georeference.resolution) ** 2
     return {
         "elevation_rmse_m": float(np.sqrt(np.mean(error**2))),
         "elevation_mae_m": float(np.mean(error)),
@@ -150,7 +139,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     manifest = read_site_manifest(site_manifest_path(workspace, result.site_id))
     views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.site_id, "ground_truth")
     trajectory_xy = ego_poses(views)[:, :2, 3]
-    figures = compare(load_bev(result.folder / "bev"), load_bev(site / "ground_truth" / "bev"), trajectory_xy)
+    figures = compare(read_bev(result.folder / "bev"), read_bev(site / "ground_truth" / "bev"), trajectory_xy)
     report = result.report
     return {
         "poses": poses,

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import cama_pipeline.progress as progress_module
-from app.backend.tiles import RasterGeoreference, build_pyramid
+from app.backend.tiles import build_pyramid
+from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.progress import INTERVAL_ENV, StageProgress, format_duration
 
 

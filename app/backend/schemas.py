@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal, Self
 from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from annotations.schema import ElementClass, MapElement, ReviewState, Source
+from cama_pipeline.bev import RasterGeoreference
 
 logger = logging.getLogger(__name__)
 
@@ -83,13 +84,22 @@ class UserPublic(BaseModel):
 
 
 class GeoreferenceIn(BaseModel):
-    """A raster georeference as written beside BEV rasters (DESIGN.md convention)."""
+    """A raster georeference (`cama_pipeline.bev.RasterGeoreference`, DESIGN.md convention) in a request."""
 
     model_config = STRICT
     origin_xy: Point
     resolution: float = Field(gt=0.0)
     width: int = Field(ge=1)
     height: int = Field(ge=1)
+
+    @classmethod
+    def of(cls, raster: RasterGeoreference) -> Self:
+        """The request field for a raster folder's georeference."""
+        return cls.model_validate(raster.model_dump(include=set(cls.model_fields)))
+
+    def raster(self) -> RasterGeoreference:
+        """The georeference this request gives."""
+        return RasterGeoreference.model_validate(self.model_dump())
 
 
 class SiteCreate(BaseModel):

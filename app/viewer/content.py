@@ -10,7 +10,6 @@ import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 import trimesh
 
@@ -18,6 +17,7 @@ from annotations.lift import lift_points
 from annotations.schema import Georeference
 from app.viewer.geometry import LocalFrame, frustum_segments
 from app.viewer.style import semantic_rgb
+from cama_pipeline.bev import is_raster_folder, read_bev, read_layer
 from cama_pipeline.data import load_dataset
 from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.semantics import Semantic
@@ -53,10 +53,10 @@ class SparsePointsView:
 def surface_folder(site_dir: Path, workspace: Path, site_id: str) -> tuple[Path, bool]:
     """The raster folder to show: the reconstructed one when present, else the ground truth; (folder, reconstructed)."""
     reconstructed = Path(workspace) / "surface" / site_id / "bev"
-    if (reconstructed / "georeference.json").is_file():
+    if is_raster_folder(reconstructed):
         return reconstructed, True
     ground_truth = Path(site_dir) / "ground_truth" / "bev"
-    if (ground_truth / "georeference.json").is_file():
+    if is_raster_folder(ground_truth):
         logger.warning(
             "no reconstructed surface in %s: showing the ground-truth rasters", reconstructed.parent
         )
@@ -67,28 +67,21 @@ def surface_folder(site_dir: Path, workspace: Path, site_id: str) -> tuple[Path,
 
 
 def load_surface(folder: Path, *, reconstructed: bool) -> Surface:
-    """Read `elevation.npy` + `semantic.png` + `georeference.json` of a raster folder; ViewInputError naming the file."""
-    georeference = Georeference.from_raster_file(folder / "georeference.json", site_origin_xy=(0.0, 0.0))
-    path = folder / "elevation.npy"
+    """Read the elevation and semantic layers of a raster folder; ViewInputError naming the file."""
     try:
-        elevation = np.load(path, allow_pickle=False).astype(np.float64)
+        bev = read_bev(folder, ("semantic", "elevation"))
     except (OSError, ValueError) as err:
-        raise ViewInputError(f"{path}: cannot read the elevation raster: {err}") from None
-    semantic = cv2.imread(str(folder / "semantic.png"), cv2.IMREAD_UNCHANGED)
-    if semantic is None or elevation.shape != (georeference.height, georeference.width):
-        raise ViewInputError(
-            f"{folder}: semantic.png / elevation.npy missing or not {georeference.height} rows x "
-            f"{georeference.width} columns as georeference.json says"
-        )
-    unobserved = (semantic == int(Semantic.UNOBSERVED)) | ~np.isfinite(elevation)
+        raise ViewInputError(str(err)) from None
+    georeference = Georeference.of(bev.georeference, site_origin_xy=(0.0, 0.0))
+    elevation = bev.require("elevation").astype(np.float64)
+    unobserved = (bev.require("semantic") == int(Semantic.UNOBSERVED)) | ~np.isfinite(elevation)
     return Surface(elevation, unobserved, georeference, folder, reconstructed)
 
 
 def local_frame_of(surface: Surface) -> LocalFrame:
     """A view origin at the raster's centre, at the median observed elevation."""
     geo = surface.georeference
-    centre_x = geo.origin_xy[0] + geo.resolution * (geo.width - 1) / 2
-    centre_y = geo.origin_xy[1] - geo.resolution * (geo.height - 1) / 2
+    centre_x, centre_y = geo.global_from_pixel([(geo.width - 1) / 2, (geo.height - 1) / 2])[0]
     observed = surface.elevation[~surface.unobserved]
     z = float(np.median(observed)) if observed.size else 0.0
     return LocalFrame(np.array([centre_x, centre_y, z]))
@@ -105,10 +98,8 @@ def raster_mesh(
     index = np.full(grid_valid.shape, -1, dtype=np.int64)
     index[grid_valid] = np.arange(int(grid_valid.sum()))
     rr, cc = np.nonzero(grid_valid)
-    geo = surface.georeference
-    x = geo.origin_xy[0] + cols[cc] * geo.resolution
-    y = geo.origin_xy[1] - rows[rr] * geo.resolution
-    vertices = frame.from_global(np.column_stack([x, y, surface.elevation[rows[rr], cols[cc]]]))
+    xy = surface.georeference.global_from_pixel(np.column_stack([cols[cc], rows[rr]]))
+    vertices = frame.from_global(np.column_stack([xy, surface.elevation[rows[rr], cols[cc]]]))
     a, b, c, d = index[:-1, :-1], index[:-1, 1:], index[1:, :-1], index[1:, 1:]
     quad = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
     faces = np.concatenate(
@@ -129,10 +120,11 @@ def road_mesh(
             mesh.vertices = frame.from_global(mesh.vertices)
             return mesh
         logger.info("%s has more than %d faces: showing a grid mesh made from the rasters", path, max_faces)
-    photometric = cv2.imread(str(surface.folder / "photometric.png"), cv2.IMREAD_COLOR)
-    if photometric is None:
-        raise ViewInputError(f"{surface.folder / 'photometric.png'}: missing or unreadable")
-    return raster_mesh(surface, cv2.cvtColor(photometric, cv2.COLOR_BGR2RGB), frame, max_faces=max_faces)
+    try:
+        photometric = read_layer(surface.folder, "photometric")
+    except (OSError, ValueError) as err:
+        raise ViewInputError(str(err)) from None
+    return raster_mesh(surface, photometric, frame, max_faces=max_faces)
 
 
 def keyframe_cameras(dataset_root: Path, workspace: Path, site_id: str) -> list[CameraView]:

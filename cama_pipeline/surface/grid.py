@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from cama_pipeline.bev import RasterGeoreference
+
 
 @dataclass(frozen=True, eq=False)
 class SurfaceGrid:
@@ -57,17 +59,11 @@ class SurfaceGrid:
         found[inside] = self.vertex_id[rows[inside], cols[inside]] >= 0
         return found
 
-    def georeference(self) -> dict[str, object]:
-        """The raster georeference JSON, with the same fields as the generator's ground truth."""
-        return {
-            "origin_xy": [float(self.origin_xy[0]), float(self.origin_xy[1])],
-            "resolution": self.resolution_m,
-            "width": self.cols,
-            "height": self.rows,
-            "frame": "global",
-            "row_axis": "-y",
-            "col_axis": "+x",
-        }
+    def georeference(self) -> RasterGeoreference:
+        """The rasters' georeference."""
+        return RasterGeoreference(
+            origin_xy=self.origin_xy, resolution=self.resolution_m, width=self.cols, height=self.rows
+        )
 
 
 def road_grid(points_xy: np.ndarray, resolution_m: float, radius_m: float) -> SurfaceGrid:

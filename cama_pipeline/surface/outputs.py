@@ -2,14 +2,10 @@
 
 <workspace>/surface/<site_id>/mesh.ply      the observed road mesh (trimesh, binary PLY): global metres,
                                              per-vertex RGB colour and a `label` attribute (class 0-4)
-<workspace>/surface/<site_id>/bev/          BEV rasters, the same format as a synthetic site's
-                                             ground_truth/bev/ (`models.vma.rasters.load_site_rasters` reads it):
-    semantic.png           uint8, classes 0-4 (DESIGN.md), 255 where no camera ray hit the cell
-    photometric.png        8-bit BGR colour, black where unobserved
-    elevation.npy          float32 metres, NaN where unobserved
-    observation_count.png  uint16, camera rays (keyframe pixels) that hit each cell (clipped at 65535)
-    georeference.json      {"origin_xy" (pixel (0, 0) centre, global m), "resolution" m/px, "width",
-                            "height", "frame": "global", "row_axis": "-y", "col_axis": "+x"}
+<workspace>/surface/<site_id>/bev/          a BEV raster folder (`cama_pipeline.bev`), as a synthetic site's
+                                             ground_truth/bev/: every layer; cells no camera ray hit are
+                                             unobserved, observation_count counts the rays (keyframe pixels)
+                                             that hit each cell, clipped at 65535
 <workspace>/surface/<site_id>/report.json   schema "cama.surface/1", written last (marks completion):
     {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images",
      "points": {"strip", "sfm", "sfm_kept" (SfM points past the gate, see `fit`)}, "vertices",
@@ -17,33 +13,21 @@
      "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}}
 """
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import trimesh
 from trimesh.exchange.ply import export_ply
 
-from cama_pipeline.io import atomic_write_bytes, atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.bev import BevRasters
+from cama_pipeline.io import atomic_write_bytes, atomic_write_json
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.workspace import read_json
 from cama_pipeline.surface.grid import SurfaceGrid
 
 REPORT_SCHEMA = "cama.surface/1"
 MAX_COUNT = np.iinfo(np.uint16).max
-
-
-@dataclass(frozen=True, eq=False)
-class SurfaceRasters:
-    """The BEV rasters of a reconstructed surface (see the module docstring)."""
-
-    semantic: np.ndarray
-    photometric_rgb: np.ndarray
-    elevation: np.ndarray
-    observation_count: np.ndarray
-    georeference: dict[str, Any]
 
 
 def surface_dir(workspace: Path, site_id: str) -> Path:
@@ -71,8 +55,8 @@ def is_surface_bev(folder: Path) -> bool:
 
 def rasters_from_vertices(
     grid: SurfaceGrid, heights: np.ndarray, colour: np.ndarray, label: np.ndarray, count: np.ndarray
-) -> SurfaceRasters:
-    """Rasters from per-vertex values; cells whose count rounds to 0 stay unobserved (255 / NaN / black)."""
+) -> BevRasters:
+    """Every raster layer from per-vertex values; cells whose count rounds to 0 stay unobserved (255 / NaN / black)."""
     rows, cols = grid.vertex_cells()
     rays = np.minimum(np.round(count), MAX_COUNT).astype(np.uint16)
     seen = rays > 0
@@ -85,36 +69,27 @@ def rasters_from_vertices(
     elevation[r, c] = heights[seen]
     observation = np.zeros((grid.rows, grid.cols), np.uint16)
     observation[r, c] = rays[seen]
-    return SurfaceRasters(semantic, photometric, elevation, observation, grid.georeference())
+    return BevRasters(grid.georeference(), semantic, photometric, elevation, observation)
 
 
-def write_rasters(folder: Path, rasters: SurfaceRasters) -> None:
-    """Write the raster folder (every file atomically)."""
-    folder = Path(folder)
-    atomic_write_image(folder / "semantic.png", rasters.semantic)
-    atomic_write_image(folder / "photometric.png", cv2.cvtColor(rasters.photometric_rgb, cv2.COLOR_RGB2BGR))
-    atomic_write_npy(folder / "elevation.npy", rasters.elevation)
-    atomic_write_image(folder / "observation_count.png", rasters.observation_count)
-    atomic_write_json(folder / "georeference.json", rasters.georeference, indent=2)
-
-
-def grid_mesh(grid: SurfaceGrid, rasters: SurfaceRasters) -> trimesh.Trimesh:
+def grid_mesh(grid: SurfaceGrid, rasters: BevRasters) -> trimesh.Trimesh:
     """The observed cells as a triangle mesh: two upward-facing triangles per square of observed cells."""
-    observed = rasters.semantic != int(Semantic.UNOBSERVED)
+    semantic, rgb = rasters.require("semantic"), rasters.require("photometric")
+    observed = semantic != int(Semantic.UNOBSERVED)
     index = np.full(observed.shape, -1, np.int64)
     index[observed] = np.arange(int(observed.sum()))
     rows, cols = np.nonzero(observed)
     xy = grid.xy_of_cells(rows, cols)
-    vertices = np.column_stack([xy, rasters.elevation[rows, cols]])
+    vertices = np.column_stack([xy, rasters.require("elevation")[rows, cols]])
     a, b = index[:-1, :-1], index[:-1, 1:]
     c, d = index[1:, :-1], index[1:, 1:]
     full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
     faces = np.concatenate(
         [np.stack([a[full], c[full], d[full]], 1), np.stack([a[full], d[full], b[full]], 1)], axis=0
     )
-    colours = np.column_stack([rasters.photometric_rgb[rows, cols], np.full(len(rows), 255, np.uint8)])
+    colours = np.column_stack([rgb[rows, cols], np.full(len(rows), 255, np.uint8)])
     mesh = trimesh.Trimesh(vertices, faces, vertex_colors=colours, process=False)
-    mesh.vertex_attributes["label"] = rasters.semantic[rows, cols].astype(np.uint8)
+    mesh.vertex_attributes["label"] = semantic[rows, cols].astype(np.uint8)
     return mesh
 
 

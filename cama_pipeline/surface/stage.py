@@ -14,6 +14,7 @@ from typing import Any
 
 import torch
 
+from cama_pipeline.bev import write_bev
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.progress import StageProgress
@@ -39,7 +40,6 @@ from cama_pipeline.surface.outputs import (
     report_path,
     surface_dir,
     write_mesh,
-    write_rasters,
     write_report,
 )
 from cama_pipeline.surface.points import NoRoadPointsError, sfm_surface_points, surface_points
@@ -126,7 +126,7 @@ def reconstruct_site(
             grid, heights, mesh.colour.cpu().numpy(), labels, mesh.count.cpu().numpy()
         )
         folder = surface_dir(workspace, site_id)
-        write_rasters(folder / "bev", rasters)
+        write_bev(folder / "bev", rasters)
         write_mesh(folder / "mesh.ply", grid_mesh(grid, rasters))
         advance(1, 0.0)
     return {
@@ -137,7 +137,7 @@ def reconstruct_site(
         "images": len(views),
         "points": {"strip": points.strip_count, "sfm": points.sfm_count, "sfm_kept": fitted.sfm_kept},
         "vertices": grid.vertex_count,
-        "cells_observed": int((rasters.observation_count > 0).sum()),
+        "cells_observed": int((rasters.require("observation_count") > 0).sum()),
         "seconds": dict(phases.seconds),
         "losses": {"elevation": fitted.losses, "epochs": epoch_losses},
     }

@@ -6,7 +6,7 @@ Output (`out_dir`):
         vector_map.json       true elements (global metres, with z)
         baseline_map.json     a flawed 2D map (the paper's baseline)
         poses.json            true ego pose of every sample_data token
-        bev/{semantic.png, photometric.png, elevation.npy, observation_count.png, georeference.json}
+        bev/                  true BEV rasters, a raster folder (cama_pipeline.bev) with every layer
     manifest.json             config, fingerprint and counts; written last, so its presence means complete;
                               `images_rendered` false marks a site made with `images=False` (`cama synth
                               --no-images`): every table, CAN file and ground-truth file is written, byte for byte
@@ -32,8 +32,9 @@ import cv2
 import numpy as np
 import torch
 
+from cama_pipeline.bev import BevRasters, write_bev
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
-from cama_pipeline.io import atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth as gt
@@ -328,12 +329,16 @@ def _write_ground_truth(
         progress.update(bar, advance=1, description="observation count")
         count = gt.observation_count(grid, elevation, _key_frame_cameras(site))
         progress.update(bar, advance=1, description="writing rasters")
-        bev = gt_dir / "bev"
-        atomic_write_image(bev / "semantic.png", gt.unobserved_to_255(semantic, count))
-        atomic_write_image(bev / "photometric.png", cv2.cvtColor(photometric, cv2.COLOR_RGB2BGR))
-        atomic_write_npy(bev / "elevation.npy", elevation)
-        atomic_write_image(bev / "observation_count.png", count)
-        atomic_write_json(bev / "georeference.json", grid.georeference(cfg.site_origin_xy), indent=2)
+        write_bev(
+            gt_dir / "bev",
+            BevRasters(
+                grid.georeference(cfg.site_origin_xy),
+                semantic=gt.unobserved_to_255(semantic, count),
+                photometric_rgb=photometric,
+                elevation=elevation,
+                observation_count=count,
+            ),
+        )
         drivable = np.isin(
             semantic, [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
         )

@@ -11,6 +11,7 @@ import torch
 from shapely import affinity
 from shapely.geometry import LineString, Polygon
 
+from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic.geometry2d import resample
 from cama_pipeline.synthetic.layout import RoadLayout
@@ -39,17 +40,14 @@ class BevGrid:
         y = self.origin_xy[1] - self.resolution_m * np.arange(self.rows)
         return x, y
 
-    def georeference(self, site_origin_xy: tuple[float, float]) -> dict:
-        """The JSON georeference in global coordinates."""
-        return {
-            "origin_xy": [self.origin_xy[0] + site_origin_xy[0], self.origin_xy[1] + site_origin_xy[1]],
-            "resolution": self.resolution_m,
-            "width": self.cols,
-            "height": self.rows,
-            "frame": "global",
-            "row_axis": "-y",
-            "col_axis": "+x",
-        }
+    def georeference(self, site_origin_xy: tuple[float, float]) -> RasterGeoreference:
+        """The georeference in global coordinates."""
+        return RasterGeoreference(
+            origin_xy=(self.origin_xy[0] + site_origin_xy[0], self.origin_xy[1] + site_origin_xy[1]),
+            resolution=self.resolution_m,
+            width=self.cols,
+            height=self.rows,
+        )
 
 
 def bev_grid_for(world: World, resolution_m: float) -> BevGrid:

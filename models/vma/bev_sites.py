@@ -10,10 +10,10 @@ import logging
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from cama_pipeline.io import atomic_write_image, atomic_write_json, atomic_write_npy
+from cama_pipeline.bev import BevRasters, is_raster_folder, write_bev
+from cama_pipeline.io import atomic_write_json
 from cama_pipeline.synthetic import ground_truth as gt
 from cama_pipeline.synthetic.config import LayoutConfig, SynthConfig
 from cama_pipeline.synthetic.site_model import build_synthetic_site
@@ -47,8 +47,8 @@ def layout_for_seed(seed: int) -> LayoutConfig:
 def write_bev_site(seed: int, out_dir: Path, *, resolution_m: float = 0.1, overwrite: bool = False) -> Path:
     """Write `<out_dir>/ground_truth/{vector_map.json, bev/...}` for the site of `seed`; skip if already there."""
     out_dir = Path(out_dir)
-    marker = out_dir / "ground_truth" / "bev" / "georeference.json"
-    if marker.is_file() and not overwrite:
+    bev = out_dir / "ground_truth" / "bev"
+    if is_raster_folder(bev) and not overwrite:
         logger.info("%s is up to date; nothing to do", out_dir)
         return out_dir
     cfg = SynthConfig(preset="vma", seed=seed, layout=layout_for_seed(seed), bev_resolution_m=resolution_m)
@@ -57,18 +57,15 @@ def write_bev_site(seed: int, out_dir: Path, *, resolution_m: float = 0.1, overw
     atomic_write_json(
         gt_dir / "vector_map.json", {"elements": gt.vector_map(site.layout, site.world, cfg.site_origin_xy)}
     )
-    grid = gt.bev_grid_for(site.world, resolution_m)
-    semantic, photometric, elevation = gt.render_bev(site.world, grid)
-    bev = gt_dir / "bev"
-    atomic_write_image(bev / "semantic.png", semantic)
-    atomic_write_image(bev / "photometric.png", cv2.cvtColor(photometric, cv2.COLOR_RGB2BGR))
-    atomic_write_npy(bev / "elevation.npy", elevation)
     atomic_write_json(
         out_dir / "manifest.json",
         {"seed": seed, "config": {"site_origin_xy": list(cfg.site_origin_xy)}},
         indent=2,
     )
-    atomic_write_json(marker, grid.georeference(cfg.site_origin_xy), indent=2)
+    grid = gt.bev_grid_for(site.world, resolution_m)
+    semantic, photometric, elevation = gt.render_bev(site.world, grid)
+    # its georeference, written last, marks the site complete
+    write_bev(bev, BevRasters(grid.georeference(cfg.site_origin_xy), semantic, photometric, elevation))
     logger.info("wrote BEV site of seed %d to %s", seed, out_dir)
     return out_dir
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.evaluate.chamfer_ap import resample
 from models.vma.anchors import Anchors, patch_anchors
 from models.vma.config import ModelConfig
@@ -86,7 +87,9 @@ def procedural_sample(config: ModelConfig, rng: np.random.Generator) -> Sample:
     labels, points = targets(vectors, config.patch_px, config.num_points)
     anchors = None
     if config.anchored:
-        drawn = SiteRasters(semantic, photometric, (0.0, 0.0), config.resolution_m, "procedural")
+        h, w = semantic.shape
+        geo = RasterGeoreference(origin_xy=(0.0, 0.0), resolution=config.resolution_m, width=w, height=h)
+        drawn = SiteRasters(semantic, photometric, geo, "procedural")
         candidates = [
             Vector(v.cls, drawn.pixel_from_global(v.points) + 0.5, v.score) for v in propose_rule_based(drawn)
         ]

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Literal
 
 from annotations import Georeference
+from cama_pipeline.bev import georeference_path, layer_path
 from cama_pipeline.code_version import code_version
 from cama_pipeline.io import atomic_write_bytes
 from cama_pipeline.site.workspace import file_stats, fingerprint
@@ -80,7 +81,12 @@ def propose(
     site, out = Path(site), Path(out)
     rule = rule or RuleConfig(boundary_source=boundary_source_for(site))
     version = resolve_checkpoint(checkpoint) if proposer == "learned" else None
-    inputs = [raster_dir_of(site) / name for name in ("semantic.png", "photometric.png", "georeference.json")]
+    raster_dir = raster_dir_of(site)
+    inputs = [
+        layer_path(raster_dir, "semantic"),
+        layer_path(raster_dir, "photometric"),
+        georeference_path(raster_dir),
+    ]
     if version is not None:
         logger.info("VMA checkpoint %s", checkpoint_label(version))
         inputs.append(version / META)
@@ -107,8 +113,7 @@ def propose(
         vectors = propose_rule_based(rasters, rule)
         author = "vma-rule-based"
     vectors = [v for v in vectors if v.score >= min_confidence]
-    geo = json.loads((raster_dir_of(site) / "georeference.json").read_text(encoding="utf-8"))
-    georeference = Georeference.from_raster_json(geo, site_origin_xy=site_origin_of(site, rasters))
+    georeference = Georeference.of(rasters.georeference, site_origin_xy=site_origin_of(site, rasters))
     proposals = proposals_as_annotations(vectors, georeference, site.name or "site", author)
     proposals.write_json(out)
     atomic_write_bytes(stamp, digest.encode("utf-8"))

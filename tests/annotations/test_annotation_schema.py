@@ -1,5 +1,6 @@
 """MapElement, Georeference and AnnotationSet: validation messages that name the field, and JSON round trips."""
 
+import json
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
@@ -8,6 +9,7 @@ import pytest
 from pydantic import ValidationError
 
 from annotations import AnnotationSet, Georeference, MapElement
+from cama_pipeline.bev import GEOREFERENCE_FILE, RasterGeoreference
 from tests.annotations.annotation_helpers import SQUARE, element_kwargs
 
 NAN = float("nan")
@@ -123,7 +125,7 @@ def test_with_changes_revalidates() -> None:
         element.with_changes(cls="ped_crossing")  # a 3-point open polyline is not a crosswalk polygon
 
 
-def test_georeference_from_raster_json_and_back(georef: Georeference) -> None:
+def test_georeference_from_raster_georeference_and_back(georef: Georeference) -> None:
     raster = {
         "origin_xy": [342.0, 1155.0],
         "resolution": 0.1,
@@ -133,9 +135,20 @@ def test_georeference_from_raster_json_and_back(georef: Georeference) -> None:
         "row_axis": "-y",
         "col_axis": "+x",
     }
-    built = Georeference.from_raster_json(raster, site_origin_xy=(412.0, 1085.0))
+    built = Georeference.of(RasterGeoreference.from_json(raster), site_origin_xy=(412.0, 1085.0))
     assert built.shape == (1351, 1674)
-    assert built.raster_json() == raster
+    assert built.to_json() == raster
+    assert built.as_raster() == RasterGeoreference.from_json(raster)
+    assert list(json.loads(built.model_dump_json())) == ["site_origin_xy", *raster]  # the stored key order
+
+
+def test_georeference_writes_only_the_raster_fields(tmp_path: Path) -> None:
+    fixture = Path(__file__).parents[1] / "bev_fixture" / GEOREFERENCE_FILE
+    raster = RasterGeoreference.read(fixture)
+    annotation_geo = Georeference.of(raster, site_origin_xy=(1.0, 2.0))
+    annotation_geo.write(tmp_path / GEOREFERENCE_FILE)
+    assert (tmp_path / GEOREFERENCE_FILE).read_bytes() == fixture.read_bytes()
+    assert annotation_geo.as_raster() == raster and type(annotation_geo.as_raster()) is RasterGeoreference
 
 
 @pytest.mark.parametrize(
@@ -151,15 +164,8 @@ def test_georeference_from_raster_json_and_back(georef: Georeference) -> None:
 def test_bad_georeference_is_rejected(changes: dict[str, Any], field: str) -> None:
     raster = {"origin_xy": [0.0, 0.0], "resolution": 0.1, "width": 10, "height": 10, **changes}
     with pytest.raises(ValidationError) as info:
-        Georeference.from_raster_json(raster, site_origin_xy=(0.0, 0.0))
+        Georeference.model_validate({**raster, "site_origin_xy": (0.0, 0.0)})
     assert any(field in m for m in _messages(info.value))
-
-
-def test_georeference_file_errors_name_the_file(tmp_path: Path) -> None:
-    path = tmp_path / "georeference.json"
-    path.write_text('{"origin_xy": [0, 0], "resolution": -1, "width": 2, "height": 2}')
-    with pytest.raises(ValueError, match="georeference.json"):
-        Georeference.from_raster_file(path, site_origin_xy=(0.0, 0.0))
 
 
 def _annotation_set(georef: Georeference) -> AnnotationSet:

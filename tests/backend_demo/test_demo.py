@@ -11,6 +11,7 @@ from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.backend.config import Settings
 from app.backend.main import create_app
 from app.backend.models import Element, Site
+from cama_pipeline.bev import read_georeference
 from cama_studio.cli import app as cli
 
 runner = CliRunner()
@@ -19,9 +20,7 @@ runner = CliRunner()
 def proposals_file(site_dir: Path, path: Path) -> Path:
     """Two proposals in the middle of the site, written as `cama propose` writes them."""
     origin = json.loads((site_dir / "manifest.json").read_text())["config"]["site_origin_xy"]
-    georef = Georeference.from_raster_file(
-        site_dir / "ground_truth" / "bev" / "georeference.json", site_origin_xy=tuple(origin)
-    )
+    georef = Georeference.of(read_georeference(site_dir / "ground_truth" / "bev"), site_origin_xy=origin)
     cx = georef.origin_xy[0] - origin[0] + georef.width * georef.resolution / 2
     cy = georef.origin_xy[1] - origin[1] - georef.height * georef.resolution / 2
     elements = [

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from app.backend.tiles import (
-    RasterGeoreference,
     TileRequestError,
     UnknownLayerError,
     build_pyramid,
@@ -25,12 +24,13 @@ from app.backend.tiles.layers import (
     semantic_bgra,
 )
 from app.backend.tiles.pyramid import EMPTY_TILE_NAME, pyramid_levels, tile_path
+from cama_pipeline.bev import RasterGeoreference
 
 GEO = RasterGeoreference(origin_xy=(1000.0, 2000.0), resolution=0.5, width=600, height=300)
 
 
 def _photometric(height: int = 300, width: int = 600) -> np.ndarray:
-    """A smooth, non-constant BGR test image."""
+    """A smooth, non-constant RGB test image."""
     rows, cols = np.mgrid[0:height, 0:width]
     return np.stack([cols % 256, rows % 256, (rows + cols) % 256], axis=2).astype(np.uint8)
 
@@ -56,7 +56,7 @@ def test_tiles_equal_downsampled_raster(tmp_path: Path) -> None:
     photo = _photometric()
     info = build_pyramid("photometric", photo, GEO, tmp_path)
     assert info.max_zoom == 2 and len(list((tmp_path / "photometric").rglob("*.png"))) == 9
-    bgra = cv2.cvtColor(photo, cv2.COLOR_BGR2BGRA)
+    bgra = cv2.cvtColor(photo, cv2.COLOR_RGB2BGRA)
     finest = _read_rgba_as_bgra(tile_path(tmp_path, "photometric", 2, 2, 1))
     assert finest.shape == (256, 256, 4)  # the corner tile is padded, not cut, so no client stretches it
     np.testing.assert_array_equal(finest[:44, :88], bgra[256:300, 512:600])

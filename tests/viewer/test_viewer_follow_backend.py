@@ -22,6 +22,7 @@ from app.viewer.content import Surface, local_frame_of
 from app.viewer.review import follow, show_vectors
 from app.viewer.scene import ReviewScene
 from app.viewer.sources import ApiVectorSource
+from cama_pipeline.bev import RasterGeoreference
 
 PASSWORD = "correct horse battery"
 SITE_ORIGIN_XY = (100.0, 200.0)
@@ -37,7 +38,7 @@ def _free_port() -> int:
 
 def _flat_surface(z_m: float = 3.0) -> Surface:
     """The site's 10 m x 10 m at a constant height."""
-    geo = Georeference.from_raster_json(GEOREFERENCE, site_origin_xy=(0.0, 0.0))
+    geo = Georeference.of(RasterGeoreference.from_json(GEOREFERENCE), site_origin_xy=(0.0, 0.0))
     return Surface(np.full(geo.shape, z_m), np.zeros(geo.shape, bool), geo, Path("."), True)
 
 

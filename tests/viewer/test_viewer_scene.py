@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.viewer.review import ViewInputs, follow, open_review
 from app.viewer.sources import FileVectorSource, VectorSourceError
+from cama_pipeline.bev import read_georeference
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
 from tests.pairs.site_workspace import build_site_workspace
 
@@ -31,9 +32,7 @@ def view_site(tiny_site, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path
 
 
 def _annotations(site_root: Path, elements: list[MapElement]) -> AnnotationSet:
-    georef = Georeference.from_raster_file(
-        site_root / "ground_truth" / "bev" / "georeference.json", site_origin_xy=(0.0, 0.0)
-    )
+    georef = Georeference.of(read_georeference(site_root / "ground_truth" / "bev"), site_origin_xy=(0.0, 0.0))
     return AnnotationSet(site_id="tiny", georeference=georef, elements=elements)
 
 

@@ -1,5 +1,6 @@
 """Reconstruction-like damage for benchmarks: markings thinned, noise added, unobserved cells kept."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,9 +14,7 @@ def test_damage_is_seeded_and_keeps_unobserved_cells(drawn_site: Path) -> None:
     rasters = load_site_rasters(drawn_site)
     semantic = rasters.semantic.copy()
     semantic[:20] = int(Semantic.UNOBSERVED)
-    clean = type(rasters)(
-        semantic, rasters.photometric, rasters.origin_xy, rasters.resolution_m, rasters.name
-    )
+    clean = replace(rasters, semantic=semantic)
     damaged = degrade_rasters(
         clean, DegradeConfig(marking_dropout=0.5, speckle=0.0, edge_jitter_px=0, seed=1)
     )

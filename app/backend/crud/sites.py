@@ -5,7 +5,6 @@ import logging
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 from weakref import WeakKeyDictionary
 
 from sqlalchemy import Engine, func, select
@@ -18,6 +17,7 @@ from app.backend.data_roots import data_folder
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import Element, Site
 from app.backend.schemas import Extent, SiteCreate
+from cama_pipeline.bev import RasterGeoreference, georeference_path, read_georeference
 
 logger = logging.getLogger(__name__)
 
@@ -28,11 +28,11 @@ extent check need not load the site again."""
 _EXTENTS_LOCK = threading.Lock()
 
 
-def _read_synthetic(folder: Path) -> tuple[tuple[float, float], dict[str, Any], Path]:
-    """Site origin, raster georeference and raster folder of a `cama synth` site folder (messages name the
+def _read_synthetic(folder: Path) -> tuple[Georeference, Path]:
+    """Georeference (with the site origin) and raster folder of a `cama synth` site folder (messages name the
     files relative to it: the folder's place on the server is not the caller's business)."""
     manifest_path = folder / "manifest.json"
-    geo_path = folder / "ground_truth" / "bev" / "georeference.json"
+    geo_path = georeference_path(folder / "ground_truth" / "bev")
     for path in (manifest_path, geo_path):
         if not path.is_file():
             name = path.relative_to(folder).as_posix()
@@ -40,13 +40,12 @@ def _read_synthetic(folder: Path) -> tuple[tuple[float, float], dict[str, Any], 
     try:
         origin = json.loads(manifest_path.read_text(encoding="utf-8"))["config"]["site_origin_xy"]
         origin_xy = (float(origin[0]), float(origin[1]))
-        georeference = Georeference.from_raster_file(geo_path, site_origin_xy=origin_xy)
+        georeference = Georeference.of(read_georeference(geo_path.parent), site_origin_xy=origin_xy)
     except (OSError, KeyError, IndexError, TypeError, ValueError) as error:
         logger.warning("%s: unreadable site: %s", folder, error)
-        raise InvalidInputError(
-            "synthetic_dir", "unreadable site: manifest.json or ground_truth/bev/georeference.json"
-        ) from error
-    return origin_xy, georeference.raster_json(), geo_path.parent
+        name = geo_path.relative_to(folder).as_posix()
+        raise InvalidInputError("synthetic_dir", f"unreadable site: manifest.json or {name}") from error
+    return georeference, geo_path.parent
 
 
 def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path]) -> Site:
@@ -54,16 +53,17 @@ def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path])
     a folder that is missing, unreadable or outside them, or a bad georeference."""
     if site_in.synthetic_dir is not None:
         folder = data_folder(site_in.synthetic_dir, roots=roots, field="synthetic_dir")
-        origin_xy, geo, raster_dir = _read_synthetic(folder)
+        georeference, raster_dir = _read_synthetic(folder)
     else:
-        origin_xy = site_in.site_origin_xy  # type: ignore[assignment]  # checked by SiteCreate
-        geo = site_in.georeference.model_dump()  # type: ignore[union-attr]
+        raster = site_in.georeference.raster()  # type: ignore[union-attr]  # checked by SiteCreate
+        georeference = Georeference.of(raster, site_origin_xy=site_in.site_origin_xy)  # type: ignore[arg-type]
         raster_dir = data_folder(site_in.raster_dir or "", roots=roots, field="raster_dir")
+    origin_xy = georeference.site_origin_xy
     site = Site(
         name=site_in.name,
         site_origin_x=origin_xy[0],
         site_origin_y=origin_xy[1],
-        georeference=Georeference.from_raster_json(geo, site_origin_xy=origin_xy).raster_json(),
+        georeference=georeference.to_json(),
         raster_dir=str(raster_dir),
         created_at=utc_now(),
     )
@@ -104,14 +104,14 @@ def list_sites(*, session: Session) -> list[Site]:
 
 def site_extent(site: Site) -> Extent:
     """The raster's footprint in site metres (pixel edges, rows growing with -y)."""
-    geo = site.georeference
-    resolution = float(geo["resolution"])
-    x0 = float(geo["origin_xy"][0]) - site.site_origin_x
-    y0 = float(geo["origin_xy"][1]) - site.site_origin_y
+    geo = RasterGeoreference.from_json(site.georeference, source=f"site {site.id}")
+    resolution = geo.resolution
+    x0 = geo.origin_xy[0] - site.site_origin_x
+    y0 = geo.origin_xy[1] - site.site_origin_y
     return Extent(
         xmin=x0 - resolution / 2,
-        xmax=x0 + (int(geo["width"]) - 0.5) * resolution,
-        ymin=y0 - (int(geo["height"]) - 0.5) * resolution,
+        xmax=x0 + (geo.width - 0.5) * resolution,
+        ymin=y0 - (geo.height - 0.5) * resolution,
         ymax=y0 + resolution / 2,
     )
 

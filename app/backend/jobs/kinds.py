@@ -22,11 +22,11 @@ from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.models import Element, Site
 from app.backend.schemas import STRICT
+from cama_pipeline.bev import RasterGeoreference, read_layer
 from cama_pipeline.data import Dataset, load_dataset
 
 logger = logging.getLogger(__name__)
 
-ELEVATION_FILE = "elevation.npy"
 LIFTED_FILE = "lifted.json"
 EXPORT_ZIP = "export.zip"
 EXPORT_FOLDER = "export"
@@ -89,9 +89,8 @@ def site_annotations(context: JobContext) -> tuple[AnnotationSet, Path, str]:
         rows = session.scalars(
             select(Element).where(Element.site_id == site.id, Element.deleted.is_(False)).order_by(Element.id)
         ).all()
-        georef = Georeference.from_raster_json(
-            site.georeference, site_origin_xy=(site.site_origin_x, site.site_origin_y)
-        )
+        raster = RasterGeoreference.from_json(site.georeference, source=f"site {site.name}")
+        georef = Georeference.of(raster, site_origin_xy=(site.site_origin_x, site.site_origin_y))
         annotations = AnnotationSet(
             site_id=site.name, georeference=georef, elements=[_map_element(row) for row in rows]
         )
@@ -100,15 +99,12 @@ def site_annotations(context: JobContext) -> tuple[AnnotationSet, Path, str]:
 
 def read_elevation(raster_dir: Path, georef: Georeference) -> np.ndarray:
     """The site's elevation raster; FileNotFoundError / ValueError naming the file when unusable."""
-    path = raster_dir / ELEVATION_FILE
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no elevation raster for this site")
-    try:
-        elevation = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as error:
-        raise ValueError(f"{path}: unreadable elevation raster: {error}") from error
+    elevation = read_layer(raster_dir, "elevation")
     if elevation.shape != georef.shape:
-        raise ValueError(f"{path}: shape {elevation.shape} != georeference (height, width) {georef.shape}")
+        raise ValueError(
+            f"{raster_dir}: elevation shape {elevation.shape} != the site's georeference (height, width) "
+            f"{georef.shape}"
+        )
     return np.asarray(elevation, dtype=np.float64)
 
 

@@ -7,18 +7,13 @@ from app.backend.tiles.access import (
     pyramid_info,
     tile_file,
 )
-from app.backend.tiles.georef import GeoreferenceLike, RasterGeoreference
-from app.backend.tiles.layers import LAYER_NAMES, LayerName, Legend
+from app.backend.tiles.layers import Legend
 from app.backend.tiles.pyramid import PyramidInfo, PyramidLevel, build_pyramid, build_site_pyramids
 
 __all__ = [
-    "LAYER_NAMES",
-    "GeoreferenceLike",
-    "LayerName",
     "Legend",
     "PyramidInfo",
     "PyramidLevel",
-    "RasterGeoreference",
     "TileRequestError",
     "UnknownLayerError",
     "build_pyramid",

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.backend.tiles.georef import GeoreferenceLike
-from app.backend.tiles.layers import LAYER_NAMES, LayerName
 from app.backend.tiles.pyramid import PyramidInfo, ensure_empty_tile, read_pyramid_info, tile_path
+from cama_pipeline.bev import LAYER_NAMES, LayerName, RasterGeoreference
 
 logger = logging.getLogger(__name__)
 
@@ -60,13 +59,12 @@ def tile_file(cache_dir: Path, layer: str, z: int, x: int, y: int) -> Path:
     return ensure_empty_tile(root, info.tile_size)
 
 
-def elevation_at(elevation: np.ndarray, georef: GeoreferenceLike, x: float, y: float) -> float | None:
+def elevation_at(elevation: np.ndarray, georef: RasterGeoreference, x: float, y: float) -> float | None:
     """Bilinear elevation (m) at global metres (x, y); None outside the raster or when a used cell is NaN."""
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"elevation query at non-finite point ({x}, {y})")
     height, width = elevation.shape[:2]
-    col = (x - georef.origin_xy[0]) / georef.resolution
-    row = (georef.origin_xy[1] - y) / georef.resolution
+    col, row = (float(v) for v in georef.pixel_from_global([x, y])[0])
     if not (0.0 <= col <= width - 1 and 0.0 <= row <= height - 1):
         return None
     c0, r0 = min(int(col), max(width - 2, 0)), min(int(row), max(height - 2, 0))

@@ -1,4 +1,5 @@
-"""BEV layers turned into display colours (BGRA, OpenCV's order; PNGs read back as RGBA) plus their legends.
+"""BEV layers (`cama_pipeline.bev`) turned into display colours (BGRA, OpenCV's order; PNGs read back as RGBA)
+plus their legends.
 
 Palette of the semantic layer (RGBA): background grey (128, 128, 128, 90), road dark slate (60, 64, 72, 255),
 curb orange (255, 140, 0, 255), lane marking white (255, 255, 255, 255), crosswalk yellow (255, 220, 0, 255);
@@ -9,25 +10,17 @@ cells (NaN transparent); observation count uses viridis on log(1 + count) up to 
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from cama_pipeline.bev import LAYER_NAMES, LayerName
 from cama_pipeline.semantics import BEV_CLASSES, Semantic
 
 logger = logging.getLogger(__name__)
 
-LayerName = Literal["semantic", "photometric", "elevation", "observation_count"]
-LAYER_NAMES: tuple[LayerName, ...] = ("semantic", "photometric", "elevation", "observation_count")
-LAYER_FILES: dict[LayerName, str] = {
-    "semantic": "semantic.png",
-    "photometric": "photometric.png",
-    "elevation": "elevation.npy",
-    "observation_count": "observation_count.png",
-}
 SEMANTIC_PALETTE_RGBA: dict[int, tuple[int, int, int, int]] = {
     int(Semantic.BACKGROUND): (128, 128, 128, 90),
     int(Semantic.ROAD): (60, 64, 72, 255),
@@ -91,9 +84,9 @@ def semantic_bgra(ids: np.ndarray) -> np.ndarray:
     return _SEMANTIC_LUT[np.asarray(ids, dtype=np.uint8)]
 
 
-def photometric_bgra(bgr: np.ndarray) -> np.ndarray:
-    """BGR photometric raster -> opaque BGRA, colours as they are."""
-    return cv2.cvtColor(np.ascontiguousarray(bgr), cv2.COLOR_BGR2BGRA)
+def photometric_bgra(rgb: np.ndarray) -> np.ndarray:
+    """RGB photometric raster -> opaque BGRA, colours as they are."""
+    return cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGRA)
 
 
 def _colormap_bgra(unit: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -165,23 +158,6 @@ def check_layer(name: LayerName, raster: np.ndarray, shape: tuple[int, int]) -> 
             f"layer {name}: raster shape {raster.shape} does not match georeference (h, w) {shape}"
         )
     if name == "photometric" and (raster.shape[2] != 3 or raster.dtype != np.uint8):
-        raise ValueError(f"layer photometric: expected uint8 BGR, got {raster.dtype} x {raster.shape[2]}")
+        raise ValueError(f"layer photometric: expected uint8 RGB, got {raster.dtype} x {raster.shape[2]}")
     if name == "semantic" and raster.dtype != np.uint8:
         raise ValueError(f"layer semantic: expected uint8 class ids, got {raster.dtype}")
-
-
-def load_layer(bev_dir: Path, name: LayerName) -> np.ndarray:
-    """Read one layer file from a BEV directory (elevation memory-mapped); FileNotFoundError/ValueError name it."""
-    path = Path(bev_dir) / LAYER_FILES[name]
-    if not path.is_file():
-        raise FileNotFoundError(f"layer {name}: no raster file {path}")
-    if name == "elevation":
-        try:
-            return np.load(path, mmap_mode="r", allow_pickle=False)
-        except (ValueError, EOFError, OSError) as error:
-            raise ValueError(f"{path}: not a readable .npy raster: {error}") from error
-    flags = cv2.IMREAD_COLOR if name == "photometric" else cv2.IMREAD_UNCHANGED
-    image = cv2.imread(str(path), flags)
-    if image is None:
-        raise ValueError(f"{path}: not a readable image")
-    return image

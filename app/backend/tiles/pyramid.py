@@ -25,17 +25,15 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from app.backend.tiles.georef import GeoreferenceLike, RasterGeoreference
-from app.backend.tiles.layers import (
+from app.backend.tiles.layers import LayerStyle, Legend, Resampling, check_layer, layer_style
+from cama_pipeline.bev import (
     LAYER_FILES,
     LAYER_NAMES,
     LayerName,
-    LayerStyle,
-    Legend,
-    Resampling,
-    check_layer,
-    layer_style,
-    load_layer,
+    RasterGeoreference,
+    layer_path,
+    read_georeference,
+    read_layer,
 )
 from cama_pipeline.io import atomic_write_bytes
 from cama_pipeline.progress import StageProgress
@@ -236,7 +234,7 @@ def _up_to_date(cache_dir: Path, layer: LayerName, fingerprint: str) -> PyramidI
 def build_pyramid(
     layer_name: LayerName,
     raster: np.ndarray,
-    georef: GeoreferenceLike,
+    georef: RasterGeoreference,
     cache_dir: Path,
     *,
     overwrite: bool = False,
@@ -246,7 +244,7 @@ def build_pyramid(
     """Build (or reuse, when up to date) one layer's tile pyramid; `source_fingerprint` defaults to a content hash."""
     if layer_name not in LAYER_NAMES:
         raise ValueError(f"unknown raster layer {layer_name!r}; known: {', '.join(LAYER_NAMES)}")
-    geo = RasterGeoreference.of(georef)
+    geo = georef.as_raster()
     check_layer(layer_name, raster, (geo.height, geo.width))
     fingerprint = _full_fingerprint(source_fingerprint or array_fingerprint(raster), geo, tile_size)
     cached = None if overwrite else _up_to_date(cache_dir, layer_name, fingerprint)
@@ -282,10 +280,10 @@ def build_site_pyramids(
 ) -> dict[LayerName, PyramidInfo]:
     """Pyramids of every layer present in a BEV directory; up-to-date layers are not even read."""
     bev_dir = Path(bev_dir)
-    georef = RasterGeoreference.from_file(bev_dir / "georeference.json")
+    georef = read_georeference(bev_dir)
     infos: dict[LayerName, PyramidInfo] = {}
     for name in LAYER_NAMES:
-        path = bev_dir / LAYER_FILES[name]
+        path = layer_path(bev_dir, name)
         if not path.is_file():
             continue
         source = file_fingerprint(path)
@@ -295,7 +293,7 @@ def build_site_pyramids(
         if cached is not None:
             infos[name] = cached
             continue
-        raster = load_layer(bev_dir, name)
+        raster = read_layer(bev_dir, name, mmap=True)
         infos[name] = build_pyramid(
             name, raster, georef, cache_dir, overwrite=True, source_fingerprint=source
         )

@@ -16,16 +16,14 @@ from app.backend.errors import InvalidInputError, NotFoundError
 from app.backend.models import Site
 from app.backend.schemas_quality import ElevationPublic, LayerPublic
 from app.backend.tiles import (
-    LayerName,
     PyramidInfo,
-    RasterGeoreference,
     TileRequestError,
     UnknownLayerError,
     build_site_pyramids,
     elevation_at,
     tile_file,
 )
-from app.backend.tiles.layers import load_layer
+from cama_pipeline.bev import LayerName, RasterGeoreference, is_raster_folder, read_layer
 
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}", tags=["rasters"])
@@ -79,8 +77,8 @@ def ensure_pyramids(site: Site, cache: TileCache, data_dir: Path) -> dict[LayerN
         if site.id in cache.built:
             return cache.built[site.id]
         raster_dir = Path(site.raster_dir)
-        if not (raster_dir / "georeference.json").is_file():
-            logger.warning("site %d: %s has no georeference.json; no raster layers", site.id, raster_dir)
+        if not is_raster_folder(raster_dir):
+            logger.warning("site %d: %s has no raster georeference; no raster layers", site.id, raster_dir)
             infos: dict[LayerName, PyramidInfo] = {}
         else:
             try:
@@ -156,12 +154,12 @@ def read_elevation(
         raise InvalidInputError("x" if not math.isfinite(x) else "y", f"must be finite, got ({x}, {y})")
     site = crud.get_site(session=session, site_id=site_id)
     try:
-        elevation = load_layer(Path(site.raster_dir), "elevation")
+        elevation = read_layer(Path(site.raster_dir), "elevation", mmap=True)
     except FileNotFoundError:
         raise NotFoundError(f"site {site_id} has no elevation raster") from None
     except ValueError as error:
         raise InvalidInputError("raster_dir", f"site {site_id}: {error}") from None
-    georef = RasterGeoreference.model_validate(site.georeference)
+    georef = RasterGeoreference.from_json(site.georeference, source=f"site {site_id}")
     if elevation.shape[:2] != (georef.height, georef.width):
         raise InvalidInputError(
             "raster_dir", f"site {site_id}: elevation shape {elevation.shape} does not match the georeference"
