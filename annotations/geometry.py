@@ -51,16 +51,22 @@ def validate_geometry(
     points: ArrayLike, *, closed: bool, field: str = "points", dims: int | None = None
 ) -> np.ndarray:
     """Check a polyline (or, if `closed`, a polygon ring) and return it as an array; ValueError naming `field`."""
+    array = _finite_points(points, field=field, dims=dims)
+    if _planar_length(array) <= 0.0:
+        raise ValueError(f"{field}: all points coincide (zero length)")
+    if closed:
+        _validate_ring(array, field)
+    return array
+
+
+def _finite_points(points: ArrayLike, *, field: str = "points", dims: int | None = None) -> np.ndarray:
+    """At least 2 finite points as an array (they may coincide); ValueError naming `field` otherwise."""
     array = as_points(points, field=field, dims=dims)
     if len(array) < 2:
         raise ValueError(f"{field}: needs at least 2 points, got {len(array)}")
     bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
     if bad.size:
         raise ValueError(f"{field}: point {int(bad[0])} is not finite: {array[bad[0]].tolist()}")
-    if _planar_length(array) <= 0.0:
-        raise ValueError(f"{field}: all points coincide (zero length)")
-    if closed:
-        _validate_ring(array, field)
     return array
 
 
@@ -103,11 +109,16 @@ def _interpolate(array: np.ndarray, stations: np.ndarray) -> np.ndarray:
 
 
 def resample_fixed(points: ArrayLike, n: int) -> np.ndarray:
-    """`n` points evenly spaced by arc length, keeping both ends (a closed ring stays closed)."""
+    """`n` points evenly spaced by planar arc length, keeping both ends (a closed ring stays closed); a polyline
+    of zero length (a degenerate prediction) gives `n` copies of its first point. The resampling of Chamfer-AP
+    and VMA targets and merging too (MapTR resamples vectors to a fixed count the same way)."""
     if n < 2:
         raise ValueError(f"n: need at least 2 points, got {n}")
-    array = validate_geometry(points, closed=False)
-    out = _interpolate(array, np.linspace(0.0, _planar_length(array), n))
+    array = _finite_points(points)
+    arc = _arc_lengths(array)
+    if arc[-1] <= 0.0:
+        return np.repeat(array[:1], n, axis=0)
+    out = _interpolate(array, np.linspace(0.0, arc[-1], n))
     out[0], out[-1] = array[0], array[-1]
     return out
 

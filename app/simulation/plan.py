@@ -12,9 +12,9 @@ from typing import Literal
 import numpy as np
 from shapely.geometry import LineString, Point
 
-from annotations.geometry import simplify
+from annotations.geometry import resample_fixed, simplify
 from app.simulation.costs import ActionCosts
-from cama_pipeline.evaluate.chamfer_ap import chamfer_distance, resample
+from cama_pipeline.evaluate.chamfer_ap import chamfer_distance
 
 _SAMPLES = 50
 
@@ -123,7 +123,7 @@ def drawing_seconds(line: Polyline, config: SimulationConfig, costs: ActionCosts
 
 
 def _chamfer(a: Polyline, b: Polyline) -> float:
-    return chamfer_distance(resample(a.points, _SAMPLES), resample(b.points, _SAMPLES))
+    return chamfer_distance(resample_fixed(a.points, _SAMPLES), resample_fixed(b.points, _SAMPLES))
 
 
 def _worst(a: Polyline, b: Polyline) -> float:
@@ -132,14 +132,16 @@ def _worst(a: Polyline, b: Polyline) -> float:
 
     def one_way(src: Polyline, dst: Polyline) -> float:
         line = LineString(dst.points)
-        return max(line.distance(Point(p)) for p in np.vstack([src.points, resample(src.points, _SAMPLES)]))
+        return max(
+            line.distance(Point(p)) for p in np.vstack([src.points, resample_fixed(src.points, _SAMPLES)])
+        )
 
     return max(one_way(a, b), one_way(b, a))
 
 
 def _mean_distance_to(line: LineString, points: np.ndarray) -> float:
     """Mean distance of a polyline's resampled points to `line`: how well it lies along it, however short."""
-    return float(np.mean([line.distance(Point(p)) for p in resample(points, _SAMPLES)]))
+    return float(np.mean([line.distance(Point(p)) for p in resample_fixed(points, _SAMPLES)]))
 
 
 def _covered(target: np.ndarray, pieces: Sequence[np.ndarray], tolerance_m: float) -> np.ndarray:

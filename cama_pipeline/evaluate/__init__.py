@@ -10,7 +10,6 @@ from cama_pipeline.evaluate.chamfer_ap import (
 )
 from cama_pipeline.evaluate.errors import ElevationErrors, PoseErrors, elevation_errors, pose_errors
 from cama_pipeline.evaluate.inputs import (
-    VECTOR_CLASSES,
     EvaluationInputError,
     VectorElement,
     load_true_poses,
@@ -27,7 +26,6 @@ from cama_pipeline.evaluate.sre_dataset import evaluate_sre
 from cama_pipeline.evaluate.sre_report import ImageSre, SreReport, SreSummary
 
 __all__ = [
-    "VECTOR_CLASSES",
     "ChamferApConfig",
     "ChamferApResult",
     "ElevationErrors",

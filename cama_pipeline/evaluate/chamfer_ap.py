@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from cama_pipeline.evaluate.inputs import VECTOR_CLASSES
+from annotations.geometry import resample_fixed
+from annotations.schema import ELEMENT_CLASSES
 
 logger = logging.getLogger(__name__)
 
@@ -28,8 +29,8 @@ class MapVector:
     score: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.cls not in VECTOR_CLASSES:
-            raise ValueError(f"MapVector: unknown class {self.cls!r}, expected one of {VECTOR_CLASSES}")
+        if self.cls not in ELEMENT_CLASSES:
+            raise ValueError(f"MapVector: unknown class {self.cls!r}, expected one of {ELEMENT_CLASSES}")
         points = np.asarray(self.points, dtype=np.float64)
         if points.ndim != 2 or points.shape[0] < 2 or points.shape[1] != 2 or not np.isfinite(points).all():
             raise ValueError(f"MapVector: points must be finite (N, 2) with N >= 2, got shape {points.shape}")
@@ -46,7 +47,7 @@ class ChamferApConfig:
     """Chamfer-distance thresholds."""
     num_points: int = 100
     """Points each vector is resampled to."""
-    classes: tuple[str, ...] = VECTOR_CLASSES
+    classes: tuple[str, ...] = ELEMENT_CLASSES
     """Classes evaluated (and averaged into mAP)."""
 
     def __post_init__(self) -> None:
@@ -54,9 +55,11 @@ class ChamferApConfig:
             raise ValueError(f"ChamferApConfig.thresholds_m must be positive, got {self.thresholds_m}")
         if self.num_points < 2:
             raise ValueError(f"ChamferApConfig.num_points must be >= 2, got {self.num_points}")
-        unknown = set(self.classes) - set(VECTOR_CLASSES)
+        unknown = set(self.classes) - set(ELEMENT_CLASSES)
         if not self.classes or unknown:
-            raise ValueError(f"ChamferApConfig.classes: unknown {sorted(unknown)}, expected {VECTOR_CLASSES}")
+            raise ValueError(
+                f"ChamferApConfig.classes: unknown {sorted(unknown)}, expected {ELEMENT_CLASSES}"
+            )
 
 
 @dataclass(frozen=True)
@@ -68,16 +71,6 @@ class ChamferApResult:
     class_ap: dict[str, float | None]
     mean_ap: float | None
     config: ChamferApConfig = field(default_factory=ChamferApConfig)
-
-
-def resample(points: np.ndarray, num_points: int) -> np.ndarray:
-    """`num_points` points evenly spaced along a polyline's arc length (ends kept)."""
-    points = np.asarray(points, dtype=np.float64)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    if arc[-1] <= 0:
-        return np.repeat(points[:1], num_points, axis=0)
-    targets = np.linspace(0.0, arc[-1], num_points)
-    return np.column_stack([np.interp(targets, arc, points[:, d]) for d in range(points.shape[1])])
 
 
 def chamfer_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -129,8 +122,8 @@ def _class_distances(
     distances: dict[str, np.ndarray] = {}
     num_gt = 0
     for sample in samples:
-        preds = [resample(v.points, num_points) for v in predictions.get(sample, ()) if v.cls == cls]
-        gts = [resample(v.points, num_points) for v in ground_truth.get(sample, ()) if v.cls == cls]
+        preds = [resample_fixed(v.points, num_points) for v in predictions.get(sample, ()) if v.cls == cls]
+        gts = [resample_fixed(v.points, num_points) for v in ground_truth.get(sample, ()) if v.cls == cls]
         pred_scores = [v.score for v in predictions.get(sample, ()) if v.cls == cls]
         num_gt += len(gts)
         distances[sample] = np.array([[chamfer_distance(p, g) for g in gts] for p in preds]).reshape(

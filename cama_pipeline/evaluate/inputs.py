@@ -18,12 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from annotations.schema import ELEMENT_CLASSES
 from cama_pipeline.data import Pose
 
 logger = logging.getLogger(__name__)
-
-VECTOR_CLASSES: tuple[str, ...] = ("divider", "ped_crossing", "boundary")
-"""Map element classes (MapTR / VMA vocabulary)."""
 
 
 class EvaluationInputError(ValueError):
@@ -37,16 +35,16 @@ class VectorElement:
     id: str
     """Element id, unique within its map."""
     cls: str
-    """One of VECTOR_CLASSES."""
+    """One of ELEMENT_CLASSES."""
     points: np.ndarray
     """(N, 2) or (N, 3) global metres, N >= 2, finite."""
     closed: bool = False
     """True for a ring (a pedestrian-crossing outline): the last vertex joins the first."""
 
     def __post_init__(self) -> None:
-        if self.cls not in VECTOR_CLASSES:
+        if self.cls not in ELEMENT_CLASSES:
             raise ValueError(
-                f"element {self.id!r}: unknown class {self.cls!r}, expected one of {VECTOR_CLASSES}"
+                f"element {self.id!r}: unknown class {self.cls!r}, expected one of {ELEMENT_CLASSES}"
             )
         points = np.array(self.points, dtype=np.float64)
         if points.ndim != 2 or points.shape[0] < 2 or points.shape[1] not in (2, 3):
@@ -81,9 +79,9 @@ def load_vector_map(path: Path) -> list[VectorElement]:
             raise EvaluationInputError(f"{where}.id: duplicate id {element_id!r}")
         seen.add(element_id)
         cls = raw.get("class")
-        if cls not in VECTOR_CLASSES:
+        if cls not in ELEMENT_CLASSES:
             raise EvaluationInputError(
-                f"{where}.class: unknown class {cls!r}, expected one of {VECTOR_CLASSES}"
+                f"{where}.class: unknown class {cls!r}, expected one of {ELEMENT_CLASSES}"
             )
         try:
             element = VectorElement(

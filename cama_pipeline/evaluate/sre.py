@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from cama_pipeline.evaluate.inputs import VECTOR_CLASSES
+from annotations.schema import ELEMENT_CLASSES
 from cama_pipeline.evaluate.projection import ProjectedPiece, ProjectionConfig
 from cama_pipeline.evaluate.skeleton import skeletonize
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
@@ -48,9 +48,9 @@ class SreConfig:
         if not self.class_pairs:
             raise ValueError("SreConfig.class_pairs must name at least one (map class, mask class) pair")
         for map_class, mask_class in self.class_pairs:
-            if map_class not in VECTOR_CLASSES:
+            if map_class not in ELEMENT_CLASSES:
                 raise ValueError(
-                    f"SreConfig.class_pairs: unknown map class {map_class!r}, expected {VECTOR_CLASSES}"
+                    f"SreConfig.class_pairs: unknown map class {map_class!r}, expected {ELEMENT_CLASSES}"
                 )
             if int(mask_class) not in {int(s) for s in Semantic} or int(mask_class) in (0, 255):
                 raise ValueError(f"SreConfig.class_pairs: {mask_class} is not a mask class id")

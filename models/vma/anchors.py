@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from cama_pipeline.evaluate.chamfer_ap import resample
+from annotations.geometry import resample_fixed
 from models.vma.config import ModelConfig
 from models.vma.vectors import CLASSES, Vector, clip_vectors
 
@@ -53,7 +53,7 @@ def patch_anchors(candidates: Sequence[Vector], config: ModelConfig, min_length_
     lengths = np.zeros(config.num_queries, np.float64)
     for k, (piece, index) in enumerate(pieces[: config.num_queries]):
         sources[k], lengths[k] = index, piece.length_m()
-        points[k] = resample(piece.points, config.num_points) / size
+        points[k] = resample_fixed(piece.points, config.num_points) / size
         features[k, CLASSES.index(piece.cls)] = 1.0
         features[k, -2] = piece.score
         features[k, -1] = 1.0

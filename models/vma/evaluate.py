@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from annotations.geometry import resample_fixed
 from cama_pipeline.evaluate.chamfer_ap import (
     ChamferApConfig,
     ChamferApResult,
     MapVector,
     chamfer_ap,
     chamfer_distance,
-    resample,
 )
 from models.vma.loop import LoopConfig, calibrate_preaccept_threshold
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
@@ -111,8 +111,8 @@ def prediction_outcomes(
     for sample, preds in predictions.items():
         gts = truth.get(sample, [])
         for pred in preds:
-            same = [resample(g.points, num_points) for g in gts if g.cls == pred.cls]
-            p = resample(pred.points, num_points)
+            same = [resample_fixed(g.points, num_points) for g in gts if g.cls == pred.cls]
+            p = resample_fixed(pred.points, num_points)
             best = min((chamfer_distance(p, g) for g in same), default=np.inf)
             scores.append(pred.score)
             correct.append(best <= config.bin_threshold_m)

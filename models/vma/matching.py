@@ -12,9 +12,10 @@ import torch
 import torch.nn.functional as F
 from scipy.optimize import linear_sum_assignment
 
-from models.vma.vectors import CLASSES, CLOSED_CLASSES
+from annotations.schema import POLYGON_CLASSES
+from models.vma.vectors import CLASSES
 
-_CLOSED_INDICES = [CLASSES.index(c) for c in CLOSED_CLASSES]
+_CLOSED_INDICES = [CLASSES.index(c) for c in POLYGON_CLASSES]
 
 
 def equivalent_orderings(points: torch.Tensor, closed: bool) -> torch.Tensor:

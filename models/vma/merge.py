@@ -15,7 +15,7 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import LineString, Polygon
 
-from cama_pipeline.evaluate.chamfer_ap import resample
+from annotations.geometry import resample_fixed
 from models.vma.vectors import Vector, clip_vectors
 
 _NEAR_M = 0.5
@@ -109,7 +109,7 @@ def _iou(a: Polygon, b: Polygon) -> float:
 
 def _covered_share(vector: Vector, other: Vector, distance_m: float) -> float:
     """Share of `vector`'s points (about every 0.5 m) within `distance_m` of `other`."""
-    samples = resample(vector.points, max(2, int(vector.length_m() / 0.5)))
+    samples = resample_fixed(vector.points, max(2, int(vector.length_m() / 0.5)))
     return float(np.mean(shapely.distance(LineString(other.points), shapely.points(samples)) <= distance_m))
 
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from annotations.geometry import resample_fixed
 from cama_pipeline.bev import RasterGeoreference
-from cama_pipeline.evaluate.chamfer_ap import resample
 from models.vma.anchors import Anchors, patch_anchors
 from models.vma.config import ModelConfig
 from models.vma.procedural import procedural_patch
@@ -76,7 +76,7 @@ def targets(vectors: Sequence[Vector], size_px: int, num_points: int) -> tuple[n
     labels = np.array([CLASSES.index(v.cls) for v in pieces], np.int64)
     points = np.zeros((len(pieces), num_points, 2), np.float32)
     for k, v in enumerate(pieces):
-        points[k] = resample(v.points, num_points) / size_px
+        points[k] = resample_fixed(v.points, num_points) / size_px
     return labels, points
 
 

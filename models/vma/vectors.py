@@ -14,14 +14,14 @@ import numpy as np
 from shapely.geometry import LineString, Polygon, box
 
 from annotations import AnnotationSet, Georeference, MapElement
+from annotations.schema import ELEMENT_CLASSES, POLYGON_CLASSES
 from cama_pipeline.evaluate.chamfer_ap import MapVector
-from cama_pipeline.evaluate.inputs import VECTOR_CLASSES, load_vector_map
+from cama_pipeline.evaluate.inputs import load_vector_map
 
 logger = logging.getLogger(__name__)
 
-CLASSES: tuple[str, ...] = VECTOR_CLASSES
+CLASSES: tuple[str, ...] = ELEMENT_CLASSES
 """Vector classes, in the order of the model's class scores."""
-CLOSED_CLASSES: frozenset[str] = frozenset({"ped_crossing"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,7 +44,7 @@ class Vector:
     @property
     def closed(self) -> bool:
         """Whether this vector is a polygon ring."""
-        return self.cls in CLOSED_CLASSES
+        return self.cls in POLYGON_CLASSES
 
     def length_m(self) -> float:
         """Planar length (perimeter for rings)."""
@@ -60,7 +60,7 @@ def read_vectors(path: Path) -> list[Vector]:
     out = []
     for element in load_vector_map(path):
         points = np.asarray(element.points)[:, :2]
-        if element.cls in CLOSED_CLASSES and not np.allclose(points[0], points[-1]):
+        if element.cls in POLYGON_CLASSES and not np.allclose(points[0], points[-1]):
             points = np.vstack([points, points[:1]])
         out.append(Vector(element.cls, points))
     return out

@@ -51,6 +51,47 @@ def test_resample_interpolates_z_along_the_plane_length() -> None:
     np.testing.assert_allclose(out, [[0, 0, 1], [2, 0, 2], [4, 0, 3]])
 
 
+def _chamfer_ap_resample(points: np.ndarray, num_points: int) -> np.ndarray:
+    """The twin `cama_pipeline.evaluate.chamfer_ap.resample` had, before resample_fixed replaced it."""
+    points = np.asarray(points, dtype=np.float64)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    if arc[-1] <= 0:
+        return np.repeat(points[:1], num_points, axis=0)
+    targets = np.linspace(0.0, arc[-1], num_points)
+    return np.column_stack([np.interp(targets, arc, points[:, d]) for d in range(points.shape[1])])
+
+
+def _previous_resample_fixed(points: np.ndarray, n: int) -> np.ndarray:
+    """resample_fixed before the merge: stations up to the pairwise-summed length instead of the last arc."""
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1))])
+    keep = np.concatenate([[True], np.diff(arc) > 0])
+    stations = np.linspace(0.0, float(np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1).sum()), n)
+    out = np.stack([np.interp(stations, arc[keep], points[keep, k]) for k in range(points.shape[1])], axis=1)
+    out[0], out[-1] = points[0], points[-1]
+    return out
+
+
+def test_resample_fixed_equals_both_twins_it_replaced() -> None:
+    """Bit for bit the Chamfer-AP / VMA resampling (so proposals do not change), within 1e-12 m the previous
+    resample_fixed (MapTR export), on random polylines with repeated vertices and zero-length ones."""
+    rng = np.random.default_rng(22)
+    for trial in range(2000):
+        points = np.cumsum(rng.normal(0.0, 3.0, (int(rng.integers(2, 60)), 2)), axis=0) + rng.uniform(
+            -500, 500, 2
+        )
+        if trial % 5 == 0:
+            points = np.repeat(points, rng.integers(1, 3, len(points)), axis=0)
+        n = int(rng.integers(2, 120))
+        if trial % 50 == 0:
+            points = np.repeat(points[:1], len(points), axis=0)
+            np.testing.assert_array_equal(resample_fixed(points, n), _chamfer_ap_resample(points, n))
+            continue
+        np.testing.assert_array_equal(resample_fixed(points, n), _chamfer_ap_resample(points, n))
+        np.testing.assert_allclose(
+            resample_fixed(points, n), _previous_resample_fixed(points, n), rtol=0, atol=1e-12
+        )
+
+
 def test_resample_spacing() -> None:
     out = resample_spacing([[0.0, 0.0], [10.0, 0.0]], 3.0)  # 4 steps of 2.5 m
     np.testing.assert_allclose(out[:, 0], [0, 2.5, 5, 7.5, 10])

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
+from annotations.geometry import resample_fixed
 from cama_pipeline.evaluate.chamfer_ap import (
     ChamferApConfig,
     MapVector,
     average_precision,
     chamfer_ap,
     chamfer_distance,
-    resample,
 )
 
 
@@ -25,7 +25,7 @@ GROUND_TRUTH = {
 
 
 def test_resample_and_chamfer_distance() -> None:
-    points = resample(np.array([[0.0, 0.0], [10.0, 0.0]]), 11)
+    points = resample_fixed(np.array([[0.0, 0.0], [10.0, 0.0]]), 11)
     assert np.allclose(points[:, 0], np.arange(11))
     assert chamfer_distance(points, points + [0.0, 0.8]) == pytest.approx(0.8)
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from annotations import Georeference
-from cama_pipeline.evaluate.chamfer_ap import chamfer_distance, resample
+from annotations.geometry import resample_fixed
+from cama_pipeline.evaluate.chamfer_ap import chamfer_distance
 from models.vma.checkpoint import current_version, load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig
 from models.vma.model import VmaNet
@@ -34,7 +35,10 @@ def simulated_review(site: Path, proposals: list[Vector], share: float, rng: np.
     fixed, rejected, used = [], [], set()
     for proposal in reviewed:
         same = [(k, t) for k, t in enumerate(truth) if t.cls == proposal.cls and k not in used]
-        dist = [chamfer_distance(resample(proposal.points, 50), resample(t.points, 50)) for _, t in same]
+        dist = [
+            chamfer_distance(resample_fixed(proposal.points, 50), resample_fixed(t.points, 50))
+            for _, t in same
+        ]
         if dist and min(dist) < 3.0:
             k, t = same[int(np.argmin(dist))]
             used.add(k)
