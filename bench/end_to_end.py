@@ -48,12 +48,12 @@ from app.simulation.workbench import (
     register_synthetic_site,
 )
 from cama_pipeline.bev import read_bev, read_layer
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from cama_pipeline.features.config import FeaturesConfig
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from cama_pipeline.bev import read_bev
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import load_dataset
 from cama_pipeline.evaluate.covisibility import ElevationSurface, covisibility_matrix
 from cama_pipeline.evaluate.inputs import load_true_poses
@@ -55,7 +56,6 @@ from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.features.stage import extract_missing
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.repeats import repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs

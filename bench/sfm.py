@@ -47,11 +47,11 @@ from typing import Any
 import numpy as np
 import pycolmap
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.stage import features_dir
 from cama_pipeline.features.stage import run as run_features
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.sfm.baseline import (
     PoseErrors,
     align_to_reference,

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.io import atomic_write_json
-from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.baseline import pose_errors
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.gauge import fit_gauge

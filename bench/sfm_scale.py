@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 import pycolmap
 
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.io import atomic_write_json
-from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.sfm.baseline import model_poses, pose_errors
 from cama_pipeline.sfm.bundle import bundle_adjust
 from cama_pipeline.sfm.config import SfmConfig

@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "cama_pipeline.semantics",
             "cama_pipeline.data",
             "cama_pipeline.bev",
+            "cama_pipeline.cameras",
             "cama_pipeline.workspace",
             "cama_pipeline.fingerprints",
             "cama_pipeline.results",

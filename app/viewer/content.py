@@ -18,8 +18,8 @@ from annotations.schema import Georeference
 from app.viewer.geometry import LocalFrame, frustum_segments
 from app.viewer.style import semantic_rgb
 from cama_pipeline.bev import is_raster_folder, read_bev, read_layer
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import load_dataset
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
 

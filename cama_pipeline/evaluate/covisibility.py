@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.pairs.footprint import ground_hits_ego
 
 NEIGHBOUR_MARGIN_M = 2.0

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pycolmap
 
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.features.interface import Features
-from cama_pipeline.pairs.cameras import CameraView
 
 
 @contextmanager

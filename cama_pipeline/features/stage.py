@@ -27,6 +27,7 @@ from typing import Any
 
 import cv2
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
@@ -36,7 +37,6 @@ from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
 from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.io import atomic_write_json
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.io import pairs_dir
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.site.workspace import (

@@ -9,7 +9,7 @@ import numpy as np
 import shapely
 from shapely import MultiPoint, Point, Polygon
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 
 EMPTY = Polygon()
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.footprint import footprint_overlap, ground_footprint
 from cama_pipeline.pairs.rules import face_to_face, height_compatible, view_cones_overlap

@@ -10,7 +10,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.sequential import Pair, ordered
 

@@ -6,7 +6,7 @@ from itertools import combinations
 
 import numpy as np
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
 
 Pair = tuple[int, int]

@@ -5,9 +5,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import load_dataset
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import spatial_pairs
 from cama_pipeline.pairs.io import PAIR_REASONS, pairs_dir, read_pairs, write_pairs

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pycolmap
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.gauge import apply_gauge, fit_gauge

@@ -8,8 +8,8 @@ from collections.abc import Callable
 import numpy as np
 import pycolmap
 
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.data import Dataset
-from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.semantics import BEV_CLASSES, Semantic
 from cama_pipeline.sfm.io import SparsePoints
 

@@ -18,7 +18,7 @@ import numpy as np
 import pycolmap
 from scipy.spatial.transform import Rotation
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 
 logger = logging.getLogger(__name__)
 

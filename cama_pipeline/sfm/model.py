@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pycolmap
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 

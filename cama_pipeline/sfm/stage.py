@@ -19,10 +19,10 @@ from typing import Any
 
 import pycolmap
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.stage import features_dir
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError

@@ -17,8 +17,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.data import Dataset
-from cama_pipeline.pairs.cameras import CameraView
 from cama_pipeline.semantics import BEV_CLASSES
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, surface_loss

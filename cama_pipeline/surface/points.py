@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.io import read_points, sfm_dir
 from cama_pipeline.surface.config import SurfaceConfig

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Dataset, Pose
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.sfm.io import read_refined_poses, sfm_dir
 from cama_pipeline.surface.config import POSE_SOURCES
 

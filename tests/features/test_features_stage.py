@@ -10,13 +10,13 @@ import pycolmap
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.cameras import site_views
 from cama_pipeline.data import load_dataset
 from cama_pipeline.features import stage
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
 from cama_pipeline.features.sift import SiftExtractor
 from cama_pipeline.features.stage import extract_missing, features_dir, run
-from cama_pipeline.pairs.cameras import site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.stage import run as run_pairs
 from cama_pipeline.semantics import Semantic

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 
 WIDTH, HEIGHT = 512, 288
 INTRINSIC = np.array([[300.0, 0.0, 256.0], [0.0, 300.0, 144.0], [0.0, 0.0, 1.0]])

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import knn_candidates, spatial_pairs
 from cama_pipeline.pairs.repeats import repeated_views

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.stage import run as run_features
-from cama_pipeline.pairs.cameras import CameraView, site_views
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.stage import run as run_pairs
 from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path

@@ -5,7 +5,7 @@ import pycolmap
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.sfm.merge import (
     ClipModel,
     MergeConfig,

@@ -6,7 +6,7 @@ import numpy as np
 import pycolmap
 import pytest
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import reconstruct_views, refined_views
 from cama_pipeline.sfm.model import matrix_from_rigid

@@ -4,7 +4,7 @@ join across clips, observations of images outside the model are dropped, and the
 import numpy as np
 import pytest
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views
 from cama_pipeline.sfm.stage import site_clips

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from cama_pipeline.pairs.cameras import CameraView
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.elevation import new_elevation_mlp

@@ -1,4 +1,8 @@
-"""The cameras pair selection works on: every keyframe image of a site with its fused pose and calibration."""
+"""A site's camera views: every keyframe image with its pose and calibration (global metres, OpenCV camera frame).
+
+Pair selection, features, SfM, the surface, the evaluation, the 3D viewer and the benches all work on these views;
+`site_views` builds them from the data set and a site manifest (poses fused by WIGO), and stages that refine
+poses replace `world_from_ego`."""
 
 import logging
 from dataclasses import dataclass
@@ -13,7 +17,7 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class CameraView:
-    """One image with everything geometric that pairing needs (global metres, OpenCV camera frame)."""
+    """One image with everything geometric the stages need (global metres, OpenCV camera frame)."""
 
     name: str
     """Image path relative to the data set root: the image's name in the COLMAP database and pair files."""
