@@ -1,5 +1,8 @@
 """Lead views: the confidence queue (order, filters, approve/return, open in the editor), figures, jobs."""
 
+from dataclasses import replace
+from pathlib import Path
+
 import pytest
 from playwright.sync_api import Page, expect
 
@@ -7,8 +10,12 @@ from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
 from tests.frontend.editor_browser_helpers import SeededServer, log_in, screenshot
 
-UNAVAILABLE_KINDS = unavailable_kinds(Settings.from_env())
-"""What the served backend (same environment) refuses: retrain without a configured VMA registry."""
+_SERVED = Settings.from_env()
+UNAVAILABLE_KINDS = unavailable_kinds(
+    _SERVED if _SERVED.vma_registry else replace(_SERVED, vma_registry=Path("seeded-by-cama-serve"))
+)
+"""What the served backend (same environment) refuses: `cama serve` seeds a VMA registry in its data folder when
+none is configured, so without CAMA_VMA_VALIDATION_SITES retrain is refused for want of a held-out gate."""
 
 pytestmark = pytest.mark.slow  # each test is a few seconds; the shared server and browser start once
 
@@ -71,7 +78,7 @@ def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
     expect(chart.locator("text.chart-label", has_text="bob")).to_have_count(1)
     expect(page.locator("#figures .figures-table td.author", has_text="bob").first).to_be_visible()
     page.click("#launch-retrain")
-    if "retrain" in UNAVAILABLE_KINDS:  # the backend refuses with 422 without a VMA registry
+    if "retrain" in UNAVAILABLE_KINDS:  # the backend refuses with 422 without validation sites
         expect(page.locator("#job-message")).to_have_class("job-message error")
         expect(page.locator("#job-message")).to_contain_text(UNAVAILABLE_KINDS["retrain"])
         expect(page.locator("#job-message")).not_to_contain_text("kind: kind:")
