@@ -28,6 +28,7 @@ from app.backend.schemas import ElementCreate, GeoreferenceIn, SiteCreate
 from app.backend.vma_loop import with_shipped_registry
 from cama_pipeline.bev import read_georeference
 from cama_pipeline.console import bad_input
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 DEMO_USERS = (("admin", "admin"), ("lead", "lead"), ("annotator", "annotator"))
@@ -156,9 +157,18 @@ def demo_command(
         f"log in as annotator, lead or admin; password {password!r} (set CAMA_DEMO_PASSWORD to change)"
     )
     if view_port:
-        _start_review(site_dir, rasters, site_id, password, f"http://{host}:{port}", host, view_port)
-        # the review's site is known only once loaded; the editor's link reads these two fields per request
-        app.state.settings = replace(settings, review_url=review_url(host, view_port), review_site_id=site_id)
+        try:
+            workspace, site_key = review_site(site_dir, rasters)
+        except ValueError as err:  # rasters outside a workspace: the editor shows them, the review cannot
+            typer.echo(f"3D review not started: {err}", err=True)
+        else:
+            _start_review(
+                site_dir, workspace, site_key, site_id, password, f"http://{host}:{port}", host, view_port
+            )
+            # the review's site is known only once loaded; the editor's link reads these two fields per request
+            app.state.settings = replace(
+                settings, review_url=review_url(host, view_port), review_site_id=site_id
+            )
     run_server(app, host=host, port=port, log_level="warning")
 
 
@@ -176,16 +186,30 @@ def review_url(host: str, port: int) -> str:
     return f":{port}" if host in WILDCARD_HOSTS else f"http://{host}:{port}/"
 
 
+def review_site(site_dir: Path, rasters: Path | None) -> tuple[Workspace, str | None]:
+    """The workspace and site the 3D review shows: those of `--rasters` (`<workspace>/surface/<site_id>/bev`;
+    ValueError naming it when it is not such a folder), else the site folder's own workspace (`<site>/workspace`)
+    and its first site (None)."""
+    if rasters is not None:
+        return Workspace.locate(rasters)
+    return Workspace.for_dataset(site_dir / "nuscenes"), None
+
+
 def _start_review(
-    site_dir: Path, rasters: Path | None, site_id: int, password: str, api: str, host: str, port: int
+    site_dir: Path,
+    workspace: Workspace,
+    site_key: str | None,
+    site_id: int,
+    password: str,
+    api: str,
+    host: str,
+    port: int,
 ) -> None:
-    """The viser 3D review of the demo site, following the demo server's vectors (as the lead)."""
+    """The viser 3D review of the demo site (`site_key` of `workspace`; None: its first site), following the
+    demo server's vectors (site `site_id`, as the lead)."""
     from app.viewer.review import ViewInputs, serve_in_background
     from app.viewer.sources import ApiVectorSource
 
-    workspace, site_key = (
-        (rasters.parents[2], rasters.parent.name) if rasters else (site_dir / "workspace", "site-001")
-    )
-    inputs = ViewInputs(site_dir, workspace, site_key)
+    inputs = ViewInputs(site_dir, workspace.root, site_key)
     serve_in_background(inputs, ApiVectorSource(api, site_id, "lead", password), host=host, port=port)
     typer.echo(f"3D review: http://{host}:{port}/")

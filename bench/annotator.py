@@ -31,6 +31,8 @@ from app.simulation.workbench import (
     register_synthetic_site,
     true_polylines,
 )
+from cama_pipeline.site.io import read_site_ids
+from cama_pipeline.workspace import Workspace
 
 RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
@@ -60,7 +62,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
     parser.add_argument(
-        "--proposals", type=Path, nargs="*", default=None, help="Default: <site>/workspace/proposals.json"
+        "--proposals",
+        type=Path,
+        nargs="*",
+        default=None,
+        help="Default: the proposals `cama run` wrote for the site's first workspace site",
     )
     parser.add_argument(
         "--rasters", type=Path, default=None, help="cut the truth to these rasters' observed cells"
@@ -68,7 +74,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    files = args.proposals if args.proposals else [args.site / "workspace" / "proposals.json"]
+    workspace = Workspace.for_dataset(args.site / "nuscenes")
+    files = args.proposals or [workspace.proposals(read_site_ids(workspace.sites_index())[0])]
     figures = run(args.site, files, args.rasters)
     figures["command"] = "python bench/annotator.py " + " ".join(sys.argv[1:])
     figures["machine"] = {"python": platform.python_version()}

@@ -57,9 +57,9 @@ from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
-from cama_studio.pipeline import proposals_path, surface_rasters
 from cama_studio.pipeline import run as run_pipeline
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
@@ -72,13 +72,13 @@ RESULTS = Path(__file__).parent / "results"
 logger = logging.getLogger("bench.end_to_end")
 
 
-def stage_reports(workspace: Path, site_id: str) -> dict[str, Any]:
+def stage_reports(workspace: Workspace, site_id: str) -> dict[str, Any]:
     """Timings the stages wrote into their own reports (the run that made the outputs)."""
     found: dict[str, Any] = {}
     for stage, path in {
-        "features": workspace / "features" / site_id / "features.json",
-        "sfm": workspace / "sfm" / site_id / "report.json",
-        "surface": workspace / "surface" / site_id / "report.json",
+        "features": workspace.features_report(site_id),
+        "sfm": workspace.sfm_report(site_id),
+        "surface": workspace.surface_report(site_id),
     }.items():
         if path.is_file():
             report = json.loads(path.read_text())
@@ -86,12 +86,12 @@ def stage_reports(workspace: Path, site_id: str) -> dict[str, Any]:
     return found
 
 
-def pose_figures(site: Path, views: list[CameraView], workspace: Path, site_id: str) -> dict[str, Any]:
+def pose_figures(site: Path, views: list[CameraView], workspace: Workspace, site_id: str) -> dict[str, Any]:
     """WIGO and SfM camera pose errors against the truth."""
     truth_poses = load_true_poses(site / "ground_truth" / "poses.json")
     truth = {v.name: truth_poses[v.token].matrix() @ v.ego_from_cam for v in views}
     wigo = {v.name: v.world_from_cam for v in views}
-    refined = read_refined_poses(workspace, site_id)
+    refined = read_refined_poses(workspace.sfm_poses(site_id))
     sfm = {v.name: refined[v.token] @ v.ego_from_cam for v in views if v.token in refined}
     out = {}
     for name, poses in (("wigo", wigo), ("sfm", sfm)):
@@ -180,10 +180,10 @@ def lifted_map(vectors_xy: list[tuple[str, np.ndarray]], folder: Path) -> list[V
     return out
 
 
-def sfm_pose_map(workspace: Path, site_id: str) -> dict[str, Pose]:
+def sfm_pose_map(workspace: Workspace, site_id: str) -> dict[str, Pose]:
     """SfM world_from_ego by image token, as the SRE evaluation takes poses."""
     out = {}
-    for token, matrix in read_refined_poses(workspace, site_id).items():
+    for token, matrix in read_refined_poses(workspace.sfm_poses(site_id)).items():
         quaternion = Rotation.from_matrix(matrix[:3, :3]).as_quat(scalar_first=True)
         out[token] = Pose(matrix[:3, 3], quaternion)
     return out
@@ -211,7 +211,7 @@ def simulated_pass(
 
 def sre_rows(
     site: Path,
-    workspace: Path,
+    workspace: Workspace,
     site_id: str,
     rows: dict[str, tuple[list[VectorElement], dict | None]],
     images: set[str],
@@ -219,7 +219,7 @@ def sre_rows(
     """SRE / precision / recall / F1 of each map over the same images: the site's key-frame images SfM posed."""
     dataset = load_dataset(site / "nuscenes")
     config = SreConfig(class_pairs=(("divider", int(Semantic.LANE_MARKING)),))
-    scenes = [s["scene"] for s in read_site_manifest(site_manifest_path(workspace, site_id))["scenes"]]
+    scenes = [s["scene"] for s in read_site_manifest(workspace.site_manifest(site_id))["scenes"]]
     out = {}
     for name, (elements, poses) in rows.items():
         report = evaluate_sre(dataset, elements, config, true_poses=poses, scenes=scenes, images=images)
@@ -330,7 +330,7 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
-    workspace = site / "workspace"
+    workspace = Workspace.for_dataset(site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:
         features = (
@@ -340,15 +340,15 @@ def main() -> None:
         )
         result = run_pipeline(
             site / "nuscenes",
-            workspace,
+            workspace.root,
             PipelineConfig(proposer=args.proposer, features=features),
             on_stage=lambda s: print(f"== {s}", flush=True),
         )
         stage_seconds = {k: round(v, 1) for k, v in result.seconds.items()}
     dataset = load_dataset(site / "nuscenes")
-    views = site_views(dataset, read_site_manifest(site_manifest_path(workspace, site_id)))
-    rasters = surface_rasters(workspace, site_id)
-    proposals = proposals_path(workspace, site_id)
+    views = site_views(dataset, read_site_manifest(workspace.site_manifest(site_id)))
+    rasters = workspace.surface_bev(site_id)
+    proposals = workspace.proposals(site_id)
     figures: dict[str, Any] = {
         "site": str(site),
         "site_id": site_id,

@@ -61,10 +61,11 @@ from cama_pipeline.pairs.repeats import repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
 from cama_pipeline.pairs.stage import select_pairs
 from cama_pipeline.site.config import SiteConfig
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.site.stage import run as run_sites
-from cama_pipeline.site.workspace import read_site_manifest, read_sites_index
 from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
+from cama_pipeline.workspace import Workspace
 
 RESULTS = Path(__file__).parent / "results"
 STRATEGIES = ("exhaustive", "sequential", "sequential+hsp")
@@ -187,10 +188,9 @@ def bench_site(
             run_wigo(WigoConfig(), dataset_root, workspace, show_progress=False)
             run_keyframes(KeyframeConfig(), dataset_root, workspace)
             run_sites(SiteConfig(), dataset_root, workspace, dataset=dataset)
-        source = sites_from or workspace
-        for entry in read_sites_index(source / "sites" / "index.json")["sites"]:
-            site_id = entry["site_id"]
-            views = site_views(dataset, read_site_manifest(source / "sites" / site_id / "manifest.json"))
+        source = Workspace(sites_from or workspace)
+        for site_id in read_site_ids(source.sites_index()):
+            views = site_views(dataset, read_site_manifest(source.site_manifest(site_id)))
             images = has_images(dataset_root, views)
             if not images and reference is None:
                 raise SystemExit(

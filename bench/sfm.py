@@ -50,7 +50,6 @@ import pycolmap
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
-from cama_pipeline.features.stage import features_dir
 from cama_pipeline.features.stage import run as run_features
 from cama_pipeline.sfm.baseline import (
     PoseErrors,
@@ -65,12 +64,8 @@ from cama_pipeline.sfm.executor import LocalExecutor
 from cama_pipeline.sfm.guided import reconstruct_views
 from cama_pipeline.sfm.merge import MergeConfig
 from cama_pipeline.sfm.stage import copy_database, reconstruct_site, site_clips
-from cama_pipeline.site.workspace import (
-    read_site_manifest,
-    read_sites_index,
-    site_manifest_path,
-    sites_index_path,
-)
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 RESULTS = Path(__file__).parent / "results"
 logger = logging.getLogger("bench.sfm")
@@ -211,12 +206,13 @@ def run_parallel(
 def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, Any], list[CameraView]]:
     """The first site's database (features computed when missing), manifest and keyframe views (only those
     of `scenes` when given: a stationary scene left out is simply not part of its clip)."""
-    dataset_root, workspace = site / "nuscenes", site / "workspace"
-    site_id = read_sites_index(sites_index_path(workspace))["sites"][0]["site_id"]
-    if not (features_dir(workspace, site_id) / "database.db").is_file():
-        logger.info("no features yet: running `cama features` on %s", workspace)
+    dataset_root = site / "nuscenes"
+    workspace = Workspace.for_dataset(dataset_root)
+    site_id = read_site_ids(workspace.sites_index())[0]
+    if not workspace.features_db(site_id).is_file():
+        logger.info("no features yet: running `cama features` on %s", workspace.root)
         run_features(FeaturesConfig(), dataset_root, workspace)
-    manifest = read_site_manifest(site_manifest_path(workspace, site_id))
+    manifest = read_site_manifest(workspace.site_manifest(site_id))
     views = site_views(load_dataset(dataset_root), manifest)
     if scenes:
         known = {view.scene for view in views}
@@ -224,7 +220,7 @@ def site_inputs(site: Path, scenes: list[str] | None) -> tuple[Path, dict[str, A
         if unknown:
             raise SystemExit(f"--scenes: {unknown} are not scenes of {site_id} ({sorted(known)})")
         views = [view for view in views if view.scene in scenes]
-    return features_dir(workspace, site_id) / "database.db", manifest, views
+    return workspace.features_db(site_id), manifest, views
 
 
 def print_table(rows: dict[str, dict[str, Any]]) -> None:

@@ -26,6 +26,7 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.gauge import fit_gauge
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.sfm.merge import robust_similarity
+from cama_pipeline.workspace import Workspace
 
 sys.path.insert(0, str(Path(__file__).parent))
 from sfm import read_runs, site_inputs, true_world_from_cam  # noqa: E402
@@ -76,7 +77,7 @@ def measure(site: Path) -> dict[str, Any]:
     _, manifest, views = site_inputs(site, None)
     by_name = {view.name: view for view in views}
     truth = true_world_from_cam(site, views)
-    refined = read_refined_poses(site / "workspace", manifest["site_id"])
+    refined = read_refined_poses(Workspace.for_dataset(site / "nuscenes").sfm_poses(manifest["site_id"]))
     ego = {view.name: refined[view.token] for view in views if view.token in refined}
     cameras = {name: pose @ by_name[name].ego_from_cam for name, pose in ego.items()}
     wigo_ego = {view.name: view.world_from_ego for view in views}

@@ -39,10 +39,11 @@ from scipy import ndimage
 from cama_pipeline.bev import BevRasters, read_bev
 from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
+from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
 BANDS_M = ((0, 2), (2, 4), (4, 6), (6, 8), (8, 10), (10, 14), (14, 100))
@@ -128,18 +129,23 @@ def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> d
 
 def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
     """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
-    workspace = scratch / f"{len(list(scratch.iterdir()))}-{poses}"
-    workspace.mkdir(parents=True)
-    for shared in ("sites", "sfm"):
-        if (site / "workspace" / shared).exists():
-            (workspace / shared).symlink_to((site / "workspace" / shared).absolute())
+    workspace = Workspace(scratch / f"{len(list(scratch.iterdir()))}-{poses}")
+    workspace.root.mkdir(parents=True)
+    source = Workspace.for_dataset(site / "nuscenes")
+    shared_stages: tuple[StageFolder, ...] = ("sites", "sfm")
+    for shared in shared_stages:
+        if source.stage_dir(shared).exists():
+            workspace.stage_dir(shared).symlink_to(source.stage_dir(shared).absolute())
     started = time.perf_counter()
-    result = run(config, site / "nuscenes", workspace, poses=poses, overwrite=True, show_progress=False)[0]
+    result = run(
+        config, site / "nuscenes", workspace, poses=poses, overwrite=True, show_progress=False
+    ).items[0]
     seconds = time.perf_counter() - started
-    manifest = read_site_manifest(site_manifest_path(workspace, result.site_id))
-    views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.site_id, "ground_truth")
+    manifest = read_site_manifest(workspace.site_manifest(result.name))
+    views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, "ground_truth")
     trajectory_xy = ego_poses(views)[:, :2, 3]
-    figures = compare(read_bev(result.folder / "bev"), read_bev(site / "ground_truth" / "bev"), trajectory_xy)
+    bev = workspace.surface_bev(result.name)
+    figures = compare(read_bev(bev), read_bev(site / "ground_truth" / "bev"), trajectory_xy)
     report = result.report
     return {
         "poses": poses,
@@ -182,7 +188,10 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     config = SurfaceConfig(resolution_m=args.resolution, epochs=args.epochs, torch_threads=args.threads)
-    finished_sfm = any((args.site / "workspace" / "sfm").glob("*/poses.json"))
+    source = Workspace.for_dataset(args.site / "nuscenes")
+    finished_sfm = source.sites_index().is_file() and any(
+        source.sfm_poses(site_id).is_file() for site_id in read_site_ids(source.sites_index())
+    )
     sources = [s for s in args.sources.split(",") if s != "sfm" or finished_sfm]
     scratch = Path(tempfile.mkdtemp(prefix="bench-surface-"))
     try:

@@ -41,7 +41,6 @@ from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
 from cama_pipeline.site.config import SiteConfig
 from cama_pipeline.site.stage import run as run_sites
-from cama_pipeline.site.workspace import read_keyframes
 from cama_pipeline.wigo import ClipInputs, WigoConfig, clip_inputs, fuse_clip
 from cama_pipeline.wigo import run as run_wigo
 from cama_pipeline.wigo.fusion import graph_span
@@ -181,25 +180,22 @@ def stage_figures(site: Path) -> dict[str, object]:
         wigo_s = time.perf_counter() - started
         kf_result = run_keyframes(KeyframeConfig(), root, Path(tmp))
         keyframes = {}
-        for name, path in kf_result.files.items():
-            kf = read_keyframes(path)
-            keyframes[name] = {
-                "frames": len(kf.frames),
-                "keyframes": len(kf.keyframes),
-                "stationary": kf.stationary,
-                "path_length_m": round(kf.path_length_m, 1),
-                "max_time_diff_ms": kf.max_time_diff_us / 1000,
-                "max_time_range_ms": kf.max_time_range_us / 1000,
+        for item in kf_result.items:
+            kf = item.report
+            keyframes[item.name] = {
+                "frames": kf["frames"],
+                "keyframes": kf["keyframes"],
+                "stationary": kf["stationary"],
+                "path_length_m": round(kf["path_length_m"], 1),
+                "max_time_diff_ms": kf["max_time_diff_us"] / 1000,
+                "max_time_range_ms": kf["max_time_range_us"] / 1000,
             }
         sites = run_sites(SiteConfig(), root, Path(tmp))
     return {
         "wigo_stage_seconds": round(wigo_s, 2),
         "keyframes": keyframes,
-        "sites": [
-            {"site_id": s.site_id, "scenes": list(s.scenes), "merged": s.merged}
-            for s in sites.aggregation.sites
-        ],
-        "dropped": sites.aggregation.dropped,
+        "sites": sites.report["sites"],
+        "dropped": {entry["scene"]: entry["reason"] for entry in sites.report["dropped"]},
     }
 
 

@@ -2,8 +2,8 @@
 -> VMA proposals, for any nuScenes-layout data set. Only composes the stages' own `run`s (each skips what is up
 to date), times them, and names the stage that failed.
 
-Outputs are the stages' own files in the workspace; the proposals of site `s` are `proposals/<s>.json`
-(an annotation set in the frame of that site's reconstructed rasters, `surface/<s>/bev/`).
+Outputs are the stages' own files in the workspace (`cama_pipeline.workspace`); the proposals of site `s` are
+`proposals/<s>.json` (an annotation set in the frame of that site's reconstructed rasters, `surface/<s>/bev/`).
 """
 
 import logging
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cama_pipeline.data.errors import DatasetError
-from cama_pipeline.site.workspace import default_workspace, read_sites_index, sites_index_path
+from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 
@@ -58,14 +58,6 @@ class PipelineResult:
     """The VMA checkpoint version folder the learned proposer used (None: rule-based, or not reached)."""
 
 
-def proposals_path(workspace: Path, site_id: str) -> Path:
-    return Path(workspace) / "proposals" / f"{site_id}.json"
-
-
-def surface_rasters(workspace: Path, site_id: str) -> Path:
-    return Path(workspace) / "surface" / site_id / "bev"
-
-
 def _stage_calls(
     dataset_root: Path, workspace: Path, config: PipelineConfig, overwrite: bool
 ) -> dict[str, Callable[[], object]]:
@@ -103,11 +95,11 @@ def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool, res
     """VMA proposals for every site from its reconstructed rasters, recorded in `result`."""
     from models.vma.propose import propose
 
-    for site in read_sites_index(sites_index_path(workspace))["sites"]:
-        site_id = site["site_id"]
+    ws = Workspace(workspace)
+    for site_id in read_site_ids(ws.sites_index()):
         proposed = propose(
-            surface_rasters(workspace, site_id),
-            proposals_path(workspace, site_id),
+            ws.surface_bev(site_id),
+            ws.proposals(site_id),
             proposer=config.proposer,
             checkpoint=config.checkpoint if config.proposer == "learned" else None,
             min_confidence=config.propose.min_confidence,
@@ -133,7 +125,7 @@ def run(
         raise ValueError(f"stop_after must be one of {', '.join(STAGES)}, got {stop_after!r}")
     config = config or PipelineConfig()
     dataset_root = Path(dataset_root)
-    workspace = Path(workspace) if workspace is not None else default_workspace(dataset_root)
+    workspace = Workspace.resolve(workspace, dataset_root).root
     result = PipelineResult(workspace)
     calls = _stage_calls(dataset_root, workspace, config, overwrite)
     for stage in STAGES[: STAGES.index(stop_after) + 1]:

@@ -14,6 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cama_pipeline.console import EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_OK
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 
 runner = CliRunner()
@@ -42,7 +43,8 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
     nowhere = str(tmp / "nowhere")
     corrupt = tmp / "corrupt.json"
     corrupt.write_text("{ not json", encoding="utf-8")
-    sites_index = str(tmp / "workspace" / "sites" / "index.json")
+    workspace = Workspace(tmp / "workspace")
+    sites_index = str(workspace.sites_index())
     return {
         "synth": (["--preset", "huge", "--out", str(tmp / "site")], "'huge'"),
         "eval": ([nowhere, str(corrupt), "--out", str(tmp / "report.json")], str(corrupt)),
@@ -52,7 +54,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "demo": ([nowhere, "--data-dir", str(tmp / "server"), "--view-port", "0"], nowhere),
         "view": ([nowhere, "--port", str(free_port())], nowhere),
         "wigo": ([nowhere], nowhere),
-        "keyframes": ([nowhere], str(tmp / "workspace" / "wigo")),
+        "keyframes": ([nowhere], str(workspace.stage_dir("wigo"))),
         "sites": ([nowhere], nowhere),
         "pairs": ([nowhere], sites_index),
         "features": ([nowhere], sites_index),

@@ -13,11 +13,17 @@ def view_command(
     site_dir: Annotated[Path, typer.Argument(help="A site folder written by `cama synth`.")] = Path(
         "data/synthetic/default"
     ),
-    workspace: Annotated[Path | None, typer.Option(help="Workspace; default <site>/workspace.")] = None,
-    site_id: Annotated[str, typer.Option(help="Site of the workspace to show.")] = "site-001",
+    workspace: Annotated[
+        Path | None, typer.Option(help="Workspace; default <site>/workspace (beside <site>/nuscenes).")
+    ] = None,
+    site_id: Annotated[
+        str | None, typer.Option(help="Site of the workspace to show; default: its first site.")
+    ] = None,
     annotations: Annotated[
         Path | None,
-        typer.Option(help="Vectors from an annotation JSON file (default <workspace>/proposals.json)."),
+        typer.Option(
+            help="Vectors from an annotation JSON file (default <workspace>/proposals/<site-id>.json, `cama run`'s)."
+        ),
     ] = None,
     api: Annotated[
         str | None, typer.Option(help="Vectors from a running backend instead, e.g. http://127.0.0.1:8000.")
@@ -37,21 +43,29 @@ def view_command(
     the selected element (see app/viewer/focus.py)."""
     import viser
 
-    from app.viewer.content import ViewInputError
+    from app.viewer.content import ViewInputError, first_site
     from app.viewer.review import ViewInputs, follow, open_review
     from app.viewer.sources import ApiVectorSource, FileVectorSource, VectorSource, VectorSourceError
-    from cama_pipeline.site.workspace import WorkspaceError
+    from cama_pipeline.io import WorkspaceError
+    from cama_pipeline.workspace import Workspace
 
-    workspace = workspace or site_dir / "workspace"
-    source: VectorSource = (
-        ApiVectorSource(api, api_site, user, password)
-        if api
-        else FileVectorSource(annotations or workspace / "proposals.json")
-    )
+    input_errors = (ViewInputError, VectorSourceError, WorkspaceError, FileNotFoundError, ValueError)
+    if not site_dir.is_dir():
+        raise bad_input(f"SITE_DIR: {site_dir}: not a folder")
+    ws = Workspace.resolve(workspace, site_dir / "nuscenes")
+    try:
+        site_id = site_id or first_site(ws.root)
+        source: VectorSource = (
+            ApiVectorSource(api, api_site, user, password)
+            if api
+            else FileVectorSource(annotations or ws.proposals(site_id))
+        )
+    except input_errors as err:
+        raise bad_input(err) from err
     server = viser.ViserServer(host=host, port=port, label="CAMA Studio 3D review", verbose=False)
     try:
-        scene = open_review(server, ViewInputs(site_dir, workspace, site_id), source)
-    except (ViewInputError, VectorSourceError, WorkspaceError, FileNotFoundError, ValueError) as err:
+        scene = open_review(server, ViewInputs(site_dir, ws.root, site_id), source)
+    except input_errors as err:
         server.stop()
         raise bad_input(err) from err
     # viser takes the next free port when `port` is busy

@@ -21,7 +21,8 @@ from cama_pipeline.bev import is_raster_folder, read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -50,9 +51,18 @@ class SparsePointsView:
     rgb: np.ndarray
 
 
+def first_site(workspace: Path) -> str:
+    """The workspace's first site (`sites/index.json`), shown when none is named; errors name the index."""
+    index = Workspace(workspace).sites_index()
+    site_ids = read_site_ids(index)
+    if not site_ids:
+        raise ViewInputError(f"{index}: no sites (every scene was dropped)")
+    return site_ids[0]
+
+
 def surface_folder(site_dir: Path, workspace: Path, site_id: str) -> tuple[Path, bool]:
     """The raster folder to show: the reconstructed one when present, else the ground truth; (folder, reconstructed)."""
-    reconstructed = Path(workspace) / "surface" / site_id / "bev"
+    reconstructed = Workspace(workspace).surface_bev(site_id)
     if is_raster_folder(reconstructed):
         return reconstructed, True
     ground_truth = Path(site_dir) / "ground_truth" / "bev"
@@ -113,7 +123,7 @@ def road_mesh(
     workspace: Path, site_id: str, surface: Surface, frame: LocalFrame, *, max_faces: int
 ) -> trimesh.Trimesh:
     """The surface stage's `mesh.ply` when it fits the face budget, else a grid mesh made from the rasters."""
-    path = Path(workspace) / "surface" / site_id / "mesh.ply"
+    path = Workspace(workspace).surface_mesh(site_id)
     if path.is_file():
         mesh = trimesh.load(path, process=False)
         if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) <= max_faces:
@@ -129,14 +139,14 @@ def road_mesh(
 
 def keyframe_cameras(dataset_root: Path, workspace: Path, site_id: str) -> list[CameraView]:
     """The site's keyframe cameras, posed by SfM when `cama sfm` has run, else by the site manifest (WIGO)."""
-    manifest = read_site_manifest(site_manifest_path(workspace, site_id))
-    views = site_views(load_dataset(dataset_root), manifest)
-    poses_path = Path(workspace) / "sfm" / site_id / "poses.json"
+    ws = Workspace(workspace)
+    views = site_views(load_dataset(dataset_root), read_site_manifest(ws.site_manifest(site_id)))
+    poses_path = ws.sfm_poses(site_id)
     if not poses_path.is_file():
         return views
     from cama_pipeline.sfm.io import read_refined_poses
 
-    refined = read_refined_poses(workspace, site_id)
+    refined = read_refined_poses(poses_path)
     return [replace(v, world_from_ego=refined[v.token]) for v in views if v.token in refined]
 
 
@@ -154,11 +164,12 @@ def camera_segments(views: list[CameraView], frame: LocalFrame, *, depth_m: floa
 
 def sparse_points(workspace: Path, site_id: str, frame: LocalFrame) -> SparsePointsView | None:
     """The SfM points coloured by label, or None before `cama sfm` has run."""
-    if not (Path(workspace) / "sfm" / site_id / "points.npz").is_file():
+    path = Workspace(workspace).sfm_points(site_id)
+    if not path.is_file():
         return None
     from cama_pipeline.sfm.io import read_points
 
-    points = read_points(workspace, site_id)
+    points = read_points(path)
     return SparsePointsView(frame.from_global(points.xyz), semantic_rgb(points.label))
 
 

@@ -10,6 +10,7 @@ import viser
 
 from app.viewer.content import (
     camera_segments,
+    first_site,
     keyframe_cameras,
     load_surface,
     local_frame_of,
@@ -31,23 +32,23 @@ class ViewInputs:
     site_dir: Path
     """A site folder written by `cama synth` (its data set is `nuscenes/` inside)."""
     workspace: Path
-    site_id: str
+    site_id: str | None
+    """The workspace's site to show; None: its first site (`sites/index.json`)."""
     max_mesh_faces: int = 300_000
     frustum_depth_m: float = 1.0
 
 
 def open_review(server: viser.ViserServer, inputs: ViewInputs, source: VectorSource) -> ReviewScene:
     """Build every layer of the site's 3D review on `server` and draw the source's current vectors."""
-    folder, reconstructed = surface_folder(inputs.site_dir, inputs.workspace, inputs.site_id)
+    site_id = inputs.site_id or first_site(inputs.workspace)
+    folder, reconstructed = surface_folder(inputs.site_dir, inputs.workspace, site_id)
     surface = load_surface(folder, reconstructed=reconstructed)
     frame = local_frame_of(surface)
     scene = ReviewScene(server, frame, surface)
-    scene.add_mesh(
-        road_mesh(inputs.workspace, inputs.site_id, surface, frame, max_faces=inputs.max_mesh_faces)
-    )
-    views = keyframe_cameras(inputs.site_dir / "nuscenes", inputs.workspace, inputs.site_id)
+    scene.add_mesh(road_mesh(inputs.workspace, site_id, surface, frame, max_faces=inputs.max_mesh_faces))
+    views = keyframe_cameras(inputs.site_dir / "nuscenes", inputs.workspace, site_id)
     scene.add_cameras(camera_segments(views, frame, depth_m=inputs.frustum_depth_m))
-    points = sparse_points(inputs.workspace, inputs.site_id, frame)
+    points = sparse_points(inputs.workspace, site_id, frame)
     if points is None:
         logger.info("no sparse points yet (run `cama sfm`)")
     else:

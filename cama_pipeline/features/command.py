@@ -34,17 +34,17 @@ def features_command(
             num_threads=threads,
             matcher=matcher,  # type: ignore[arg-type]  # checked by FeaturesConfig
         )
-        sites = run(config, dataset, workspace, overwrite=overwrite)
+        result = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
-    for site in sites:
+    for site in result.items:
         report = site.report
         counts = [c["features"] for c in report["images"].values()]
         mean = sum(counts) / max(len(counts), 1)
         console.print(
-            f"[green]{site.site_id}[/green]: {len(counts)} images, {mean:.0f} features each on average, "
+            f"[green]{site.name}[/green]: {len(counts)} images, {mean:.0f} features each on average, "
             f"{report['pairs_verified']} of {report['pairs_listed']} pairs verified "
-            f"(median {report['median_inliers']} inliers) -> {site.database}"
+            f"(median {report['median_inliers']} inliers) -> {result.workspace.features_db(site.name)}"
         )
         if report["low_feature_images"]:
             console.print(

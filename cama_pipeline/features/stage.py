@@ -1,13 +1,7 @@
-"""The features stage: masked features of every keyframe image into the site's COLMAP database, then
-matching with geometric verification on the pairs chosen by `cama pairs`.
+"""The features stage: masked features of every keyframe image into the site's COLMAP database
+(`cama_pipeline.features.database`), then matching with geometric verification on the pairs chosen by
+`cama pairs`; its report is `features.json` (`cama_pipeline.features.io`).
 
-    <workspace>/features/<site_id>/database.db     COLMAP database (cameras, images, keypoints, matches)
-    <workspace>/features/<site_id>/features.json   schema "cama.features/1": extractor, matcher, per-image
-        counts {"name": {"features", "masked" (null when an interrupted run extracted it)}},
-        "low_feature_images" [name], "pairs_listed", "pairs_pruned", "pairs_verified", "median_inliers",
-        "seconds": {"extract", "match"}
-    "fingerprint": code, config, extractor, matcher, manifest and pair list; "database_bytes": the database's size
-        as this stage left it (not its mtime: merely reading a SQLite database can touch that).
 A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
 later stages keyed on it stay up to date). Otherwise the database is reused: images already in it are not
 extracted again, matched pairs are not matched again, and the matches of pairs the list no longer holds are
@@ -21,7 +15,7 @@ import statistics
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -33,40 +27,18 @@ from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, prune_unlisted, verified_pairs
 from cama_pipeline.features.interface import FeatureExtractor, Features, PairMatcher
+from cama_pipeline.features.io import read_report, write_report
 from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
 from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
-from cama_pipeline.io import atomic_write_json
-from cama_pipeline.pairs.io import pairs_dir
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
+from cama_pipeline.io import WorkspaceError
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.site.workspace import (
-    WorkspaceError,
-    default_workspace,
-    file_stats,
-    fingerprint,
-    read_json,
-    read_site_manifest,
-    read_sites_index,
-    site_manifest_path,
-    sites_index_path,
-)
+from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
-FEATURES_SCHEMA = "cama.features/1"
-
-
-@dataclass(frozen=True)
-class SiteFeatures:
-    """One site's database and what went into it."""
-
-    site_id: str
-    database: Path
-    report: dict[str, Any]
-
-
-def features_dir(workspace: Path, site_id: str) -> Path:
-    """`<workspace>/features/<site_id>/`."""
-    return Path(workspace) / "features" / site_id
 
 
 def image_features(
@@ -141,7 +113,7 @@ def _previous_report(path: Path, extractor: FeatureExtractor) -> dict[str, Any]:
     """The stored report (empty when none); WorkspaceError when it was made by another extractor."""
     if not path.is_file():
         return {}
-    report = read_json(path, FEATURES_SCHEMA, "cama features")
+    report = read_report(path)
     if report.get("extractor") != extractor.name:
         raise WorkspaceError(
             f"{path}: database made with extractor {report.get('extractor')!r}, not {extractor.name!r}; "
@@ -152,25 +124,25 @@ def _previous_report(path: Path, extractor: FeatureExtractor) -> dict[str, Any]:
 
 def run_site(
     dataset: Dataset,
-    workspace: Path,
+    workspace: Workspace,
     site_id: str,
     config: FeaturesConfig,
     *,
     extractor: FeatureExtractor,
     matcher: PairMatcher,
     overwrite: bool = False,
-) -> SiteFeatures:
-    """Extract and match one site (see the module docstring for the files)."""
-    folder = features_dir(workspace, site_id)
-    database, report_path = folder / "database.db", folder / "features.json"
-    pairs_file = pairs_dir(workspace, site_id) / "pairs.txt"
+) -> ItemResult:
+    """Extract and match one site (see the module docstring); its item: the site's features folder and report."""
+    folder = workspace.features_dir(site_id)
+    database, report_path = workspace.features_db(site_id), workspace.features_report(site_id)
+    pairs_file = workspace.pairs_txt(site_id)
     if not pairs_file.is_file():
         raise FileNotFoundError(f"{pairs_file}: not found; run `cama pairs` first")
     if overwrite:
         database.unlink(missing_ok=True)
         report_path.unlink(missing_ok=True)
     previous = _previous_report(report_path, extractor)
-    manifest_path = site_manifest_path(workspace, site_id)
+    manifest_path = workspace.site_manifest(site_id)
     digest = fingerprint(
         code_version("cama_pipeline.features"),
         asdict(config),
@@ -179,9 +151,9 @@ def run_site(
         file_stats([manifest_path, pairs_file]),
     )
     size = database.stat().st_size if database.is_file() else None
-    if size is not None and previous.get("fingerprint") == digest and previous.get("database_bytes") == size:
+    if size is not None and is_up_to_date(report_path, digest) and previous.get("database_bytes") == size:
         logger.info("features of %s up to date", site_id)
-        return SiteFeatures(site_id, database, previous)
+        return ItemResult(site_id, folder, previous, skipped=True)
     views = site_views(dataset, read_site_manifest(manifest_path))
     started = time.perf_counter()
     with open_database(database) as db:
@@ -207,7 +179,6 @@ def run_site(
             "%d image(s) with under %d features, e.g. %s", len(low), config.min_features_warning, low[:3]
         )
     report = {
-        "schema": FEATURES_SCHEMA,
         "site_id": site_id,
         "extractor": extractor.name,
         "matcher": matcher.name,
@@ -221,35 +192,29 @@ def run_site(
     }
     report["fingerprint"] = digest
     report["database_bytes"] = database.stat().st_size
-    atomic_write_json(report_path, report, indent=1)
-    return SiteFeatures(site_id, database, report)
+    report = write_report(report_path, report)
+    return ItemResult(site_id, folder, report, skipped=False)
 
 
 def run(
     config: FeaturesConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     extractor: FeatureExtractor | None = None,
     matcher: PairMatcher | None = None,
     overwrite: bool = False,
-) -> list[SiteFeatures]:
+) -> StageResult:
     """Features and matches for every site of the workspace (after `cama pairs`); SIFT and the matcher named by
     the config unless another extractor/matcher pair is given."""
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    index = read_sites_index(sites_index_path(workspace))
+    started = time.perf_counter()
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    site_ids = read_site_ids(ws.sites_index())
     dataset = load_dataset(Path(dataset_root))
     extractor = extractor or SiftExtractor(config)
     matcher = matcher or (BlasMatcher(config) if config.matcher == "blas" else ColmapMatcher(config))
-    return [
-        run_site(
-            dataset,
-            workspace,
-            site["site_id"],
-            config,
-            extractor=extractor,
-            matcher=matcher,
-            overwrite=overwrite,
-        )
-        for site in index["sites"]
-    ]
+    items = tuple(
+        run_site(dataset, ws, site_id, config, extractor=extractor, matcher=matcher, overwrite=overwrite)
+        for site_id in site_ids
+    )
+    return StageResult("features", ws, items, time.perf_counter() - started)

@@ -3,12 +3,11 @@
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.keyframes.resync import ImageStamp, SyncedFrame, resync
 from cama_pipeline.keyframes.selection import is_stationary, select_keyframes
-from cama_pipeline.keyframes.stage import KeyframesResult, keyframes_of, run
+from cama_pipeline.keyframes.stage import keyframes_of, run
 
 __all__ = [
     "ImageStamp",
     "KeyframeConfig",
-    "KeyframesResult",
     "SyncedFrame",
     "is_stationary",
     "keyframes_of",

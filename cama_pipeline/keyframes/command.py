@@ -9,7 +9,6 @@ from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, Works
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.keyframes.stage import run
-from cama_pipeline.site.workspace import read_keyframes
 
 
 def keyframes_command(
@@ -29,22 +28,22 @@ def keyframes_command(
             min_rotation_deg=min_rotation_deg,
         )
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
-        table = Table(title="keyframes")
-        table.add_column("scene", no_wrap=True, min_width=10)
-        for column in ("frames", "keyframes", "stationary", "path m", "max diff ms", "max range ms"):
-            table.add_column(column)
-        for name, path in result.files.items():
-            kf = read_keyframes(path)
-            table.add_row(
-                name,
-                str(len(kf.frames)),
-                str(len(kf.keyframes)),
-                "yes" if kf.stationary else "",
-                f"{kf.path_length_m:.1f}",
-                f"{kf.max_time_diff_us / 1000:.1f}",
-                f"{kf.max_time_range_us / 1000:.1f}",
-            )
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
+    table = Table(title="keyframes")
+    table.add_column("scene", no_wrap=True, min_width=10)
+    for column in ("frames", "keyframes", "stationary", "path m", "max diff ms", "max range ms"):
+        table.add_column(column)
+    for item in result.items:
+        kf = item.report
+        table.add_row(
+            item.name,
+            str(kf["frames"]),
+            str(kf["keyframes"]),
+            "yes" if kf["stationary"] else "",
+            f"{kf['path_length_m']:.1f}",
+            f"{kf['max_time_diff_us'] / 1000:.1f}",
+            f"{kf['max_time_range_us'] / 1000:.1f}",
+        )
     console.print(table)
-    console.print(f"  -> {result.workspace / 'keyframes'}")
+    console.print(f"  -> {result.workspace.stage_dir('keyframes')}")

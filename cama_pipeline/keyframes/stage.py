@@ -4,53 +4,49 @@ WIGO poses; writes `keyframes/<scene>.json` into the workspace."""
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cama_pipeline.code_version import code_version
+from cama_pipeline.fingerprints import fingerprint, is_up_to_date, stored_fingerprint
 from cama_pipeline.keyframes.config import KeyframeConfig
+from cama_pipeline.keyframes.io import FrameRecord, KeyframesFile, read_keyframes, write_keyframes
 from cama_pipeline.keyframes.resync import ImageStamp, resync
 from cama_pipeline.keyframes.selection import is_stationary, path_length_m, select_keyframes
-from cama_pipeline.site.workspace import (
-    FrameRecord,
-    KeyframesFile,
-    WigoFile,
-    default_workspace,
-    fingerprint,
-    keyframes_path,
-    read_wigo,
-    stored_fingerprint,
-    wigo_path,
-    write_keyframes,
-)
+from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.wigo.io import WigoFile, read_wigo
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class KeyframesResult:
-    """What a run did: the files per scene and which were up to date."""
-
-    workspace: Path
-    files: dict[str, Path]
-    skipped: tuple[str, ...]
-    seconds: float
-
-
-def scene_names(workspace: Path, scenes: Sequence[str] | None) -> list[str]:
+def scene_names(workspace: Workspace, scenes: Sequence[str] | None) -> list[str]:
     """The requested scenes, or every scene WIGO wrote; FileNotFoundError when WIGO has not run."""
+    folder = workspace.stage_dir("wigo")
     if scenes:
-        missing = [s for s in scenes if not wigo_path(workspace, s).is_file()]
+        missing = [s for s in scenes if not workspace.wigo(s).is_file()]
         if missing:
-            raise FileNotFoundError(f"{workspace / 'wigo'}: no poses for {missing}; run `cama wigo` first")
+            raise FileNotFoundError(f"{folder}: no poses for {missing}; run `cama wigo` first")
         return list(scenes)
-    names = sorted(p.stem for p in (Path(workspace) / "wigo").glob("*.json"))
+    names = workspace.wigo_scenes()
     if not names:
-        raise FileNotFoundError(f"{workspace / 'wigo'}: no WIGO poses; run `cama wigo` first")
+        raise FileNotFoundError(f"{folder}: no WIGO poses; run `cama wigo` first")
     return names
+
+
+def summary(kf: KeyframesFile) -> dict[str, Any]:
+    """A scene's figures for the stage result: frames and keyframes, whether stationary, path and times."""
+    return {
+        "frames": len(kf.frames),
+        "keyframes": len(kf.keyframes),
+        "stationary": kf.stationary,
+        "path_length_m": kf.path_length_m,
+        "max_time_diff_us": kf.max_time_diff_us,
+        "max_time_range_us": kf.max_time_range_us,
+    }
 
 
 def keyframes_of(wigo: WigoFile, config: KeyframeConfig, digest: str) -> KeyframesFile:
@@ -91,25 +87,24 @@ def keyframes_of(wigo: WigoFile, config: KeyframeConfig, digest: str) -> Keyfram
 def run(
     config: KeyframeConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     scenes: Sequence[str] | None = None,
     overwrite: bool = False,
-) -> KeyframesResult:
-    """Resync and select keyframes for the scenes WIGO fused (default workspace: beside the data set)."""
+) -> StageResult:
+    """Resync and select keyframes for the scenes WIGO fused (default workspace: beside the data set); one item
+    per scene, its report the scene's `summary`."""
     started = time.perf_counter()
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    files: dict[str, Path] = {}
-    skipped: list[str] = []
-    for name in scene_names(workspace, scenes):
-        source = wigo_path(workspace, name)
-        path = keyframes_path(workspace, name)
-        files[name] = path
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    items: list[ItemResult] = []
+    for name in scene_names(ws, scenes):
+        source = ws.wigo(name)
+        path = ws.keyframes(name)
         digest = fingerprint(
             "keyframes", code_version("cama_pipeline.keyframes"), config.to_json(), stored_fingerprint(source)
         )
-        if not overwrite and stored_fingerprint(path) == digest:
-            skipped.append(name)
+        if not overwrite and is_up_to_date(path, digest):
+            items.append(ItemResult(name, path, summary(read_keyframes(path)), skipped=True))
             continue
         result = keyframes_of(read_wigo(source), config, digest)
         write_keyframes(path, result)
@@ -121,4 +116,5 @@ def run(
             " (stationary: all kept)" if result.stationary else "",
             result.max_time_diff_us / 1000,
         )
-    return KeyframesResult(workspace, files, tuple(skipped), time.perf_counter() - started)
+        items.append(ItemResult(name, path, summary(result), skipped=False))
+    return StageResult("keyframes", ws, tuple(items), time.perf_counter() - started)

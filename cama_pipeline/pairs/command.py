@@ -49,11 +49,11 @@ def pairs_command(
     kinds = ("exhaustive", *PAIR_REASONS, "total")
     for column in ("site", "images", *kinds, "share"):
         table.add_column(column)
-    for site in result.sites:
-        counts = site.counts
+    for site in result.items:
+        counts = site.report["counts"]
         share = counts["total"] / max(counts["exhaustive"], 1)
-        name = site.site_id + (" (up to date)" if site.skipped else "")
+        name = site.name + (" (up to date)" if site.skipped else "")
         values = [counts.get(k, 0) for k in kinds]
-        table.add_row(name, str(site.images), *map(str, values), f"{share:.1%}")
+        table.add_row(name, str(site.report["images"]), *map(str, values), f"{share:.1%}")
     console.print(table)
-    console.print(f"  -> {result.workspace / 'pairs'}")
+    console.print(f"  -> {result.workspace.stage_dir('pairs')}")

@@ -1,4 +1,5 @@
-"""The pair files of a site: the only module that reads or writes them.
+"""The pair files of a site (`Workspace.pairs_txt`, `Workspace.pairs_json`): the only module that reads or
+writes them.
 
     <workspace>/pairs/<site_id>/pairs.txt    one "nameA nameB" line per pair (COLMAP's imported pair list)
     <workspace>/pairs/<site_id>/pairs.json   schema "cama.pairs/1":
@@ -13,22 +14,17 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from cama_pipeline.io import atomic_write_bytes, atomic_write_json
+from cama_pipeline.io import WorkspaceError, atomic_write_bytes, atomic_write_json, read_json
 from cama_pipeline.pairs.config import PairsConfig
-from cama_pipeline.site.workspace import WorkspaceError, read_json
 
 PAIRS_SCHEMA = "cama.pairs/1"
 PAIR_REASONS = ("temporal", "rig", "repeat", "hsp")
 """Why a pair was chosen, in the order the counts list them."""
 
 
-def pairs_dir(workspace: Path, site_id: str) -> Path:
-    """`<workspace>/pairs/<site_id>/`."""
-    return Path(workspace) / "pairs" / site_id
-
-
 def write_pairs(
-    folder: Path,
+    txt_path: Path,
+    json_path: Path,
     *,
     site_id: str,
     digest: str,
@@ -40,9 +36,9 @@ def write_pairs(
 ) -> None:
     """Write pairs.txt and then pairs.json (the JSON, carrying the fingerprint, last: it marks completion)."""
     text = "".join(f"{a} {b}\n" for a, b, _ in pairs)
-    atomic_write_bytes(folder / "pairs.txt", text.encode("utf-8"))
+    atomic_write_bytes(txt_path, text.encode("utf-8"))
     atomic_write_json(
-        folder / "pairs.json",
+        json_path,
         {
             "schema": PAIRS_SCHEMA,
             "site_id": site_id,
@@ -56,9 +52,8 @@ def write_pairs(
     )
 
 
-def read_pairs(folder: Path) -> dict[str, Any]:
+def read_pairs(path: Path) -> dict[str, Any]:
     """pairs.json of a site, checked; FileNotFoundError says to run `cama pairs`."""
-    path = Path(folder) / "pairs.json"
     data = read_json(path, PAIRS_SCHEMA, "cama pairs")
     pairs = data.get("pairs")
     if not isinstance(pairs, list) or not all(isinstance(p, list) and len(p) == 3 for p in pairs):

@@ -2,44 +2,25 @@
 
 import logging
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import load_dataset
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import spatial_pairs
-from cama_pipeline.pairs.io import PAIR_REASONS, pairs_dir, read_pairs, write_pairs
+from cama_pipeline.pairs.io import PAIR_REASONS, read_pairs, write_pairs
 from cama_pipeline.pairs.repeats import repeat_pairs, repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
-from cama_pipeline.site.outputs import SitesRun
-from cama_pipeline.site.workspace import (
-    default_workspace,
-    file_stats,
-    fingerprint,
-    read_site_manifest,
-    read_sites_index,
-    site_manifest_path,
-    sites_index_path,
-    stored_fingerprint,
-)
+from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class SitePairs:
-    """The pairs of one site and how they were chosen."""
-
-    site_id: str
-    folder: Path
-    images: int
-    counts: dict[str, int]
-    skipped: bool
-
-
-PairsResult = SitesRun[SitePairs]
+REPORT_FIELDS = ("images", "counts", "hsp_funnel")
+"""The parts of pairs.json a run reports per site (all but the pairs themselves)."""
 
 
 def select_pairs(views: list[CameraView], config: PairsConfig) -> tuple[dict[Pair, str], dict[str, object]]:
@@ -64,24 +45,23 @@ def _counts(pairs: dict[Pair, str], n_images: int) -> dict[str, int]:
 def run(
     config: PairsConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     overwrite: bool = False,
-) -> PairsResult:
-    """Write `pairs/<site_id>/pairs.{txt,json}` for every site in `sites/index.json` (after `cama sites`)."""
+) -> StageResult:
+    """Write `pairs/<site_id>/pairs.{txt,json}` for every site in `sites/index.json` (after `cama sites`); one
+    item per site, its report pairs.json's images, counts and HSP funnel."""
     started = time.perf_counter()
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    index = read_sites_index(sites_index_path(workspace))
+    ws = Workspace.resolve(workspace, Path(dataset_root))
     dataset = None
-    done: list[SitePairs] = []
-    for site in index["sites"]:
-        site_id = site["site_id"]
-        manifest_path = site_manifest_path(workspace, site_id)
-        folder = pairs_dir(workspace, site_id)
+    done: list[ItemResult] = []
+    for site_id in read_site_ids(ws.sites_index()):
+        manifest_path = ws.site_manifest(site_id)
+        folder, report_path = ws.pairs_dir(site_id), ws.pairs_json(site_id)
         digest = fingerprint(code_version("cama_pipeline.pairs"), asdict(config), file_stats([manifest_path]))
-        if not overwrite and stored_fingerprint(folder / "pairs.json") == digest:
-            stored = read_pairs(folder)
-            done.append(SitePairs(site_id, folder, stored["images"], stored["counts"], skipped=True))
+        if not overwrite and is_up_to_date(report_path, digest):
+            stored = read_pairs(report_path)
+            done.append(ItemResult(site_id, folder, {k: stored[k] for k in REPORT_FIELDS}, skipped=True))
             continue
         if dataset is None:
             dataset = load_dataset(Path(dataset_root), check_files=False)  # poses only: no image is read
@@ -90,7 +70,8 @@ def run(
         rows = [(views[i].name, views[j].name, reason) for (i, j), reason in sorted(pairs.items())]
         counts = _counts(pairs, len(views))
         write_pairs(
-            folder,
+            ws.pairs_txt(site_id),
+            report_path,
             site_id=site_id,
             digest=digest,
             config=config,
@@ -100,5 +81,6 @@ def run(
             pairs=rows,
         )
         logger.info("site %s: %d images, pairs %s", site_id, len(views), counts)
-        done.append(SitePairs(site_id, folder, len(views), counts, skipped=False))
-    return PairsResult(workspace, tuple(done), time.perf_counter() - started)
+        report = {"images": len(views), "counts": counts, "hsp_funnel": funnel}
+        done.append(ItemResult(site_id, folder, report, skipped=False))
+    return StageResult("pairs", ws, tuple(done), time.perf_counter() - started)

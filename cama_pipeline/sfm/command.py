@@ -34,14 +34,14 @@ def sfm_command(
         raise bad_input(err) from err
     except SfmError as err:  # every clip failed: the reconstruction, not its input
         raise failure(err) from err
-    for site in result.sites:
+    for site in result.items:
         merged, clips = site.report["merged"], site.report["clips"]
         failed = [scene for scene, clip in clips.items() if clip["status"] != "ok"]
         state = "up to date" if site.skipped else f"{site.report['seconds']['total']:.1f} s"
         console.print(
-            f"[green]{site.site_id}[/green]: {merged['registered_images']} of {merged['images']} images, "
+            f"[green]{site.name}[/green]: {merged['registered_images']} of {merged['images']} images, "
             f"{merged['points']} points, {merged['reprojection_error_px']:.2f} px, "
-            f"{len(clips) - len(failed)} of {len(clips)} clips ({state}) -> {site.folder}"
+            f"{len(clips) - len(failed)} of {len(clips)} clips ({state}) -> {site.path}"
         )
         if failed:
             console.print(f"  [yellow]clips left out (SfM failed): {', '.join(failed)}[/yellow]")

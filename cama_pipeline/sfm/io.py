@@ -1,4 +1,5 @@
-"""The SfM outputs of a site in the workspace: the only module that reads or writes them.
+"""The SfM outputs of a site in the workspace (`Workspace.sfm_model`, `sfm_clips`, `sfm_poses`, `sfm_points`,
+`sfm_report`): the only module that reads or writes them.
 
 <workspace>/sfm/<site_id>/model/          the merged site model, COLMAP binary (`Reconstruction.write`):
                                           cameras.bin, images.bin, points3D.bin (+ rigs.bin, frames.bin);
@@ -41,8 +42,7 @@ import numpy as np
 import pycolmap
 
 from cama_pipeline.data import Pose
-from cama_pipeline.io import atomic_write_bytes, atomic_write_json
-from cama_pipeline.site.workspace import WorkspaceError, _field, read_json
+from cama_pipeline.io import WorkspaceError, atomic_write_bytes, atomic_write_json, field, read_json
 
 POSES_SCHEMA = "cama.sfm/1"
 REPORT_SCHEMA = "cama.sfm-report/1"
@@ -73,11 +73,6 @@ class PoseEntry:
     channel: str
     world_from_ego: np.ndarray
     flagged: bool
-
-
-def sfm_dir(workspace: Path, site_id: str) -> Path:
-    """`<workspace>/sfm/<site_id>/`."""
-    return Path(workspace) / "sfm" / site_id
 
 
 def write_model(folder: Path, reconstruction: pycolmap.Reconstruction) -> None:
@@ -133,7 +128,7 @@ def write_poses(path: Path, *, site_id: str, digest: str, poses: dict[str, PoseE
 def _vector(raw: dict[str, Any], name: str, size: int, path: Path, where: str) -> np.ndarray:
     """raw[name] as `size` finite floats, else a WorkspaceError naming the file and field."""
     try:
-        vector = np.asarray(_field(raw, name, list, path, where), dtype=np.float64)
+        vector = np.asarray(field(raw, name, list, path, where), dtype=np.float64)
     except (TypeError, ValueError):
         vector = np.zeros(0)
     if vector.shape != (size,) or not np.all(np.isfinite(vector)):
@@ -150,27 +145,25 @@ def _pose_entry(raw: Any, path: Path, token: str) -> PoseEntry:
     if np.linalg.norm(rotation) < 1e-9:
         raise WorkspaceError(f"{path}: field {where}'rotation' must be a non-zero quaternion")
     return PoseEntry(
-        name=_field(raw, "name", str, path, where),
-        scene=_field(raw, "scene", str, path, where),
-        channel=_field(raw, "channel", str, path, where),
+        name=field(raw, "name", str, path, where),
+        scene=field(raw, "scene", str, path, where),
+        channel=field(raw, "channel", str, path, where),
         world_from_ego=Pose(translation, rotation).matrix(),
-        flagged=_field(raw, "flagged", bool, path, where),
+        flagged=field(raw, "flagged", bool, path, where),
     )
 
 
-def read_pose_entries(workspace: Path, site_id: str) -> dict[str, PoseEntry]:
+def read_pose_entries(path: Path) -> dict[str, PoseEntry]:
     """Every image of poses.json, checked; FileNotFoundError / WorkspaceError naming the file and field."""
-    path = sfm_dir(workspace, site_id) / "poses.json"
     data = read_json(path, POSES_SCHEMA, "cama sfm")
-    images = _field(data, "images", dict, path)
+    images = field(data, "images", dict, path)
     return {token: _pose_entry(raw, path, token) for token, raw in images.items()}
 
 
-def read_refined_poses(
-    workspace: Path, site_id: str, *, include_flagged: bool = False
-) -> dict[str, np.ndarray]:
-    """sample_data token -> (4, 4) refined world_from_ego; flagged (untrusted) images left out unless asked."""
-    entries = read_pose_entries(workspace, site_id)
+def read_refined_poses(path: Path, *, include_flagged: bool = False) -> dict[str, np.ndarray]:
+    """sample_data token -> (4, 4) refined world_from_ego of poses.json; flagged (untrusted) images left out
+    unless asked."""
+    entries = read_pose_entries(path)
     return {
         token: entry.world_from_ego
         for token, entry in entries.items()
@@ -191,9 +184,9 @@ def write_points(path: Path, points: SparsePoints) -> None:
     atomic_write_bytes(path, buffer.getvalue())
 
 
-def read_points(workspace: Path, site_id: str) -> SparsePoints:
-    """The site's points.npz; FileNotFoundError / WorkspaceError naming the file and the bad array."""
-    path = sfm_dir(workspace, site_id) / "points.npz"
+def read_points(path: Path) -> SparsePoints:
+    """A site's points.npz; FileNotFoundError / WorkspaceError naming the file and the bad array."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: not found; run `cama sfm` first")
     try:
@@ -209,14 +202,16 @@ def read_points(workspace: Path, site_id: str) -> SparsePoints:
         raise WorkspaceError(f"{path}: {err}") from None
 
 
-def write_report(path: Path, report: dict[str, Any]) -> None:
-    """Write report.json atomically (last: it carries the fingerprint that marks the site done)."""
-    atomic_write_json(path, {"schema": REPORT_SCHEMA, **report}, indent=1)
+def write_report(path: Path, report: dict[str, Any]) -> dict[str, Any]:
+    """Write report.json atomically (last: it carries the fingerprint that marks the site done); returns what
+    was written."""
+    stored = {"schema": REPORT_SCHEMA, **report}
+    atomic_write_json(path, stored, indent=1)
+    return stored
 
 
-def read_report(workspace: Path, site_id: str) -> dict[str, Any]:
-    """The site's report.json, schema-checked."""
-    path = sfm_dir(workspace, site_id) / "report.json"
+def read_report(path: Path) -> dict[str, Any]:
+    """A site's report.json, schema-checked."""
     data = read_json(path, REPORT_SCHEMA, "cama sfm")
-    _field(data, "clips", dict, path)
+    field(data, "clips", dict, path)
     return data

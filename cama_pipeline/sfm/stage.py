@@ -22,8 +22,9 @@ import pycolmap
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
-from cama_pipeline.features.stage import features_dir
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date, stored_fingerprint
 from cama_pipeline.progress import StageProgress
+from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import Executor, make_executor
@@ -32,7 +33,6 @@ from cama_pipeline.sfm.io import (
     PoseEntry,
     read_model,
     read_report,
-    sfm_dir,
     write_model,
     write_points,
     write_poses,
@@ -48,17 +48,8 @@ from cama_pipeline.sfm.merge import (
     merge_groups,
 )
 from cama_pipeline.sfm.triangulate import model_seeds
-from cama_pipeline.site.outputs import SiteOutputs, SitesRun
-from cama_pipeline.site.workspace import (
-    default_workspace,
-    file_stats,
-    fingerprint,
-    read_site_manifest,
-    read_sites_index,
-    site_manifest_path,
-    sites_index_path,
-    stored_fingerprint,
-)
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -169,10 +160,10 @@ class SiteReconstruction:
 
 
 def _clip_tasks(
-    clips: dict[str, list[CameraView]], database: Path, image_dir: Path, config: SfmConfig, workdir: Path
+    clips: dict[str, list[CameraView]], database: Path, image_dir: Path, config: SfmConfig, clips_dir: Path
 ) -> list[ClipTask]:
     return [
-        ClipTask(scene, tuple(views), database, Path(image_dir), config, workdir / "clips" / scene)
+        ClipTask(scene, tuple(views), database, Path(image_dir), config, clips_dir / scene)
         for scene, views in clips.items()
     ]
 
@@ -267,15 +258,15 @@ def reconstruct_site(
     database: Path,
     image_dir: Path,
     config: SfmConfig,
-    workdir: Path,
+    clips_dir: Path,
     *,
     executor: Executor,
     merge_config: MergeConfig | None = None,
     progress: StageProgress | None = None,
 ) -> SiteReconstruction:
-    """Parallel per-clip reconstruction, then the merge (clip models are kept under `workdir/clips/`)."""
+    """Parallel per-clip reconstruction, then the merge (clip models are kept in `clips_dir/<scene>/`)."""
     started = time.perf_counter()
-    tasks = _clip_tasks(clips, database, image_dir, config, workdir)
+    tasks = _clip_tasks(clips, database, image_dir, config, clips_dir)
     outcomes = run_clips(tasks, executor, progress)
     clipped = time.perf_counter()
     result, union, merge = merge_site(outcomes, tasks, config, merge_config or MergeConfig(), progress)
@@ -302,11 +293,6 @@ def reconstruct_site(
     )
 
 
-SiteSfm = SiteOutputs
-"""One site's SfM outputs and report."""
-SfmResult = SitesRun[SiteSfm]
-
-
 def _pose_entries(site: SiteReconstruction) -> dict[str, PoseEntry]:
     """poses.json entries: refined registered views, then the flagged ones with their incoming pose."""
     entries = {}
@@ -317,7 +303,7 @@ def _pose_entries(site: SiteReconstruction) -> dict[str, PoseEntry]:
 
 
 def write_site(
-    folder: Path,
+    workspace: Workspace,
     site_id: str,
     digest: str,
     site: SiteReconstruction,
@@ -325,17 +311,16 @@ def write_site(
     extra: dict[str, Any],
 ) -> dict[str, Any]:
     """Write the site's model, poses, points and (last) report; returns the report."""
-    write_model(folder / "model", site.reconstruction)
-    write_poses(folder / "poses.json", site_id=site_id, digest=digest, poses=_pose_entries(site))
-    write_points(folder / "points.npz", sparse_points(site.reconstruction, read_mask))
+    write_model(workspace.sfm_model(site_id), site.reconstruction)
+    write_poses(workspace.sfm_poses(site_id), site_id=site_id, digest=digest, poses=_pose_entries(site))
+    write_points(workspace.sfm_points(site_id), sparse_points(site.reconstruction, read_mask))
     report = {"site_id": site_id, "fingerprint": digest, **extra, **site.report}
-    write_report(folder / "report.json", report)
-    return report
+    return write_report(workspace.sfm_report(site_id), report)
 
 
 def run_site(
     dataset: Dataset,
-    workspace: Path,
+    workspace: Workspace,
     site_id: str,
     config: SfmConfig,
     *,
@@ -343,14 +328,15 @@ def run_site(
     merge_config: MergeConfig,
     overwrite: bool = False,
     show_progress: bool = True,
-) -> SiteSfm:
-    """Reconstruct one site into `sfm/<site_id>/` unless its outputs are up to date."""
-    manifest_path = site_manifest_path(workspace, site_id)
-    database = features_dir(workspace, site_id) / "database.db"
+) -> ItemResult:
+    """Reconstruct one site into `sfm/<site_id>/` unless its outputs are up to date; its item: that folder and
+    the site's report."""
+    manifest_path = workspace.site_manifest(site_id)
+    database = workspace.features_db(site_id)
     if not database.is_file():
         raise FileNotFoundError(f"{database}: not found; run `cama features` first")
-    folder = sfm_dir(workspace, site_id)
-    features = stored_fingerprint(database.with_name("features.json")) or file_stats([database])
+    folder, report_path = workspace.sfm_dir(site_id), workspace.sfm_report(site_id)
+    features = stored_fingerprint(workspace.features_report(site_id)) or file_stats([database])
     digest = fingerprint(
         code_version("cama_pipeline.sfm"),
         asdict(config),
@@ -358,11 +344,12 @@ def run_site(
         file_stats([manifest_path]),
         features,
     )
-    if not overwrite and stored_fingerprint(folder / "report.json") == digest:
-        return SiteSfm(site_id, folder, read_report(workspace, site_id), skipped=True)
+    if not overwrite and is_up_to_date(report_path, digest):
+        return ItemResult(site_id, folder, read_report(report_path), skipped=True)
     manifest = read_site_manifest(manifest_path)
     views = site_views(dataset, manifest)
-    shutil.rmtree(folder / "clips", ignore_errors=True)  # no stale model of a clip that fails this time
+    clips_dir = workspace.sfm_clips(site_id)
+    shutil.rmtree(clips_dir, ignore_errors=True)  # no stale model of a clip that fails this time
     with (
         tempfile.TemporaryDirectory(prefix="cama-sfm-") as scratch,
         StageProgress("sfm", logger=logger, enabled=show_progress, transient=True) as progress,
@@ -373,13 +360,13 @@ def run_site(
             copy,
             dataset.root,
             config,
-            folder,
+            clips_dir,
             executor=executor,
             merge_config=merge_config,
             progress=progress,
         )
     extra = {"config": asdict(config), "merge_config": asdict(merge_config)}
-    report = write_site(folder, site_id, digest, site, dataset_masks(dataset, views), extra)
+    report = write_site(workspace, site_id, digest, site, dataset_masks(dataset, views), extra)
     merged = report["merged"]
     logger.info(
         "site %s: %d of %d images registered, %d points, %.2f px",
@@ -389,37 +376,37 @@ def run_site(
         merged["points"],
         merged["reprojection_error_px"],
     )
-    return SiteSfm(site_id, folder, report, skipped=False)
+    return ItemResult(site_id, folder, report, skipped=False)
 
 
 def run(
     config: SfmConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     executor: str = "local",
     workers: int = 2,
     merge_config: MergeConfig | None = None,
     overwrite: bool = False,
     show_progress: bool = True,
-) -> SfmResult:
+) -> StageResult:
     """Reconstruct every site of the workspace (after `cama features`) on the named executor."""
     started = time.perf_counter()
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    index = read_sites_index(sites_index_path(workspace))
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    site_ids = read_site_ids(ws.sites_index())
     runner = make_executor(executor, workers)
     dataset = load_dataset(Path(dataset_root))
     sites = tuple(
         run_site(
             dataset,
-            workspace,
-            site["site_id"],
+            ws,
+            site_id,
             config,
             executor=runner,
             merge_config=merge_config or MergeConfig(),
             overwrite=overwrite,
             show_progress=show_progress,
         )
-        for site in index["sites"]
+        for site_id in site_ids
     )
-    return SfmResult(workspace, sites, time.perf_counter() - started)
+    return StageResult("sfm", ws, sites, time.perf_counter() - started)

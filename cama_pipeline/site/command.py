@@ -25,10 +25,12 @@ def sites_command(
         result = run(config, dataset, workspace, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
-    state = " (up to date)" if result.skipped else ""
-    for site in result.aggregation.sites:
-        merged = ", ".join(f"{s} -> {m}" for s, m in site.merged.items()) or "none"
-        console.print(f"[green]{site.site_id}[/green]{state}: {', '.join(site.scenes)}; merged: {merged}")
-        console.print(f"  manifest: {result.manifests[site.site_id]}")
-    for name, reason in result.aggregation.dropped.items():
-        console.print(f"[yellow]dropped[/yellow] {name}: {reason}")
+    for site in result.items:
+        state = " (up to date)" if site.skipped else ""
+        merged = ", ".join(f"{s} -> {m}" for s, m in site.report["merged"].items()) or "none"
+        console.print(
+            f"[green]{site.name}[/green]{state}: {', '.join(site.report['scenes'])}; merged: {merged}"
+        )
+        console.print(f"  manifest: {site.path}")
+    for dropped in result.report["dropped"]:
+        console.print(f"[yellow]dropped[/yellow] {dropped['scene']}: {dropped['reason']}")

@@ -3,7 +3,6 @@ write `sites/index.json` plus one `sites/<site_id>/manifest.json` per site into 
 
 import logging
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -11,37 +10,17 @@ import numpy as np
 
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.fingerprints import fingerprint, is_up_to_date
+from cama_pipeline.keyframes.io import KeyframesFile, read_keyframes
+from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.site.aggregate import Aggregation, SceneTrack, aggregate
 from cama_pipeline.site.config import SiteConfig
+from cama_pipeline.site.io import write_site_manifest, write_sites_index
 from cama_pipeline.site.night import night_reason
-from cama_pipeline.site.workspace import (
-    KeyframesFile,
-    WigoFile,
-    default_workspace,
-    fingerprint,
-    keyframes_path,
-    read_keyframes,
-    read_wigo,
-    site_manifest_path,
-    sites_index_path,
-    stored_fingerprint,
-    wigo_path,
-    write_site_manifest,
-    write_sites_index,
-)
+from cama_pipeline.wigo.io import WigoFile, read_wigo
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class SitesResult:
-    """What a run did: the aggregation, the files written, whether it was up to date."""
-
-    workspace: Path
-    aggregation: Aggregation
-    manifests: dict[str, Path]
-    skipped: bool
-    seconds: float
 
 
 def _manifest(
@@ -70,30 +49,44 @@ def _manifest(
     return {"site_id": site_id, "scenes": scenes, "poses": poses}
 
 
-def _read_scene_outputs(dataset: Dataset, workspace: Path) -> dict[str, tuple[WigoFile, KeyframesFile]]:
+def _read_scene_outputs(dataset: Dataset, workspace: Workspace) -> dict[str, tuple[WigoFile, KeyframesFile]]:
     """WIGO and keyframes outputs of every scene; FileNotFoundError names the stage to run first."""
     outputs = {}
     for scene in dataset.scenes:
         outputs[scene.name] = (
-            read_wigo(wigo_path(workspace, scene.name)),
-            read_keyframes(keyframes_path(workspace, scene.name)),
+            read_wigo(workspace.wigo(scene.name)),
+            read_keyframes(workspace.keyframes(scene.name)),
         )
     return outputs
+
+
+def _index(aggregation: Aggregation, digest: str, config: SiteConfig) -> dict[str, Any]:
+    """The content of `sites/index.json` (schema in `cama_pipeline.site.io`)."""
+    return {
+        "fingerprint": digest,
+        "config": config.to_json(),
+        "sites": [
+            {"site_id": s.site_id, "scenes": list(s.scenes), "merged": s.merged} for s in aggregation.sites
+        ],
+        "dropped": [{"scene": name, "reason": reason} for name, reason in aggregation.dropped.items()],
+    }
 
 
 def run(
     config: SiteConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     overwrite: bool = False,
     dataset: Dataset | None = None,
-) -> SitesResult:
-    """Aggregate the data set's scenes into sites (default workspace: beside the data set)."""
+) -> StageResult:
+    """Aggregate the data set's scenes into sites (default workspace: beside the data set). One item per site
+    (its manifest; report: its `sites/index.json` entry), the run's report the whole index (with the dropped
+    scenes); an up-to-date index skips every site."""
     started = time.perf_counter()
     dataset = dataset if dataset is not None else load_dataset(Path(dataset_root), check_files=False)
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    outputs = _read_scene_outputs(dataset, workspace)
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    outputs = _read_scene_outputs(dataset, ws)
     digest = fingerprint(
         "sites",
         code_version("cama_pipeline.site"),
@@ -103,29 +96,26 @@ def run(
             for s in dataset.scenes
         ],
     )
-    index_path = sites_index_path(workspace)
+    index_path = ws.sites_index()
     tracks = []
     for scene in dataset.scenes:
         wigo, kf = outputs[scene.name]
         positions = np.array([p.translation for p in wigo.poses]).reshape(-1, 3)
         tracks.append(SceneTrack(scene.name, positions, kf.stationary, night_reason(scene, config)))
     result = aggregate(tracks, config)
-    manifests = {site.site_id: site_manifest_path(workspace, site.site_id) for site in result.sites}
-    if (
-        not overwrite
-        and stored_fingerprint(index_path) == digest
-        and all(p.is_file() for p in manifests.values())
-    ):
+    index = _index(result, digest, config)
+    manifests = {site.site_id: ws.site_manifest(site.site_id) for site in result.sites}
+    skipped = (
+        not overwrite and is_up_to_date(index_path, digest) and all(p.is_file() for p in manifests.values())
+    )
+    if skipped:
         logger.info("%s is up to date", index_path)
-        return SitesResult(workspace, result, manifests, True, time.perf_counter() - started)
-    for site in result.sites:
-        chosen = [outputs[name] for name in site.scenes]
-        write_site_manifest(manifests[site.site_id], _manifest(chosen, site.merged, site.site_id))
-    index = {
-        "fingerprint": digest,
-        "config": config.to_json(),
-        "sites": [{"site_id": s.site_id, "scenes": list(s.scenes), "merged": s.merged} for s in result.sites],
-        "dropped": [{"scene": name, "reason": reason} for name, reason in result.dropped.items()],
-    }
-    write_sites_index(index_path, index)
-    return SitesResult(workspace, result, manifests, False, time.perf_counter() - started)
+    else:
+        for site in result.sites:
+            chosen = [outputs[name] for name in site.scenes]
+            write_site_manifest(manifests[site.site_id], _manifest(chosen, site.merged, site.site_id))
+        write_sites_index(index_path, index)
+    items = tuple(
+        ItemResult(entry["site_id"], manifests[entry["site_id"]], entry, skipped) for entry in index["sites"]
+    )
+    return StageResult("sites", ws, items, time.perf_counter() - started, report=index)

@@ -1,6 +1,6 @@
 """Road surface reconstruction (RoMe-style): elevation MLP, optimised mesh, BEV rasters."""
 
 from cama_pipeline.surface.config import SurfaceConfig
-from cama_pipeline.surface.stage import SiteSurface, run
+from cama_pipeline.surface.stage import run
 
-__all__ = ["SiteSurface", "SurfaceConfig", "run"]
+__all__ = ["SurfaceConfig", "run"]

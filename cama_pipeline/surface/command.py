@@ -40,18 +40,18 @@ def surface_command(
             torch_threads=threads,
             device=device,  # type: ignore[arg-type]  # validated by SurfaceConfig
         )
-        sites = run(config, dataset, workspace, poses=poses, overwrite=overwrite)
+        result = run(config, dataset, workspace, poses=poses, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     table = Table(title=f"surface ({poses} poses)")
     for column in ("site", "images", "vertices", "cells observed", "seconds"):
         table.add_column(column)
-    for site in sites:
+    for site in result.items:
         report = site.report
-        name = site.site_id + (" (up to date)" if site.skipped else "")
+        name = site.name + (" (up to date)" if site.skipped else "")
         seconds = sum(report["seconds"].values())
         values = (report["images"], report["vertices"], report["cells_observed"], f"{seconds:.1f}")
         table.add_row(name, *map(str, values))
     console.print(table)
-    for site in sites:  # paths on their own lines: a long one would crush the table
-        console.print(f"  {site.site_id} -> {site.folder}")
+    for site in result.items:  # paths on their own lines: a long one would crush the table
+        console.print(f"  {site.name} -> {site.path}")

@@ -1,4 +1,5 @@
-"""The surface stage's files in the workspace; this module is the only one that writes or reads them.
+"""The surface stage's files in the workspace (`Workspace.surface_bev`, `surface_mesh`, `surface_report`); this
+module is the only one that writes or reads them.
 
 <workspace>/surface/<site_id>/mesh.ply      the observed road mesh (trimesh, binary PLY): global metres,
                                              per-vertex RGB colour and a `label` attribute (class 0-4)
@@ -21,30 +22,24 @@ import trimesh
 from trimesh.exchange.ply import export_ply
 
 from cama_pipeline.bev import BevRasters
-from cama_pipeline.io import atomic_write_bytes, atomic_write_json
+from cama_pipeline.io import atomic_write_bytes, atomic_write_json, read_json
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.workspace import read_json
 from cama_pipeline.surface.grid import SurfaceGrid
+from cama_pipeline.workspace import Workspace
 
 REPORT_SCHEMA = "cama.surface/1"
 MAX_COUNT = np.iinfo(np.uint16).max
 
 
-def surface_dir(workspace: Path, site_id: str) -> Path:
-    """`<workspace>/surface/<site_id>/`."""
-    return Path(workspace) / "surface" / site_id
-
-
-def report_path(workspace: Path, site_id: str) -> Path:
-    return surface_dir(workspace, site_id) / "report.json"
-
-
 def is_surface_bev(folder: Path) -> bool:
     """Whether a raster folder is a surface stage's `bev/` (reconstructed rasters: its finished report beside it),
     not a generator's ground truth; proposers treat the two differently (smeared curbs)."""
-    folder = Path(folder)
-    report = folder.parent / "report.json"
-    if folder.name != "bev" or not report.is_file():
+    try:
+        workspace, site_id = Workspace.locate(folder)
+    except ValueError:
+        return False
+    report = workspace.surface_report(site_id)
+    if not report.is_file():
         return False
     try:
         read_report(report)
@@ -98,9 +93,11 @@ def write_mesh(path: Path, mesh: trimesh.Trimesh) -> None:
     atomic_write_bytes(path, export_ply(mesh))
 
 
-def write_report(path: Path, report: dict[str, Any]) -> None:
-    """report.json atomically; written last, its fingerprint marks the site complete."""
-    atomic_write_json(path, {"schema": REPORT_SCHEMA, **report}, indent=1)
+def write_report(path: Path, report: dict[str, Any]) -> dict[str, Any]:
+    """report.json atomically; written last, its fingerprint marks the site complete. Returns what was written."""
+    stored = {"schema": REPORT_SCHEMA, **report}
+    atomic_write_json(path, stored, indent=1)
+    return stored
 
 
 def read_report(path: Path) -> dict[str, Any]:

@@ -6,14 +6,14 @@ the ego frame's z = 0 plane under the car body: road by construction, and never 
 
 import logging
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from cama_pipeline.cameras import CameraView
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.sfm.io import read_points, sfm_dir
+from cama_pipeline.sfm.io import read_points
 from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -54,12 +54,13 @@ def trajectory_strip(poses: np.ndarray, config: SurfaceConfig) -> np.ndarray:
     return np.einsum("kij,sj->ksi", poses, local)[..., :3].reshape(-1, 3)
 
 
-def sfm_surface_points(workspace: Path, site_id: str, config: SurfaceConfig) -> np.ndarray:
+def sfm_surface_points(workspace: Workspace, site_id: str, config: SurfaceConfig) -> np.ndarray:
     """(M, 3) SfM points labelled road, marking or crosswalk with a small reprojection error; empty
     without SfM."""
-    if not config.use_sfm_points or not (sfm_dir(workspace, site_id) / "points.npz").is_file():
+    path = workspace.sfm_points(site_id)
+    if not config.use_sfm_points or not path.is_file():
         return np.zeros((0, 3))
-    points = read_points(workspace, site_id)
+    points = read_points(path)
     keep = np.isin(points.label, [int(c) for c in SURFACE_LABELS]) & (
         points.error_px <= config.sfm_max_error_px
     )

@@ -10,8 +10,9 @@ import numpy as np
 
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Dataset, Pose
-from cama_pipeline.sfm.io import read_refined_poses, sfm_dir
+from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.surface.config import POSE_SOURCES
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -36,17 +37,17 @@ def _ground_truth_poses(dataset_root: Path) -> dict[str, np.ndarray]:
         raise ValueError(f"{path}: not a token -> {{translation, rotation}} map ({err})") from None
 
 
-def pose_inputs(dataset_root: Path, workspace: Path, site_id: str, source: str) -> list[Path]:
+def pose_inputs(dataset_root: Path, workspace: Workspace, site_id: str, source: str) -> list[Path]:
     """The files the chosen poses come from (besides the site manifest), for the fingerprint."""
     if source == "ground_truth":
         return [ground_truth_poses_path(dataset_root)]
     if source == "sfm":
-        return [sfm_dir(workspace, site_id) / "poses.json"]
+        return [workspace.sfm_poses(site_id)]
     return []
 
 
 def posed_views(
-    dataset: Dataset, manifest: dict[str, Any], workspace: Path, site_id: str, source: str
+    dataset: Dataset, manifest: dict[str, Any], workspace: Workspace, site_id: str, source: str
 ) -> list[CameraView]:
     """The site's keyframe views with `source`'s ego poses; views the source has no pose for are dropped."""
     if source not in POSE_SOURCES:
@@ -57,7 +58,7 @@ def posed_views(
     poses = (
         _ground_truth_poses(dataset.root)
         if source == "ground_truth"
-        else read_refined_poses(workspace, site_id)
+        else read_refined_poses(workspace.sfm_poses(site_id))
     )
     posed = [replace(v, world_from_ego=poses[v.token]) for v in views if v.token in poses]
     if len(posed) < len(views):

@@ -17,19 +17,10 @@ import torch
 from cama_pipeline.bev import write_bev
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.sfm.io import sfm_dir
-from cama_pipeline.site.outputs import SiteOutputs
-from cama_pipeline.site.workspace import (
-    default_workspace,
-    file_stats,
-    fingerprint,
-    read_site_manifest,
-    read_sites_index,
-    site_manifest_path,
-    sites_index_path,
-    stored_fingerprint,
-)
+from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
 from cama_pipeline.surface.fit import fit_steps, fit_surface
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
@@ -37,19 +28,14 @@ from cama_pipeline.surface.outputs import (
     grid_mesh,
     rasters_from_vertices,
     read_report,
-    report_path,
-    surface_dir,
     write_mesh,
     write_report,
 )
 from cama_pipeline.surface.points import NoRoadPointsError, sfm_surface_points, surface_points
 from cama_pipeline.surface.poses import pose_inputs, posed_views
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
-
-
-SiteSurface = SiteOutputs
-"""One site's surface outputs and report."""
 
 
 def pick_device(config: SurfaceConfig) -> torch.device:
@@ -91,21 +77,23 @@ class _Phases:
         self.progress.update(task, completed=total)
 
 
-def _site_digest(config: SurfaceConfig, dataset_root: Path, workspace: Path, site_id: str, poses: str) -> str:
+def _site_digest(
+    config: SurfaceConfig, dataset_root: Path, workspace: Workspace, site_id: str, poses: str
+) -> str:
     """Fingerprint of the config, the pose source and the files the site's surface is made from."""
-    inputs = [site_manifest_path(workspace, site_id), *pose_inputs(dataset_root, workspace, site_id, poses)]
+    inputs = [workspace.site_manifest(site_id), *pose_inputs(dataset_root, workspace, site_id, poses)]
     if config.use_sfm_points:
-        inputs.append(sfm_dir(workspace, site_id) / "points.npz")
+        inputs.append(workspace.sfm_points(site_id))
     return fingerprint(code_version("cama_pipeline.surface"), asdict(config), poses, file_stats(inputs))
 
 
 def reconstruct_site(
-    dataset: Dataset, workspace: Path, site_id: str, config: SurfaceConfig, poses: str, phases: _Phases
+    dataset: Dataset, workspace: Workspace, site_id: str, config: SurfaceConfig, poses: str, phases: _Phases
 ) -> dict[str, Any]:
     """Run every phase on one site and write its outputs; returns the report (without fingerprint)."""
     device = pick_device(config)
     views = posed_views(
-        dataset, read_site_manifest(site_manifest_path(workspace, site_id)), workspace, site_id, poses
+        dataset, read_site_manifest(workspace.site_manifest(site_id)), workspace, site_id, poses
     )
     try:
         points = surface_points(views, sfm_surface_points(workspace, site_id, config), config)
@@ -125,9 +113,8 @@ def reconstruct_site(
         rasters = rasters_from_vertices(
             grid, heights, mesh.colour.cpu().numpy(), labels, mesh.count.cpu().numpy()
         )
-        folder = surface_dir(workspace, site_id)
-        write_bev(folder / "bev", rasters)
-        write_mesh(folder / "mesh.ply", grid_mesh(grid, rasters))
+        write_bev(workspace.surface_bev(site_id), rasters)
+        write_mesh(workspace.surface_mesh(site_id), grid_mesh(grid, rasters))
         advance(1, 0.0)
     return {
         "site_id": site_id,
@@ -146,40 +133,37 @@ def reconstruct_site(
 def run(
     config: SurfaceConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     poses: str = "wigo",
     overwrite: bool = False,
     show_progress: bool = True,
-) -> list[SiteSurface]:
+) -> StageResult:
     """Surface mesh and BEV rasters of every site in `sites/index.json` (after `cama sites`), posed by
     `poses` (ground_truth: synthetic sites only; wigo: the site manifest; sfm: after `cama sfm`)."""
     if poses not in POSE_SOURCES:
         raise ValueError(f"poses must be one of {', '.join(POSE_SOURCES)}, got {poses!r}")
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
-    index = read_sites_index(sites_index_path(workspace))
+    started = time.perf_counter()
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    site_ids = read_site_ids(ws.sites_index())
     dataset: Dataset | None = None
-    done: list[SiteSurface] = []
+    done: list[ItemResult] = []
     with (
         StageProgress("surface", logger=logger, enabled=show_progress) as progress,
         torch_threads(config.torch_threads),
     ):
-        for site in index["sites"]:
-            site_id = site["site_id"]
-            digest = _site_digest(config, Path(dataset_root), workspace, site_id, poses)
-            path = report_path(workspace, site_id)
-            if not overwrite and stored_fingerprint(path) == digest:
-                done.append(
-                    SiteSurface(site_id, surface_dir(workspace, site_id), read_report(path), skipped=True)
-                )
+        for site_id in site_ids:
+            digest = _site_digest(config, Path(dataset_root), ws, site_id, poses)
+            path, folder = ws.surface_report(site_id), ws.surface_dir(site_id)
+            if not overwrite and is_up_to_date(path, digest):
+                done.append(ItemResult(site_id, folder, read_report(path), skipped=True))
                 continue
             dataset = dataset or load_dataset(Path(dataset_root))
             torch.manual_seed(config.seed)
-            report = reconstruct_site(dataset, workspace, site_id, config, poses, _Phases(progress, site_id))
-            report = {**report, "fingerprint": digest}
-            write_report(path, report)
+            report = reconstruct_site(dataset, ws, site_id, config, poses, _Phases(progress, site_id))
+            report = write_report(path, {**report, "fingerprint": digest})
             logger.info(
                 "site %s: %d cells observed, %s s", site_id, report["cells_observed"], report["seconds"]
             )
-            done.append(SiteSurface(site_id, surface_dir(workspace, site_id), report, skipped=False))
-    return done
+            done.append(ItemResult(site_id, folder, report, skipped=False))
+    return StageResult("surface", ws, tuple(done), time.perf_counter() - started)

@@ -28,8 +28,8 @@ def wigo_command(
         result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
-    done = len(result.files) - len(result.skipped)
+    done = len(result.items) - len(result.skipped)
     console.print(
         f"[green]wigo[/green] {done} scene(s) fused, {len(result.skipped)} up to date, "
-        f"in {result.seconds:.1f} s -> {result.workspace / 'wigo'}"
+        f"in {result.seconds:.1f} s -> {result.workspace.stage_dir('wigo')}"
     )

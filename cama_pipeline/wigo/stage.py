@@ -3,7 +3,6 @@
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 from scipy.spatial.transform import Rotation
@@ -11,32 +10,16 @@ from scipy.spatial.transform import Rotation
 from cama_pipeline.code_version import code_version
 from cama_pipeline.data import Dataset, Scene, load_dataset
 from cama_pipeline.data.schema import CAN_DIR, CAN_MESSAGES, can_file_name
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.site.workspace import (
-    PoseRecord,
-    WigoFile,
-    default_workspace,
-    file_stats,
-    fingerprint,
-    stored_fingerprint,
-    wigo_path,
-    write_wigo,
-)
+from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.wigo.config import WigoConfig
 from cama_pipeline.wigo.fusion import FusedPoses, fuse_clip
 from cama_pipeline.wigo.inputs import clip_inputs
+from cama_pipeline.wigo.io import PoseRecord, WigoFile, read_wigo, write_wigo
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class WigoResult:
-    """What a run did: the files per scene, which were skipped as up to date, how long it took."""
-
-    workspace: Path
-    files: dict[str, Path]
-    skipped: tuple[str, ...]
-    seconds: float
 
 
 def select_scenes(dataset: Dataset, names: Sequence[str] | None) -> tuple[Scene, ...]:
@@ -76,35 +59,35 @@ def to_wigo_file(fused: FusedPoses, scene: Scene, digest: str, config: WigoConfi
 def run(
     config: WigoConfig,
     dataset_root: Path,
-    workspace: Path | None = None,
+    workspace: Path | Workspace | None = None,
     *,
     scenes: Sequence[str] | None = None,
     overwrite: bool = False,
     show_progress: bool = True,
     dataset: Dataset | None = None,
-) -> WigoResult:
-    """Fuse the scenes of the data set at `dataset_root` (default workspace: beside the data set).
+) -> StageResult:
+    """Fuse the scenes of the data set at `dataset_root` (default workspace: beside the data set); one item
+    per scene, its report the fusion's (as stored in the pose file).
 
     A scene whose output holds the same fingerprint (config + input files) is skipped unless `overwrite`.
     `dataset` may pass an already loaded data set of the same root.
     """
     started = time.perf_counter()
     dataset = dataset if dataset is not None else load_dataset(Path(dataset_root), check_files=False)
-    workspace = Path(workspace) if workspace is not None else default_workspace(Path(dataset_root))
+    ws = Workspace.resolve(workspace, Path(dataset_root))
     chosen = select_scenes(dataset, scenes)
-    files: dict[str, Path] = {}
-    skipped: list[str] = []
+    items: list[ItemResult] = []
     with StageProgress("wigo", logger=logger, enabled=show_progress, transient=True) as progress:
         bar = progress.add_task("fuse scenes", total=len(chosen))
         for scene in chosen:
-            path = wigo_path(workspace, scene.name)
+            path = ws.wigo(scene.name)
             digest = scene_fingerprint(dataset, scene, config)
-            files[scene.name] = path
-            if not overwrite and stored_fingerprint(path) == digest:
+            if not overwrite and is_up_to_date(path, digest):
                 logger.info("scene %s: %s is up to date", scene.name, path)
-                skipped.append(scene.name)
+                items.append(ItemResult(scene.name, path, read_wigo(path).report, skipped=True))
             else:
-                fused = fuse_clip(clip_inputs(scene), config)
-                write_wigo(path, to_wigo_file(fused, scene, digest, config))
+                wigo = to_wigo_file(fuse_clip(clip_inputs(scene), config), scene, digest, config)
+                write_wigo(path, wigo)
+                items.append(ItemResult(scene.name, path, wigo.report, skipped=False))
             progress.advance(bar)
-    return WigoResult(workspace, files, tuple(skipped), time.perf_counter() - started)
+    return StageResult("wigo", ws, tuple(items), time.perf_counter() - started)

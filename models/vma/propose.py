@@ -2,8 +2,8 @@
 
 Output coordinates are site metres: the site origin is the generator's `manifest.json` `config.site_origin_xy`
 when the site has one, else the raster origin. Beside it, `<out>.fingerprint` holds the digest of what made
-it (rasters, checkpoint version, proposer settings, the code); a rerun with the same digest does nothing unless
-`overwrite`.
+it (rasters, checkpoint version, proposer settings, the code; `cama_pipeline.fingerprints`); a rerun with the
+same digest does nothing unless `overwrite`.
 """
 
 import json
@@ -16,8 +16,7 @@ from typing import Literal
 from annotations import Georeference
 from cama_pipeline.bev import georeference_path, layer_path
 from cama_pipeline.code_version import code_version
-from cama_pipeline.io import atomic_write_bytes
-from cama_pipeline.site.workspace import file_stats, fingerprint
+from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date, mark_done
 from cama_pipeline.surface.outputs import is_surface_bev
 from models.vma.checkpoint import META, load_checkpoint
 from models.vma.infer import InferenceConfig, predict_site
@@ -97,8 +96,7 @@ def propose(
         asdict(rule),
     ]
     digest = fingerprint(code_version("models.vma"), settings, file_stats([*inputs, site / "manifest.json"]))
-    stamp = out.with_name(f"{out.name}.fingerprint")
-    if out.is_file() and not overwrite and stamp.is_file() and stamp.read_text(encoding="utf-8") == digest:
+    if not overwrite and is_up_to_date(out, digest):
         logger.info("%s is up to date; nothing to do", out)
         return ProposeResult(out, -1, 0.0, skipped=True, checkpoint=version)
     started = time.perf_counter()
@@ -116,7 +114,7 @@ def propose(
     georeference = Georeference.of(rasters.georeference, site_origin_xy=site_origin_of(site, rasters))
     proposals = proposals_as_annotations(vectors, georeference, site.name or "site", author)
     proposals.write_json(out)
-    atomic_write_bytes(stamp, digest.encode("utf-8"))
+    mark_done(out, digest)
     seconds = time.perf_counter() - started
     logger.info("wrote %d proposals to %s in %.1f s", len(vectors), out, seconds)
     return ProposeResult(out, len(vectors), seconds, skipped=False, checkpoint=version)

@@ -16,11 +16,13 @@ from cama_pipeline.features import stage
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, verified_pairs
 from cama_pipeline.features.sift import SiftExtractor
-from cama_pipeline.features.stage import extract_missing, features_dir, run
+from cama_pipeline.features.stage import extract_missing, run
+from cama_pipeline.io import WorkspaceError
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.stage import run as run_pairs
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.workspace import WorkspaceError, read_site_manifest
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 from tests.pairs.site_workspace import build_site_workspace
 
@@ -48,22 +50,22 @@ def dataset_root(tiny_site: object) -> Path:
 @pytest.fixture(scope="module")
 def workspace(dataset_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = build_site_workspace(dataset_root, tmp_path_factory.mktemp("features-ws"))
-    keep_first_keyframes(folder / "sites" / "site-001" / "manifest.json", KEYFRAMES_PER_SCENE)
+    keep_first_keyframes(Workspace(folder).site_manifest("site-001"), KEYFRAMES_PER_SCENE)
     run_pairs(PairsConfig(), dataset_root, folder)
     return folder
 
 
 def test_features_are_masked_stored_and_matched(dataset_root: Path, workspace: Path) -> None:
-    (site,) = run(FeaturesConfig(), dataset_root, workspace)
+    (site,) = run(FeaturesConfig(), dataset_root, workspace).items
     report = site.report
     views = site_views(
-        load_dataset(dataset_root), read_site_manifest(workspace / "sites" / "site-001" / "manifest.json")
+        load_dataset(dataset_root), read_site_manifest(Workspace(workspace).site_manifest("site-001"))
     )
     assert set(report["images"]) == {v.name for v in views}
     assert report["pairs_verified"] > 0 and report["median_inliers"] >= 15
     assert sum(c["masked"] for c in report["images"].values()) > 0  # the trunk and vehicles removed features
     dataset = load_dataset(dataset_root)
-    with open_database(site.database) as db:
+    with open_database(Workspace(workspace).features_db(site.name)) as db:
         assert db.num_images() == len(views)
         on_blocked = 0
         for view in views:
@@ -79,17 +81,19 @@ def test_features_are_masked_stored_and_matched(dataset_root: Path, workspace: P
 def test_rerun_skips_when_up_to_date_reuses_the_database_otherwise_and_refuses_another_extractor(
     dataset_root: Path, workspace: Path
 ) -> None:
-    folder = features_dir(workspace, "site-001")
-    report_path, database = folder / "features.json", folder / "database.db"
+    report_path, database = (
+        Workspace(workspace).features_report("site-001"),
+        Workspace(workspace).features_db("site-001"),
+    )
     before = json.loads(report_path.read_text())
     with open_database(database) as db:  # a later stage reading the database leaves it up to date
         assert verified_pairs(db)
     stamp = database.stat().st_mtime_ns
-    (again,) = run(FeaturesConfig(), dataset_root, workspace)
-    assert again.report == before and database.stat().st_mtime_ns == stamp
-    pairs_file = workspace / "pairs" / "site-001" / "pairs.txt"
+    (again,) = run(FeaturesConfig(), dataset_root, workspace).items
+    assert again.skipped and again.report == before and database.stat().st_mtime_ns == stamp
+    pairs_file = Workspace(workspace).pairs_txt("site-001")
     pairs_file.write_text(pairs_file.read_text())  # new pair list: match again, reuse extracted features
-    (changed,) = run(FeaturesConfig(), dataset_root, workspace)
+    (changed,) = run(FeaturesConfig(), dataset_root, workspace).items
     assert changed.report["images"] == before["images"]
     assert changed.report["fingerprint"] != before["fingerprint"]
     assert changed.report["seconds"]["extract"] < 0.5 * max(before["seconds"]["extract"], 0.5)
@@ -99,7 +103,7 @@ def test_rerun_skips_when_up_to_date_reuses_the_database_otherwise_and_refuses_a
     with pytest.raises(WorkspaceError, match="overwrite"):
         run(FeaturesConfig(), dataset_root, workspace)
     report_path.unlink()  # an interrupted run leaves extracted images in the database but no report
-    (resumed,) = run(FeaturesConfig(), dataset_root, workspace)
+    (resumed,) = run(FeaturesConfig(), dataset_root, workspace).items
     counts = {name: count["features"] for name, count in resumed.report["images"].items()}
     assert counts == {name: count["features"] for name, count in before["images"].items()}
     assert {count["masked"] for count in resumed.report["images"].values()} == {None}
@@ -115,13 +119,13 @@ def test_blank_and_dark_images_give_few_features_and_a_warning_not_a_crash(
     copy = tmp_path / "ws"
     shutil.copytree(workspace, copy)
     views = site_views(
-        load_dataset(dataset_root), read_site_manifest(copy / "sites" / "site-001" / "manifest.json")
+        load_dataset(dataset_root), read_site_manifest(Workspace(copy).site_manifest("site-001"))
     )
     with open_database(tmp_path / "blank.db") as db:
         assert FeatureStore(db).add(views[0], blank) > 0
         assert db.num_keypoints_for_image(1) == 0
     with caplog.at_level("WARNING"):
-        (site,) = run(FeaturesConfig(min_features_warning=10**6), dataset_root, copy)
+        (site,) = run(FeaturesConfig(min_features_warning=10**6), dataset_root, copy).items
     assert len(site.report["low_feature_images"]) == len(views)
     assert "features" in caplog.text
 
@@ -130,7 +134,7 @@ def test_cli_reports_and_names_missing_pairs(dataset_root: Path, workspace: Path
     done = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(workspace)])
     assert done.exit_code == 0, done.output
     assert "pairs verified" in done.output
-    shutil.copytree(workspace / "sites", tmp_path / "sites")
+    shutil.copytree(Workspace(workspace).stage_dir("sites"), Workspace(tmp_path).stage_dir("sites"))
     missing = runner.invoke(app, ["features", str(dataset_root), "--workspace", str(tmp_path)])
     assert missing.exit_code == 2 and "cama pairs" in missing.output
     unknown = runner.invoke(
@@ -162,7 +166,7 @@ def test_extraction_processes_store_what_one_process_stores(
     rebuilt = pickle.loads(pickle.dumps(extractor))
     assert np.array_equal(rebuilt.extract(gray).descriptors, extractor.extract(gray).descriptors)
     dataset = load_dataset(dataset_root)
-    views = site_views(dataset, read_site_manifest(workspace / "sites" / "site-001" / "manifest.json"))
+    views = site_views(dataset, read_site_manifest(Workspace(workspace).site_manifest("site-001")))
     monkeypatch.setattr(stage, "MIN_IMAGES_PER_PROCESS", 1)
     stored = {}
     for workers in (1, 2):
@@ -175,17 +179,20 @@ def test_extraction_processes_store_what_one_process_stores(
 
 
 def test_matches_of_pairs_no_longer_listed_are_dropped(dataset_root: Path, workspace: Path) -> None:
-    pairs_file = workspace / "pairs" / "site-001" / "pairs.txt"
+    pairs_file, database = (
+        Workspace(workspace).pairs_txt("site-001"),
+        Workspace(workspace).features_db("site-001"),
+    )
     lines = pairs_file.read_text().splitlines()
-    (site,) = run(FeaturesConfig(), dataset_root, workspace)
-    with open_database(site.database) as db:
+    run(FeaturesConfig(), dataset_root, workspace)
+    with open_database(database) as db:
         before = set(verified_pairs(db))
     kept = lines[: len(lines) // 2]
     pairs_file.write_text("".join(f"{line}\n" for line in kept))
     try:
-        (pruned,) = run(FeaturesConfig(), dataset_root, workspace)
+        (pruned,) = run(FeaturesConfig(), dataset_root, workspace).items
         listed = {frozenset(line.split()) for line in kept}
-        with open_database(pruned.database) as db:
+        with open_database(database) as db:
             after = set(verified_pairs(db))
             names = {image.image_id: image.name for image in db.read_all_images()}
             matched = [pycolmap.pair_id_to_image_pair(pair_id) for pair_id in db.read_num_matches()[0]]

@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 from cama_pipeline.data import load_dataset
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
-from cama_pipeline.site.workspace import read_keyframes
+from cama_pipeline.keyframes.io import read_keyframes
 from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
 from cama_studio.cli import app
@@ -21,8 +21,9 @@ def test_frames_within_40_ms_and_stationary_clip_kept_whole(site_root: Path, tmp
     result = run_keyframes(KeyframeConfig(), root, tmp_path)
     dataset = load_dataset(root, check_files=False)
     kinds = {s.name: s.description for s in dataset.scenes}
-    for name, path in result.files.items():
+    for name, path in result.paths.items():
         kf = read_keyframes(path)
+        assert result.item(name).report["keyframes"] == len(kf.keyframes)
         assert kf.max_time_diff_us <= 40_000
         assert all(f.time_diff_us <= 40_000 for f in kf.frames)
         assert len(kf.frames) == len(dataset.scene_by_name(name).images["CAM_FRONT"])
@@ -30,7 +31,9 @@ def test_frames_within_40_ms_and_stationary_clip_kept_whole(site_root: Path, tmp
             assert kf.stationary and len(kf.keyframes) == len(kf.frames)
         else:
             assert not kf.stationary and 2 <= len(kf.keyframes) < len(kf.frames)
-    assert run_keyframes(KeyframeConfig(), root, tmp_path).skipped == tuple(result.files)
+    again = run_keyframes(KeyframeConfig(), root, tmp_path)
+    assert again.skipped == tuple(result.paths)
+    assert [item.report for item in again.items] == [item.report for item in result.items]
 
 
 def test_cli_keyframes_table_and_missing_wigo(site_root: Path, tmp_path: Path) -> None:

@@ -27,22 +27,24 @@ def dataset_root(tiny_site: object) -> Path:
 
 def test_pairs_are_written_counted_and_skipped_when_up_to_date(dataset_root: Path, workspace: Path) -> None:
     first = run(PairsConfig(), dataset_root, workspace)
-    (site,) = first.sites
-    assert not site.skipped
-    stored = read_pairs(site.folder)
-    lines = (site.folder / "pairs.txt").read_text().splitlines()
-    assert len(lines) == len(stored["pairs"]) == site.counts["total"] > 0
-    assert site.counts["total"] == sum(site.counts[k] for k in ("temporal", "rig", "repeat", "hsp"))
-    assert site.counts["total"] < 0.3 * site.counts["exhaustive"]
+    (site,) = first.items
+    assert not site.skipped and site.path == first.workspace.pairs_dir(site.name)
+    stored = read_pairs(first.workspace.pairs_json(site.name))
+    lines = first.workspace.pairs_txt(site.name).read_text().splitlines()
+    counts = site.report["counts"]
+    assert len(lines) == len(stored["pairs"]) == counts["total"] > 0
+    assert counts["total"] == sum(counts[k] for k in ("temporal", "rig", "repeat", "hsp"))
+    assert counts["total"] < 0.3 * counts["exhaustive"]
     assert all((dataset_root / name).is_file() for line in lines[:20] for name in line.split())
     assert all(name.split("/")[0] in ("samples", "sweeps") for line in lines for name in line.split())
-    assert run(PairsConfig(), dataset_root, workspace).sites[0].skipped
-    assert not run(PairsConfig(min_footprint_overlap=0.5), dataset_root, workspace).sites[0].skipped
+    again = run(PairsConfig(), dataset_root, workspace)
+    assert again.skipped == (site.name,) and again.items[0].report == site.report
+    assert not run(PairsConfig(min_footprint_overlap=0.5), dataset_root, workspace).skipped
 
 
 def test_cross_clip_pairs_exist_on_the_tiny_site(dataset_root: Path, workspace: Path) -> None:
-    (site,) = run(PairsConfig(), dataset_root, workspace).sites
-    stored = read_pairs(site.folder)
+    result = run(PairsConfig(), dataset_root, workspace)
+    stored = read_pairs(result.workspace.pairs_json(result.items[0].name))
     hsp = [p for p in stored["pairs"] if p[2] == "hsp"]
     assert hsp and stored["hsp_funnel"]["kept"] == len(hsp)
 

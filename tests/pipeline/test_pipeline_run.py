@@ -6,8 +6,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
-from cama_studio.pipeline import STAGES, PipelineError, PipelineResult, proposals_path, run
+from cama_studio.pipeline import STAGES, PipelineError, PipelineResult, run
 
 
 def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(
@@ -16,7 +17,7 @@ def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(
     seen: list[str] = []
     result = run(site_root / "nuscenes", tmp_path / "ws", stop_after="sites", on_stage=seen.append)
     assert seen == ["wigo", "keyframes", "sites"] == list(result.seconds)
-    index = json.loads((tmp_path / "ws" / "sites" / "index.json").read_text())
+    index = json.loads(Workspace(tmp_path / "ws").sites_index().read_text())
     assert index["sites"]
     again = run(site_root / "nuscenes", tmp_path / "ws", stop_after="sites")
     assert again.seconds["wigo"] < result.seconds["wigo"] + 5.0
@@ -40,9 +41,9 @@ def test_cama_run_reports_a_bad_option_and_a_missing_dataset(tmp_path: Path) -> 
 
 @pytest.mark.slow
 def test_the_whole_path_on_the_tiny_site_ends_with_proposals(whole_path: PipelineResult) -> None:
-    workspace, proposals = whole_path.workspace, whole_path.proposals
+    workspace, proposals = Workspace(whole_path.workspace), whole_path.proposals
     assert list(whole_path.seconds) == list(STAGES) and proposals
     for site_id, path in proposals.items():
-        assert path == proposals_path(workspace, site_id) and path.is_file()
-        assert (workspace / "surface" / site_id / "bev" / "semantic.png").is_file()
-        assert (workspace / "sfm" / site_id / "points.npz").is_file()
+        assert path == workspace.proposals(site_id) and path.is_file()
+        assert (workspace.surface_bev(site_id) / "semantic.png").is_file()
+        assert workspace.sfm_points(site_id).is_file()

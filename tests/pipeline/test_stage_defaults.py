@@ -17,7 +17,8 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from cama_pipeline.site.workspace import sites_index_path, write_sites_index
+from cama_pipeline.site.io import write_sites_index
+from cama_pipeline.workspace import Workspace
 from cama_studio import pipeline
 from cama_studio.cli import app
 from models.vma.propose import ProposeResult
@@ -86,7 +87,7 @@ def test_every_stage_command_defaults_to_what_cama_run_does(
 ) -> None:
     dataset, workspace = tmp_path / "nuscenes", tmp_path / "workspace"
     dataset.mkdir()
-    write_sites_index(sites_index_path(workspace), {"sites": [{"site_id": "site-001"}], "dropped": []})
+    write_sites_index(Workspace(workspace).sites_index(), {"sites": [{"site_id": "site-001"}], "dropped": []})
     recorders: dict[str, Recorder] = {}
     for stage, package in STAGE_PACKAGES.items():
         recorders[stage] = Recorder(importlib.import_module(f"{package}.stage").run)
@@ -105,9 +106,9 @@ def test_every_stage_command_defaults_to_what_cama_run_does(
     commands = {stage: [stage, str(dataset), "--workspace", str(workspace)] for stage in STAGE_PACKAGES}
     commands["propose"] = [
         "propose",
-        str(pipeline.surface_rasters(workspace, "site-001")),
+        str(Workspace(workspace).surface_bev("site-001")),
         "--out",
-        str(pipeline.proposals_path(workspace, "site-001")),
+        str(Workspace(workspace).proposals("site-001")),
     ]
     for stage, argv in commands.items():
         recorder = recorders[stage]

@@ -16,7 +16,8 @@ from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.stage import run as run_features
 from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.stage import run as run_pairs
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 from tests.pairs.site_workspace import build_site_workspace
 
 SITE_ID = "site-001"
@@ -78,10 +79,11 @@ def build_sfm_inputs(tiny_site_root: Path, tmp_dir: Path) -> SfmInputs:
     dataset_root = Path(tiny_site_root) / "nuscenes"
     workspace = build_site_workspace(dataset_root, Path(tmp_dir) / "workspace")
     run_pairs(PairsConfig(), dataset_root, workspace)
-    (site,) = run_features(FeaturesConfig(num_threads=1), dataset_root, workspace)
-    views = site_views(load_dataset(dataset_root), read_site_manifest(site_manifest_path(workspace, SITE_ID)))
+    run_features(FeaturesConfig(num_threads=1), dataset_root, workspace)
+    ws = Workspace(workspace)
+    views = site_views(load_dataset(dataset_root), read_site_manifest(ws.site_manifest(SITE_ID)))
     truth = _true_poses(Path(tiny_site_root) / "ground_truth" / "poses.json", views)
-    return SfmInputs(dataset_root, workspace, SITE_ID, site.database, tuple(views), truth)
+    return SfmInputs(dataset_root, workspace, SITE_ID, ws.features_db(SITE_ID), tuple(views), truth)
 
 
 def pose_errors(world_from_ego: dict[str, np.ndarray], truth: dict[str, np.ndarray]) -> tuple[float, float]:

@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 
 runner = CliRunner()
@@ -22,7 +23,7 @@ def test_sfm_command_reconstructs_the_site(sfm_inputs: object, workspace: Path) 
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "site-001" in result.output and "points" in result.output
-    assert (workspace / "sfm" / "site-001" / "report.json").is_file()
+    assert Workspace(workspace).sfm_report("site-001").is_file()
     again = runner.invoke(app, args)
     assert again.exit_code == 0 and "up to date" in again.output
 
@@ -33,6 +34,6 @@ def test_bad_input_exits_with_a_message(sfm_inputs: object, workspace: Path) -> 
     assert bad_executor.exit_code == 2 and "executor" in bad_executor.output
     bad_preset = runner.invoke(app, ["sfm", root, "--workspace", str(workspace), "--preset", "fancy"])
     assert bad_preset.exit_code == 2 and "preset" in bad_preset.output
-    shutil.rmtree(workspace / "features")
+    shutil.rmtree(Workspace(workspace).stage_dir("features"))
     no_features = runner.invoke(app, ["sfm", root, "--workspace", str(workspace)])
     assert no_features.exit_code == 2 and "cama features" in no_features.output

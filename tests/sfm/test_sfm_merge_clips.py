@@ -11,7 +11,8 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import reconstruct_views, refined_views
 from cama_pipeline.sfm.merge import ClipModel, MergeConfig, align_clips, aligned_views, cross_clip_matches
 from cama_pipeline.sfm.stage import site_clips
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 pytestmark = pytest.mark.slow
 
@@ -20,7 +21,7 @@ pytestmark = pytest.mark.slow
 def clips(sfm_inputs: object) -> list[ClipModel]:
     """Each clip of the site reconstructed on its own (rigid BA)."""
     inputs = sfm_inputs
-    manifest = read_site_manifest(site_manifest_path(inputs.workspace, inputs.site_id))  # type: ignore[attr-defined]
+    manifest = read_site_manifest(Workspace(inputs.workspace).site_manifest(inputs.site_id))  # type: ignore[attr-defined]
     models = []
     for scene, views in site_clips(list(inputs.views), manifest).items():  # type: ignore[attr-defined]
         result = reconstruct_views(views, inputs.database, inputs.image_dir, SfmConfig.preset("rigid"))  # type: ignore[attr-defined]

@@ -9,7 +9,8 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views
 from cama_pipeline.sfm.stage import site_clips
 from cama_pipeline.sfm.triangulate import SeedPoints, model_seeds
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 
 pytestmark = pytest.mark.slow
 MERGE = SfmConfig.preset("iterative", max_iterations=1)
@@ -19,7 +20,7 @@ MERGE = SfmConfig.preset("iterative", max_iterations=1)
 def clips(sfm_inputs: object) -> dict[str, tuple[list[CameraView], GuidedResult]]:
     """Each clip of the tiny site reconstructed on its own (Algorithm 1), by scene."""
     inputs = sfm_inputs
-    manifest = read_site_manifest(site_manifest_path(inputs.workspace, inputs.site_id))  # type: ignore[attr-defined]
+    manifest = read_site_manifest(Workspace(inputs.workspace).site_manifest(inputs.site_id))  # type: ignore[attr-defined]
     return {
         scene: (views, reconstruct_views(views, inputs.database, inputs.image_dir, SfmConfig()))  # type: ignore[attr-defined]
         for scene, views in site_clips(list(inputs.views), manifest).items()  # type: ignore[attr-defined]

@@ -9,10 +9,11 @@ from cama_pipeline.data import load_dataset
 from cama_pipeline.keyframes import KeyframeConfig
 from cama_pipeline.keyframes import run as run_keyframes
 from cama_pipeline.site.config import SiteConfig
+from cama_pipeline.site.io import read_site_manifest, read_sites_index
 from cama_pipeline.site.stage import run as run_sites
-from cama_pipeline.site.workspace import read_site_manifest, read_sites_index
 from cama_pipeline.wigo import WigoConfig
 from cama_pipeline.wigo import run as run_wigo
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 
 runner = CliRunner()
@@ -30,22 +31,24 @@ def test_overlapping_clips_one_site_night_dropped_stationary_merged(site_root: P
     run_wigo(WigoConfig(), root, tmp_path, show_progress=False)
     run_keyframes(KeyframeConfig(), root, tmp_path)
     result = run_sites(SiteConfig(), root, tmp_path, dataset=dataset)
-    (site,) = result.aggregation.sites
-    assert set(site.scenes) == {*moving, stationary}
-    assert site.merged[stationary] in moving
-    assert "night" in result.aggregation.dropped[night]
-    index = read_sites_index(tmp_path / "sites" / "index.json")
-    assert index["dropped"] == [{"scene": night, "reason": result.aggregation.dropped[night]}]
-    manifest = read_site_manifest(result.manifests[site.site_id])
+    (site,) = result.items
+    assert set(site.report["scenes"]) == {*moving, stationary}
+    assert site.report["merged"][stationary] in moving
+    ((dropped, reason),) = [(d["scene"], d["reason"]) for d in result.report["dropped"]]
+    assert dropped == night and "night" in reason
+    index = read_sites_index(result.workspace.sites_index())
+    assert index == {"schema": "cama.sites/1", **result.report}
+    manifest = read_site_manifest(site.path)
     scenes = {s["scene"]: s for s in manifest["scenes"]}
     assert scenes[stationary]["kind"] == "stationary" and scenes[stationary]["merged_into"] in moving
     assert all(f["keyframe"] for f in scenes[stationary]["frames"])
-    images = {im.token for name in site.scenes for im in dataset.scene_by_name(name).all_images()}
+    images = {im.token for name in site.report["scenes"] for im in dataset.scene_by_name(name).all_images()}
     assert set(manifest["poses"]) == images
     for scene in manifest["scenes"]:
         for frame in scene["frames"]:
             assert all(token in manifest["poses"] for token in frame["images"].values())
-    assert run_sites(SiteConfig(), root, tmp_path, dataset=dataset).skipped
+    again = run_sites(SiteConfig(), root, tmp_path, dataset=dataset)
+    assert again.skipped == (site.name,) and again.report == result.report
 
 
 def test_cli_sites_needs_wigo_and_keyframes_first(site_root: Path, tmp_path: Path) -> None:
@@ -60,4 +63,4 @@ def test_cli_sites_needs_wigo_and_keyframes_first(site_root: Path, tmp_path: Pat
     result = runner.invoke(app, ["sites", root, *ws])
     assert result.exit_code == 0, result.output
     assert "site-001" in result.output and "dropped" in result.output
-    assert json.loads((tmp_path / "sites" / "index.json").read_text())["schema"] == "cama.sites/1"
+    assert json.loads(Workspace(tmp_path).sites_index().read_text())["schema"] == "cama.sites/1"

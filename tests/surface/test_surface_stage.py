@@ -10,11 +10,13 @@ import trimesh
 from typer.testing import CliRunner
 
 from cama_pipeline.data import load_dataset
+from cama_pipeline.results import ItemResult
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
-from cama_pipeline.surface import SiteSurface, SurfaceConfig, run
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip
 from cama_pipeline.surface.poses import posed_views
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 from models.vma.rasters import load_site_rasters
 from tests.pairs.site_workspace import build_site_workspace
@@ -35,12 +37,12 @@ def workspace(dataset_root: Path, tmp_path_factory: pytest.TempPathFactory) -> P
 
 
 @pytest.fixture(scope="module")
-def surface(dataset_root: Path, workspace: Path) -> SiteSurface:
-    return run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False)[0]
+def surface(dataset_root: Path, workspace: Path) -> ItemResult:
+    return run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
 
 
-def test_rasters_have_the_ground_truth_format_and_load_for_proposals(surface: SiteSurface, tiny_site) -> None:  # type: ignore[no-untyped-def]
-    bev = surface.folder / "bev"
+def test_rasters_have_the_ground_truth_format_and_load_for_proposals(surface: ItemResult, tiny_site) -> None:  # type: ignore[no-untyped-def]
+    bev = surface.path / "bev"
     truth = tiny_site.result.ground_truth_dir / "bev"
     assert sorted(p.name for p in bev.iterdir()) == sorted(p.name for p in truth.iterdir())
     geo, true_geo = (json.loads((f / "georeference.json").read_text()) for f in (bev, truth))
@@ -54,10 +56,10 @@ def test_rasters_have_the_ground_truth_format_and_load_for_proposals(surface: Si
     assert np.mean(rasters.semantic[observed] == int(Semantic.ROAD)) > 0.3
 
 
-def test_unobserved_cells_are_255_nan_black_and_zero_rays(surface: SiteSurface) -> None:
+def test_unobserved_cells_are_255_nan_black_and_zero_rays(surface: ItemResult) -> None:
     import cv2
 
-    bev = surface.folder / "bev"
+    bev = surface.path / "bev"
     semantic = cv2.imread(str(bev / "semantic.png"), cv2.IMREAD_UNCHANGED)
     count = cv2.imread(str(bev / "observation_count.png"), cv2.IMREAD_UNCHANGED)
     photometric = cv2.imread(str(bev / "photometric.png"), cv2.IMREAD_COLOR)
@@ -69,8 +71,8 @@ def test_unobserved_cells_are_255_nan_black_and_zero_rays(surface: SiteSurface) 
     assert np.all(photometric[unobserved] == 0)
 
 
-def test_mesh_and_report(surface: SiteSurface) -> None:
-    mesh = trimesh.load(surface.folder / "mesh.ply", process=False)
+def test_mesh_and_report(surface: ItemResult) -> None:
+    mesh = trimesh.load(surface.path / "mesh.ply", process=False)
     report = surface.report
     assert len(mesh.vertices) == report["cells_observed"] and len(mesh.faces) > 0
     assert mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
@@ -81,16 +83,17 @@ def test_mesh_and_report(surface: SiteSurface) -> None:
 
 
 def test_elevation_matches_the_true_road_under_the_trajectory(
-    surface: SiteSurface,
+    surface: ItemResult,
     tiny_site,
     dataset_root: Path,
     workspace: Path,  # type: ignore[no-untyped-def]
 ) -> None:
-    manifest = read_site_manifest(site_manifest_path(workspace, surface.site_id))
-    views = posed_views(load_dataset(dataset_root), manifest, workspace, surface.site_id, "ground_truth")
+    ws = Workspace(workspace)
+    manifest = read_site_manifest(ws.site_manifest(surface.name))
+    views = posed_views(load_dataset(dataset_root), manifest, ws, surface.name, "ground_truth")
     under_car = trajectory_strip(ego_poses(views), SurfaceConfig(strip_half_width_m=0.5))
-    ours = load_site_rasters(surface.folder / "bev")
-    elevation = np.load(surface.folder / "bev" / "elevation.npy")
+    ours = load_site_rasters(surface.path / "bev")
+    elevation = np.load(surface.path / "bev" / "elevation.npy")
     truth_dir = tiny_site.result.ground_truth_dir / "bev"
     truth = load_site_rasters(truth_dir)
     col, row = np.round(ours.pixel_from_global(under_car[:, :2])).astype(int).T
@@ -100,10 +103,10 @@ def test_elevation_matches_the_true_road_under_the_trajectory(
     assert np.median(np.abs(error)) < 0.03
 
 
-def test_rerun_skips(surface: SiteSurface, dataset_root: Path, workspace: Path) -> None:
-    report = surface.folder / "report.json"
+def test_rerun_skips(surface: ItemResult, dataset_root: Path, workspace: Path) -> None:
+    report = Workspace(workspace).surface_report(surface.name)
     before = report.stat().st_mtime_ns
-    again = run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False)[0]
+    again = run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
     assert again.skipped and report.stat().st_mtime_ns == before
     assert again.report["fingerprint"] == surface.report["fingerprint"]
 

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR
 from cama_pipeline.synthetic.generate import MANIFEST, fingerprint, run
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 from tests.synthetic.synth_helpers import file_digests, micro_config
 
@@ -75,7 +76,7 @@ def test_pairs_are_planned_without_images_and_features_fail_naming_the_missing_i
     for upstream in ("wigo", "keyframes", "sites", "pairs"):
         result = runner.invoke(app, [upstream, dataset, "--workspace", workspace])
         assert result.exit_code == 0, f"{upstream}: {result.output}"
-    assert (tmp_path / "ws" / "pairs" / "site-001" / "pairs.txt").read_text().strip()
+    assert Workspace(tmp_path / "ws").pairs_txt("site-001").read_text().strip()
     result = runner.invoke(app, ["features", dataset, "--workspace", workspace])
     assert result.exit_code == 2, result.output
     (error,) = [line for line in result.output.splitlines() if line.startswith("error:")]

@@ -14,7 +14,8 @@ from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.viewer.review import ViewInputs, follow, open_review
 from app.viewer.sources import FileVectorSource, VectorSourceError
 from cama_pipeline.bev import read_georeference
-from cama_pipeline.site.workspace import read_site_manifest, site_manifest_path
+from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.workspace import Workspace
 from tests.pairs.site_workspace import build_site_workspace
 
 
@@ -38,7 +39,7 @@ def _annotations(site_root: Path, elements: list[MapElement]) -> AnnotationSet:
 
 def _road_points(workspace: Path) -> np.ndarray:
     """Two global points on the tiny site's road, a few metres apart: the ego path from the site manifest."""
-    manifest = read_site_manifest(site_manifest_path(workspace, "site-001"))
+    manifest = read_site_manifest(Workspace(workspace).site_manifest("site-001"))
     poses = sorted(manifest["poses"].values(), key=lambda p: p["timestamp_us"])
     xy = np.array([p["translation"][:2] for p in poses])
     far = int(np.argmax(np.linalg.norm(xy - xy[0], axis=1) > 4.0))

@@ -10,8 +10,9 @@ from typer.testing import CliRunner
 
 from cama_pipeline.data import load_dataset
 from cama_pipeline.evaluate.inputs import load_true_poses
-from cama_pipeline.site.workspace import default_workspace, read_wigo
 from cama_pipeline.wigo import WigoConfig, run
+from cama_pipeline.wigo.io import read_wigo
+from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 
 runner = CliRunner()
@@ -24,7 +25,8 @@ def test_run_writes_a_pose_per_image_and_skips_up_to_date_scenes(site_root: Path
     assert result.skipped == ()
     truth = load_true_poses(site_root / "ground_truth" / "poses.json")
     for scene in dataset.scenes:
-        wigo = read_wigo(result.files[scene.name])
+        wigo = read_wigo(result.paths[scene.name])
+        assert result.item(scene.name).report == wigo.report
         tokens = [p.token for p in wigo.poses]
         assert sorted(tokens) == sorted(im.token for im in scene.all_images())
         assert [p.timestamp_us for p in wigo.poses] == sorted(p.timestamp_us for p in wigo.poses)
@@ -33,13 +35,14 @@ def test_run_writes_a_pose_per_image_and_skips_up_to_date_scenes(site_root: Path
         assert all(p.covariance is not None and p.covariance.shape == (6, 6) for p in wigo.poses)
     again = run(WigoConfig(), root, tmp_path, show_progress=False)
     assert set(again.skipped) == {s.name for s in dataset.scenes}
+    assert again.item("scene-0001").report == result.item("scene-0001").report
     forced = run(WigoConfig(), root, tmp_path, scenes=["scene-0001"], overwrite=True, show_progress=False)
     assert forced.skipped == ()
     changed = run(
         WigoConfig(gnss_robust="cauchy"), root, tmp_path, scenes=["scene-0001"], show_progress=False
     )
     assert changed.skipped == ()
-    assert read_wigo(changed.files["scene-0001"]).config["gnss_robust"] == "cauchy"
+    assert read_wigo(changed.paths["scene-0001"]).config["gnss_robust"] == "cauchy"
 
 
 def test_a_code_change_makes_outputs_stale(
@@ -58,7 +61,8 @@ def test_unknown_scene_is_named(site_root: Path, tmp_path: Path) -> None:
 
 
 def test_default_workspace_sits_beside_the_dataset(tmp_path: Path) -> None:
-    assert default_workspace(tmp_path / "site" / "nuscenes") == (tmp_path / "site" / "workspace").absolute()
+    expected = (tmp_path / "site" / "workspace").absolute()
+    assert Workspace.for_dataset(tmp_path / "site" / "nuscenes").root == expected
 
 
 def test_cli_wigo_runs_and_reports_bad_input(site_root: Path, tmp_path: Path) -> None:
@@ -66,7 +70,7 @@ def test_cli_wigo_runs_and_reports_bad_input(site_root: Path, tmp_path: Path) ->
     result = runner.invoke(app, [*args, "--no-logged-pose"])
     assert result.exit_code == 0, result.output
     assert "scene(s) fused" in result.output
-    written = json.loads((tmp_path / "wigo" / "scene-0001.json").read_text())
+    written = json.loads(Workspace(tmp_path).wigo("scene-0001").read_text())
     assert written["schema"] == "cama.wigo/1"
     assert written["config"]["gnss_robust"] == "cauchy" and written["config"]["logged_pose_sigmas"] == [
         0,
@@ -94,5 +98,5 @@ def test_data_set_without_gnss_or_imu_files_degrades(site_root: Path, tmp_path: 
     with pytest.raises(ValueError, match="scene-0003.*zoe_veh_info"):
         run(WigoConfig(), root, workspace, show_progress=False)
     result = run(WigoConfig(), root, workspace, scenes=["scene-0001", "scene-0002"], show_progress=False)
-    assert any("no GNSS" in d for d in read_wigo(result.files["scene-0001"]).report["degraded"])
-    assert any("no IMU" in d for d in read_wigo(result.files["scene-0002"]).report["degraded"])
+    assert any("no GNSS" in d for d in read_wigo(result.paths["scene-0001"]).report["degraded"])
+    assert any("no IMU" in d for d in read_wigo(result.paths["scene-0002"]).report["degraded"])

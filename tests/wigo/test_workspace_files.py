@@ -6,18 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cama_pipeline.site.workspace import (
-    FrameRecord,
-    KeyframesFile,
-    PoseRecord,
-    WigoFile,
-    WorkspaceError,
-    read_keyframes,
-    read_sites_index,
-    read_wigo,
-    write_keyframes,
-    write_wigo,
-)
+from cama_pipeline.io import WorkspaceError
+from cama_pipeline.keyframes.io import FrameRecord, KeyframesFile, read_keyframes, write_keyframes
+from cama_pipeline.site.io import read_sites_index
+from cama_pipeline.wigo.io import PoseRecord, WigoFile, read_wigo, write_wigo
 
 
 def _wigo() -> WigoFile:
