@@ -32,7 +32,6 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "cama_pipeline.workspace",
             "cama_pipeline.fingerprints",
             "cama_pipeline.results",
-            "cama_pipeline.site.workspace",  # wigo's and keyframes' formats until they move to their stages
         ),
     ),
     ("annotations", ("annotations",)),

@@ -329,7 +329,10 @@ def test_api_lint_table() -> None:
     assert_names_source(t, "api_load.json", "bench/api_load.py")
     recorded = results("api_load.json")["lint"]
     assert f"--baseline-ref {recorded['config']['baseline_ref']}" in t.context
-    rows = {"current": recorded["current"], f"commit {recorded['config']['baseline_ref']}": recorded["baseline"]}
+    rows = {
+        "current": recorded["current"],
+        f"commit {recorded['config']['baseline_ref']}": recorded["baseline"],
+    }
     for label, figures_of in rows.items():
         expected = [
             figures_of["first_lint_s"],
