@@ -8,6 +8,8 @@ Layout written under `<out>/<name>/` (name = scene or site):
   maps/elevation.npy     the (H, W) float32 elevation raster (global z, NaN = unobserved), when given.
   maps/georeference.json our extension: site id + Georeference, so import restores site coordinates.
   odometry/camera_<CHANNEL>.txt  TUM rows `t x y z qx qy qz qw` (camera to global, t seconds), with a data set.
+  odometry/pose_sources.json     our extension: per odometry file, the count of rows per pose source and each
+                                 row's source (`annotations.poses`), in row order.
 
 A plain CAMA release folder (no georeference.json) imports too: its raster (`maps/elevation.npy` or the single
 `maps/*.npy`) fixes a scene-local frame centred on the map, see `release_georeference` for the axis mapping.
@@ -26,6 +28,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, RootModel, ValidationError
 
 from annotations.lift import lift_element
+from annotations.poses import POSE_SOURCES, PoseLookup, PoseSource
 from annotations.schema import POLYGON_CLASSES, AnnotationSet, ElementClass, Georeference, MapElement
 from annotations.transforms import pixel_from_site_points, site_from_pixel_points
 from cama_pipeline.data import Dataset
@@ -44,6 +47,7 @@ MAP_LABELS = Path("maps/map_labels.json")
 ELEVATION = Path("maps/elevation.npy")
 GEOREFERENCE = Path("maps/georeference.json")
 ODOMETRY_DIR = Path("odometry")
+POSE_SOURCES_FILE = "pose_sources.json"
 IMPORT_AUTHOR = "cama-import"
 DEFAULT_RELEASE_RESOLUTION_M = 0.1
 """Metres per BEV pixel in the public CAMA release."""
@@ -158,9 +162,11 @@ def export_cama(
     name: str | None = None,
     elevation: np.ndarray | None = None,
     dataset: Dataset | None = None,
+    poses: PoseLookup | None = None,
     scenes: Sequence[str] | None = None,
 ) -> Path:
-    """Write the CAMA layout under `out/<name or site_id>/`; returns that folder."""
+    """Write the CAMA layout under `out/<name or site_id>/`; returns that folder. Odometry is written when a
+    data set is given, and then `poses` (refined, or `annotations.poses.coarse_pose` when asked) is needed."""
     georef = annotations.georeference
     if elevation is not None:
         elevation = np.asarray(elevation, dtype=np.float32)
@@ -175,34 +181,48 @@ def export_cama(
         atomic_write_npy(folder / ELEVATION, elevation)
     atomic_write_bytes(folder / GEOREFERENCE, geo_file.model_dump_json(indent=2).encode("utf-8"))
     if dataset is not None:
-        write_odometry(dataset, folder / ODOMETRY_DIR, scenes=scenes)
+        if poses is None:
+            raise ValueError("odometry: no pose lookup given (refined poses, or coarse_pose when asked for)")
+        write_odometry(dataset, folder / ODOMETRY_DIR, poses=poses, scenes=scenes)
     atomic_write_bytes(folder / MAP_LABELS, json.dumps(labels, indent=1).encode("utf-8"))
     logger.info("exported %d elements to %s", len(labels), folder)
     return folder
 
 
-def write_odometry(dataset: Dataset, folder: Path, *, scenes: Sequence[str] | None = None) -> list[Path]:
-    """One TUM file per camera channel (`t x y z qx qy qz qw`, camera to global) over the chosen scenes."""
+def write_odometry(
+    dataset: Dataset, folder: Path, *, poses: PoseLookup, scenes: Sequence[str] | None = None
+) -> list[Path]:
+    """One TUM file per camera channel (`t x y z qx qy qz qw`, camera to global) over the chosen scenes, ego
+    poses from `poses`; `pose_sources.json` beside them says which source each row came from."""
     wanted = [s for s in dataset.scenes if scenes is None or s.name in scenes]
     if scenes is not None and len(wanted) != len(set(scenes)):
         known = sorted(s.name for s in dataset.scenes)
         raise ValueError(f"scenes: {sorted(set(scenes) - {s.name for s in wanted})} not in data set {known}")
-    rows: dict[str, list[tuple[int, str]]] = {}
+    rows: dict[str, list[tuple[int, str, PoseSource]]] = {}
     for scene in wanted:
         for image in scene.all_images():
-            pose = image.global_from_ego @ image.calibration.ego_from_cam
+            sourced = poses(image)
+            pose = sourced.global_from_ego @ image.calibration.ego_from_cam
             (x, y, z), (qw, qx, qy, qz) = pose.translation, pose.rotation
             line = (
                 f"{image.timestamp_us / 1e6:.6f} {x:.6f} {y:.6f} {z:.6f} {qx:.9f} {qy:.9f} {qz:.9f} {qw:.9f}"
             )
-            rows.setdefault(image.channel, []).append((image.timestamp_us, line))
+            rows.setdefault(image.channel, []).append((image.timestamp_us, line, sourced.source))
     paths = []
+    sources: dict[str, Any] = {}
     for channel, lines in sorted(rows.items()):
         path = folder / f"camera_{channel}.txt"
+        ordered = sorted(lines, key=lambda row: row[:2])
         text = "# t x y z qx qy qz qw (camera to global, t in seconds)\n"
-        text += "".join(line + "\n" for _, line in sorted(lines))
+        text += "".join(line + "\n" for _, line, _ in ordered)
         atomic_write_bytes(path, text.encode("utf-8"))
         paths.append(path)
+        row_sources = [source for _, _, source in ordered]
+        sources[path.name] = {
+            "counts": {s: row_sources.count(s) for s in POSE_SOURCES if s in row_sources},
+            "rows": row_sources,
+        }
+    atomic_write_bytes(folder / POSE_SOURCES_FILE, json.dumps(sources, indent=1).encode("utf-8"))
     return paths
 
 

@@ -1,8 +1,9 @@
 """MapTR-ready export: per nuScenes sample (key frame), the 3D vectors in its ego frame, clipped and resampled.
 
 One JSON file: {"meta": {...}, "samples": [{"sample_token", "scene", "timestamp", "ego_pose": {"translation",
-"rotation"}, "vectors": [{"class", "points": [[x, y, z] x 20], "source_id"}]}]}. Ego pose = the CAM_FRONT
-key-frame image's `global_from_ego` (else the sample's first image by channel name). Vectors are clipped to
+"rotation"}, "pose_source", "vectors": [{"class", "points": [[x, y, z] x 20], "source_id"}]}]}. Ego pose = the
+CAM_FRONT key-frame image's `global_from_ego` (else the sample's first image by channel name) from the export's
+pose lookup (`annotations.poses`: refined by default in `cama export`), `pose_source` saying which. Vectors are clipped to
 MAPTR_RANGE (ego x forward, y left) and each piece resampled to 20 points, so import is not lossless w.r.t. the
 original elements: it gives one element per exported vector, at its resampled points.
 """
@@ -17,6 +18,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError
 
 from annotations.cama_format import format_validation_error, read_json_file, validate_file
 from annotations.geometry import MAPTR_RANGE, Box, clip_to_box, resample_fixed
+from annotations.poses import PoseLookup, PoseSource
 from annotations.schema import ELEMENT_CLASSES, AnnotationSet, ElementClass, Georeference, MapElement
 from annotations.transforms import (
     ego_from_global_points,
@@ -72,6 +74,10 @@ class MaptrSample(BaseModel):
     scene: str
     timestamp: int = Field(description="Microseconds.")
     ego_pose: EgoPose
+    pose_source: PoseSource = Field(
+        default="coarse",
+        description="Where ego_pose came from: sfm, wigo+sfm (WIGO corrected by SfM), wigo, or coarse (logged).",
+    )
     vectors: list[MaptrVector]
 
 
@@ -122,13 +128,16 @@ class MaptrFile(BaseModel):
         return self
 
 
-def sample_pose(frame: Frame) -> EgoPose:
-    """global_from_ego of a key frame: its CAM_FRONT image's, else its first image's by channel name."""
+def sample_pose(frame: Frame, poses: PoseLookup) -> tuple[EgoPose, PoseSource]:
+    """global_from_ego of a key frame from `poses`: its CAM_FRONT image's, else its first image's by channel
+    name; with the pose's source."""
     if not frame.images:
         raise ValueError(f"sample {frame.token!r}: no camera images, so no ego pose")
     image = frame.images.get(REFERENCE_CHANNEL) or frame.images[sorted(frame.images)[0]]
-    pose = image.global_from_ego
-    return EgoPose(translation=tuple(pose.translation.tolist()), rotation=tuple(pose.rotation.tolist()))
+    sourced = poses(image)
+    pose = sourced.global_from_ego
+    ego = EgoPose(translation=tuple(pose.translation.tolist()), rotation=tuple(pose.rotation.tolist()))
+    return ego, sourced.source
 
 
 def element_global_points(element: MapElement, georef: Georeference, ground_z: float) -> np.ndarray:
@@ -157,16 +166,21 @@ def sample_vectors(
 
 
 def build_maptr(
-    annotations: AnnotationSet, dataset: Dataset, *, box: Box = MAPTR_RANGE, n_points: int = POINTS_PER_VECTOR
+    annotations: AnnotationSet,
+    dataset: Dataset,
+    *,
+    poses: PoseLookup,
+    box: Box = MAPTR_RANGE,
+    n_points: int = POINTS_PER_VECTOR,
 ) -> MaptrFile:
-    """The MapTR file model for every key frame of the data set."""
+    """The MapTR file model for every key frame of the data set, ego poses (and their sources) from `poses`."""
     flat = sum(1 for e in annotations.elements if e.points_3d is None)
     if flat:
         logger.warning("%d elements have no 3D points: exported at the ego pose's height", flat)
     samples = []
     for scene in dataset.scenes:
         for frame in scene.frames:
-            pose = sample_pose(frame)
+            pose, source = sample_pose(frame, poses)
             vectors = sample_vectors(annotations, pose, box=box, n_points=n_points)
             samples.append(
                 MaptrSample(
@@ -174,6 +188,7 @@ def build_maptr(
                     scene=scene.name,
                     timestamp=frame.timestamp_us,
                     ego_pose=pose,
+                    pose_source=source,
                     vectors=vectors,
                 )
             )
@@ -191,11 +206,12 @@ def export_maptr(
     dataset: Dataset,
     out: Path,
     *,
+    poses: PoseLookup,
     box: Box = MAPTR_RANGE,
     n_points: int = POINTS_PER_VECTOR,
 ) -> Path:
     """Write the MapTR vectors JSON to `out`, validated as import will read it; returns the path."""
-    model = build_maptr(annotations, dataset, box=box, n_points=n_points)
+    model = build_maptr(annotations, dataset, poses=poses, box=box, n_points=n_points)
     text = model.model_dump_json(by_alias=True, indent=1)
     validate_file(MaptrFile, json.loads(text), Path(out))
     atomic_write_bytes(Path(out), text.encode("utf-8"))

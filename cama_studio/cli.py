@@ -78,7 +78,6 @@ def synth(
 
 def _register_stage_commands() -> None:
     """Commands whose implementation lives beside their stage (imported here, registered by name)."""
-    from annotations.export_command import export_command, import_command
     from app.backend.serve import serve_command
     from app.demo import demo_command
     from app.viewer.command import view_command
@@ -90,6 +89,7 @@ def _register_stage_commands() -> None:
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.surface.command import surface_command
     from cama_pipeline.wigo.command import wigo_command
+    from cama_studio.export_command import export_command, import_command
     from cama_studio.run_command import run_command
     from models.vma.commands import (
         propose_command,

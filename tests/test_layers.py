@@ -43,6 +43,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("stage pairs", ("cama_pipeline.pairs",)),
     ("stage features", ("cama_pipeline.features",)),
     ("stage sfm", ("cama_pipeline.sfm",)),
+    # the exports' refined poses: SfM poses, and WIGO corrected by them between SfM keyframes
+    ("stage refined poses", ("cama_pipeline.refined_poses",)),
     ("stage surface", ("cama_pipeline.surface",)),
     ("stage evaluate", ("cama_pipeline.evaluate",)),
     ("models", ("models",)),

@@ -16,9 +16,10 @@ from annotations.cama_format import (
     export_cama,
     import_cama,
 )
-from annotations.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
+from annotations.poses import coarse_pose
 from annotations.transforms import pixel_from_site_points
 from cama_pipeline.data import load_dataset
+from cama_studio.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
 from tests.annotations.annotation_helpers import SQUARE, element_kwargs, plane_z
 from tests.data.nuscenes_fixture import write_nuscenes_fixture
 
@@ -151,7 +152,9 @@ def test_odometry_tum_rows(tmp_path: Path, georef: Georeference) -> None:
     """With a data set, one TUM file per camera: `t x y z qx qy qz qw`, camera to global."""
     fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
     dataset = load_dataset(fixture.root)
-    folder = export_cama(AnnotationSet(site_id="s", georeference=georef), tmp_path / "out", dataset=dataset)
+    folder = export_cama(
+        AnnotationSet(site_id="s", georeference=georef), tmp_path / "out", dataset=dataset, poses=coarse_pose
+    )
     image = dataset.scenes[0].images["CAM_FRONT"][0]
     rows = [line.split() for line in (folder / "odometry/camera_CAM_FRONT.txt").read_text().splitlines()[1:]]
     assert len(rows) == len(dataset.scenes[0].images["CAM_FRONT"]) and all(len(r) == 8 for r in rows)
@@ -160,11 +163,27 @@ def test_odometry_tum_rows(tmp_path: Path, georef: Georeference) -> None:
     assert first[0] == pytest.approx(image.timestamp_us / 1e6)
     np.testing.assert_allclose(first[1:4], pose.translation, atol=1e-6)
     np.testing.assert_allclose(first[[7, 4, 5, 6]], pose.rotation, atol=1e-8)
+    sources = json.loads((folder / "odometry/pose_sources.json").read_text())
+    assert sources["camera_CAM_FRONT.txt"] == {
+        "counts": {"coarse": len(rows)},
+        "rows": ["coarse"] * len(rows),
+    }
+
+
+def test_odometry_needs_a_pose_lookup(tmp_path: Path, georef: Georeference) -> None:
+    """With a data set but no pose lookup, nothing silently falls back to the logged poses."""
+    fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
+    with pytest.raises(ValueError, match="no pose lookup"):
+        export_cama(
+            AnnotationSet(site_id="s", georeference=georef),
+            tmp_path / "o",
+            dataset=load_dataset(fixture.root),
+        )
 
 
 @pytest.mark.parametrize("name", sorted(SCHEMA_MODELS))
 def test_committed_schemas_match_models(name: str) -> None:
-    """annotations/schemas/*.schema.json equal the models' generated schemas (python -m annotations.export_command)."""
+    """annotations/schemas/*.schema.json equal the models' generated schemas (python -m cama_studio.export_command)."""
     assert (SCHEMA_DIR / name).read_text(encoding="utf-8") == schema_text(SCHEMA_MODELS[name])
 
 

@@ -7,7 +7,7 @@ import typer
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement
-from annotations.export_command import export_command, import_command
+from cama_studio.export_command import export_command, import_command
 from tests.annotations.annotation_helpers import element_kwargs
 from tests.data.nuscenes_fixture import write_nuscenes_fixture
 
@@ -47,7 +47,18 @@ def test_maptr_export_import(tmp_path: Path, georef: Georeference) -> None:
     fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
     out = tmp_path / "maptr.json"
     result = runner.invoke(
-        app, ["export", str(source), str(out), "--format", "maptr", "--dataset", str(fixture.root)]
+        app,
+        [
+            "export",
+            str(source),
+            str(out),
+            "--format",
+            "maptr",
+            "--dataset",
+            str(fixture.root),
+            "--poses",
+            "coarse",
+        ],
     )
     assert result.exit_code == 0, result.output
     result = runner.invoke(

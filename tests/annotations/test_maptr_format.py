@@ -8,6 +8,7 @@ import pytest
 
 from annotations import MAPTR_RANGE, AnnotationSet, Georeference, MapElement, resample_fixed
 from annotations.maptr_format import export_maptr, import_maptr, read_maptr
+from annotations.poses import coarse_pose
 from cama_pipeline.data import Dataset, load_dataset
 from tests.annotations.annotation_helpers import element_kwargs
 from tests.data.nuscenes_fixture import write_nuscenes_fixture
@@ -35,7 +36,7 @@ def _export(tmp_path: Path, georef: Georeference, dataset: Dataset) -> tuple[Ann
     annotations = AnnotationSet(
         site_id="site-a", georeference=georef, elements=[_element("in", INSIDE), _element("cross", CROSSING)]
     )
-    return annotations, export_maptr(annotations, dataset, tmp_path / "maptr.json")
+    return annotations, export_maptr(annotations, dataset, tmp_path / "maptr.json", poses=coarse_pose)
 
 
 def test_crossing_vector_clipped_at_boundary(tmp_path: Path, georef: Georeference, dataset: Dataset) -> None:

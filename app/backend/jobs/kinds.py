@@ -17,6 +17,7 @@ from sqlalchemy import select
 from annotations.cama_format import export_cama
 from annotations.lift import DEFAULT_MAX_SPACING_M, DEFAULT_SEARCH_RADIUS_M, lift_points
 from annotations.maptr_format import export_maptr
+from annotations.poses import coarse_pose
 from annotations.schema import AnnotationSet, Georeference, MapElement
 from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
@@ -187,7 +188,8 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
     else:
         dataset = _dataset(params.dataset_root or "")
         context.report(0.5, "building MapTR samples", force=True)
-        export_maptr(annotations, dataset, folder / "maptr.json")
+        # the job has no workspace yet, so it writes the logged poses and says so (pose_source "coarse")
+        export_maptr(annotations, dataset, folder / "maptr.json", poses=coarse_pose)
     context.report(0.8, "packing the archive", force=True)
     archive = zip_folder(folder, context.workdir / EXPORT_ZIP, context)
     return JobResult(archive, f"exported {len(annotations.elements)} elements of {name} ({params.format})")
