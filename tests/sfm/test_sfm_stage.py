@@ -98,3 +98,23 @@ def test_missing_features_database_names_the_file(sfm_inputs: object, tmp_path: 
     shutil.rmtree(Workspace(workspace).stage_dir("features"))
     with pytest.raises(FileNotFoundError, match=r"database\.db.*cama features"):
         run(CONFIG, sfm_inputs.dataset_root, workspace, show_progress=False)  # type: ignore[attr-defined]
+
+
+def test_refined_poses_on_the_tiny_site(sfm_inputs: object, first_run: StageResult) -> None:
+    """The exports' refined poses on real WIGO and SfM outputs: every image SfM posed (unflagged) has exactly its
+    SfM pose, every other image of the site's scenes a WIGO pose, corrected where an SfM keyframe is near."""
+    from cama_pipeline.data import load_dataset
+    from cama_pipeline.refined_poses import refined_poses, site_scenes
+
+    (site,) = first_run.items
+    dataset = load_dataset(sfm_inputs.dataset_root)  # type: ignore[attr-defined]
+    refined = refined_poses(dataset, first_run.workspace, site.name)
+    sfm = read_refined_poses(first_run.workspace.sfm_poses(site.name))
+    assert sfm and all(refined[token].source == "sfm" for token in sfm)
+    for token, matrix in sfm.items():
+        np.testing.assert_allclose(refined[token].global_from_ego.matrix(), matrix, atol=1e-9)
+    scenes = set(site_scenes(first_run.workspace, site.name))
+    images = [im for scene in dataset.scenes if scene.name in scenes for im in scene.all_images()]
+    assert {im.token for im in images} <= set(refined)
+    others = [refined[im.token].source for im in images if im.token not in sfm]
+    assert set(others) <= {"wigo+sfm", "wigo"} and "wigo+sfm" in others
