@@ -3,20 +3,18 @@ of 60 dividers x 5,000 vertices that lints once and then per changed element, an
 with what it has and says how much is pending."""
 
 import dataclasses
-import importlib
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pytest
-import shapely
 from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
 from app.backend.crud.quality import LintCache, lint_site
+from tests.backend_quality.lint_spies import count_calls, refuse_vertex_walks
 
 Headers = dict[str, dict[str, str]]
-lint_module = importlib.import_module("app.backend.quality.lint")  # the package's `lint` is the function
 
 
 def line(count: int, y: float, x0: float = 5.0, x1: float = 90.0) -> list[list[float]]:
@@ -113,23 +111,6 @@ def test_vertex_limits_refuse_writes_and_name_the_setting(
     )
 
 
-def _counting(monkeypatch: pytest.MonkeyPatch, name: str) -> list[int]:
-    """Count the calls of one rule function of the lint module."""
-    calls = [0]
-    original: Callable[..., Any] = getattr(lint_module, name)
-
-    def counted(*args: Any, **kwargs: Any) -> Any:
-        calls[0] += 1
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(lint_module, name, counted)
-    return calls
-
-
-def _refuse(*_args: object, **_kwargs: object) -> None:
-    raise AssertionError("a per-vertex GEOS walk was called")
-
-
 @with_settings(max_payload_bytes=32 * 1024 * 1024, lint_budget_s=600.0)
 def test_probe_site_lints_once_then_per_changed_element(
     client: TestClient, headers: Headers, site_id: int, monkeypatch: pytest.MonkeyPatch
@@ -138,11 +119,10 @@ def test_probe_site_lints_once_then_per_changed_element(
     created = client.post(f"{url}/elements/bulk", json={"elements": probe_bodies()}, headers=headers["lead"])
     assert created.status_code == 201, created.text[:500]
     ids = [element["id"] for element in created.json()]
-    for name in ("line_interpolate_point", "line_locate_point", "node"):
-        monkeypatch.setattr(shapely, name, _refuse)  # each walks every vertex per sample: the 30 s lint
+    refuse_vertex_walks(monkeypatch)
     own, pairs = (
-        _counting(monkeypatch, "self_intersection_of"),
-        _counting(monkeypatch, "spacing_candidate_of"),
+        count_calls(monkeypatch, "self_intersection_of"),
+        count_calls(monkeypatch, "spacing_candidate_of"),
     )
 
     report = client.get(f"{url}/lint", headers=headers["annotator"]).json()

@@ -2,18 +2,15 @@
 it equals a lint from scratch, an edit re-lints only the changed element and its neighbours, and a site of 60
 dividers x 5,000 vertices lints without walking every vertex for every sample."""
 
-import importlib
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pytest
-import shapely
 from shapely.geometry import box
 
 from app.backend.quality import ElementView, LintConfig, LintFinding, SiteLint, lint
+from tests.backend_quality.lint_spies import count_calls, refuse_vertex_walks
 
-lint_module = importlib.import_module("app.backend.quality.lint")  # the package's `lint` is the function
 REGION = box(0.0, 0.0, 100.0, 100.0)
 
 
@@ -78,31 +75,13 @@ def test_incremental_lint_equals_a_lint_from_scratch_after_every_edit() -> None:
         assert state.findings() == expected, f"step {step}: same findings in the same order"
 
 
-def _refuse(*_args: object, **_kwargs: object) -> None:
-    raise AssertionError("a per-vertex GEOS walk was called")
-
-
-def _counting(monkeypatch: pytest.MonkeyPatch, name: str) -> list[int]:
-    """Count the calls of one rule function of the lint module."""
-    calls = [0]
-    original: Callable[..., Any] = getattr(lint_module, name)
-
-    def counted(*args: Any, **kwargs: Any) -> Any:
-        calls[0] += 1
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(lint_module, name, counted)
-    return calls
-
-
 def test_probe_site_lints_and_an_edit_relints_only_the_changed_element(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    for name in ("line_interpolate_point", "line_locate_point", "node"):
-        monkeypatch.setattr(shapely, name, _refuse)  # each walks every vertex per sample: the 30 s lint
+    refuse_vertex_walks(monkeypatch)
     own, spacing = (
-        _counting(monkeypatch, "self_intersection_of"),
-        _counting(monkeypatch, "spacing_candidate_of"),
+        count_calls(monkeypatch, "self_intersection_of"),
+        count_calls(monkeypatch, "spacing_candidate_of"),
     )
     views = probe_site()
     state = SiteLint(region=REGION, rank=int)
