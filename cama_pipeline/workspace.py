@@ -6,6 +6,9 @@ owns (reads and writes, and documents) each file's format:
 
     wigo/<scene>.json                  fused ego poses of one scene                  cama_pipeline.wigo.io
     keyframes/<scene>.json             resynchronised frames and keyframes           cama_pipeline.keyframes.io
+    masks/<source>/semantic/<image path>.png       image masks made for a data set without   cama_pipeline.segment.io
+    masks/<source>/lane_instance/<image path>.png  its own (<source>: predicted, imported);
+    masks/<source>/manifest.json                   the data set's layout under each source
     sites/index.json                   the aggregation's decisions                   cama_pipeline.site.io
     sites/<site_id>/manifest.json      what a site's reconstruction reads            cama_pipeline.site.io
     pairs/<site_id>/pairs.txt          the pair list COLMAP imports                  cama_pipeline.pairs.io
@@ -29,12 +32,17 @@ from pathlib import Path
 from typing import Literal, NamedTuple
 
 WORKSPACE_DIRNAME = "workspace"
+MASK_SOURCES: tuple[str, ...] = ("predicted", "imported")
+"""The workspace's mask roots: masks the segmenter predicted, masks imported from another network."""
 """The default workspace's folder name, beside the data set root."""
 
-StageFolder = Literal["wigo", "keyframes", "sites", "pairs", "features", "sfm", "surface", "proposals"]
+StageFolder = Literal[
+    "wigo", "keyframes", "masks", "sites", "pairs", "features", "sfm", "surface", "proposals"
+]
 STAGE_FOLDERS: tuple[StageFolder, ...] = (
     "wigo",
     "keyframes",
+    "masks",
     "sites",
     "pairs",
     "features",
@@ -104,6 +112,20 @@ class Workspace:
     def keyframes(self, scene: str) -> Path:
         """`keyframes/<scene>.json`."""
         return self.stage_dir("keyframes") / f"{scene}.json"
+
+    # -- image masks ------------------------------------------------------------------------------------------
+
+    def masks_dir(self, source: str) -> Path:
+        """`masks/<source>/`: a mask root laid out as a data set's (`semantic/`, `lane_instance/` under it, see
+        `cama_pipeline.data.schema.mask_relpath`); `source` is `predicted` (`cama segment`) or `imported`
+        (`cama import-masks`)."""
+        if source not in MASK_SOURCES:
+            raise ValueError(f"mask source must be one of {', '.join(MASK_SOURCES)}, got {source!r}")
+        return self.stage_dir("masks") / source
+
+    def masks_manifest(self, source: str) -> Path:
+        """`masks/<source>/manifest.json`: what made the masks (checkpoint or class map) and for which images."""
+        return self.masks_dir(source) / "manifest.json"
 
     # -- sites --------------------------------------------------------------------------------------------------
 

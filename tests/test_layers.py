@@ -41,6 +41,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("stage keyframes", ("cama_pipeline.keyframes",)),
     ("stage site", ("cama_pipeline.site",)),
     ("stage pairs", ("cama_pipeline.pairs",)),
+    # image masks for data sets without their own: the segmenter (trained on generator sites) and imported masks
+    ("stage segment", ("cama_pipeline.segment",)),
     ("stage features", ("cama_pipeline.features",)),
     ("stage sfm", ("cama_pipeline.sfm",)),
     # the exports' refined poses: SfM poses, and WIGO corrected by them between SfM keyframes
