@@ -14,6 +14,8 @@ from cama_pipeline.workspace import STAGE_FOLDERS, SiteLocation, Workspace
 EXPECTED = {
     "wigo": ("scene-1", "wigo/scene-1.json"),
     "keyframes": ("scene-1", "keyframes/scene-1.json"),
+    "masks_dir": ("predicted", "masks/predicted"),
+    "masks_manifest": ("imported", "masks/imported/manifest.json"),
     "sites_index": (None, "sites/index.json"),
     "site_manifest": ("site-001", "sites/site-001/manifest.json"),
     "pairs_dir": ("site-001", "pairs/site-001"),
@@ -55,6 +57,8 @@ def test_every_path_method_gives_its_documented_place(tmp_path: Path) -> None:
     assert [ws.stage_dir(stage) for stage in STAGE_FOLDERS] == [tmp_path / stage for stage in STAGE_FOLDERS]
     with pytest.raises(ValueError, match="'bev'"):
         ws.stage_dir("bev")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="'dataset'"):
+        ws.masks_dir("dataset")
 
 
 def test_default_workspace_sits_beside_the_data_set_and_a_given_one_wins(tmp_path: Path) -> None:
