@@ -1,7 +1,9 @@
 """End-to-end benchmark: the whole path on a synthetic site, measured against the truth the generator kept.
 
 1. `cama run` (wigo ... surface -> proposals) into the site's workspace; seconds per stage of this run (a stage
-   that was already up to date shows the time of its skip check; its own report's timings are listed too).
+   that was already up to date shows the time of its skip check; its own report's timings are listed too), the
+   same per keyframe of the site (to compare image sizes and site sizes), and the peak resident memory of this
+   process and of its worker processes (the pipeline streams images; a 1600x900 site must fit the machine).
 2. Camera pose error of the coarse WIGO poses and of the SfM poses against the true poses (absolute, and
    gauge-free after the best similarity).
 3. Elevation RMSE of the reconstructed raster over cells that are road in the ground truth and observed.
@@ -27,6 +29,7 @@ import argparse
 import json
 import logging
 import platform
+import resource
 import sys
 import time
 from pathlib import Path
@@ -84,6 +87,19 @@ def stage_reports(workspace: Workspace, site_id: str) -> dict[str, Any]:
             report = json.loads(path.read_text())
             found[stage] = report.get("seconds")
     return found
+
+
+def keyframe_count(workspace: Workspace, site_id: str) -> int:
+    """Keyframes (frames of six images) the site's reconstruction uses, over all its scenes."""
+    manifest = read_site_manifest(workspace.site_manifest(site_id))
+    return sum(1 for scene in manifest["scenes"] for frame in scene["frames"] if frame["keyframe"])
+
+
+def peak_memory_mb() -> dict[str, float]:
+    """Peak resident set size of this process and of the largest finished child process, in MB (Linux kB)."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    return {"self_mb": round(own, 1), "largest_child_mb": round(children, 1)}
 
 
 def pose_figures(site: Path, views: list[CameraView], workspace: Workspace, site_id: str) -> dict[str, Any]:
@@ -349,11 +365,17 @@ def main() -> None:
     views = site_views(dataset, read_site_manifest(workspace.site_manifest(site_id)))
     rasters = workspace.surface_bev(site_id)
     proposals = workspace.proposals(site_id)
+    keyframes = keyframe_count(workspace, site_id)
     figures: dict[str, Any] = {
         "site": str(site),
         "site_id": site_id,
         "proposer": args.proposer,
         "stage_seconds": stage_seconds,
+        "keyframes": keyframes,
+        "stage_seconds_per_keyframe": {
+            stage: round(seconds / max(keyframes, 1), 3) for stage, seconds in stage_seconds.items()
+        },
+        "peak_memory": peak_memory_mb(),
         "stage_reports": stage_reports(workspace, site_id),
         "poses": pose_figures(site, views, workspace, site_id),
     }
