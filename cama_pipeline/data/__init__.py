@@ -2,6 +2,7 @@
 
 from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.data.loader import find_version, load_can, load_dataset
+from cama_pipeline.data.masks import MaskChoice, mask_roots, masks_fingerprint, parse_mask_choice
 from cama_pipeline.data.model import (
     CameraCalibration,
     CameraImage,
@@ -25,12 +26,16 @@ __all__ = [
     "Frame",
     "GnssSeries",
     "ImuSeries",
+    "MaskChoice",
     "Pose",
     "Scene",
     "WheelSeries",
     "find_version",
     "load_can",
     "load_dataset",
+    "mask_roots",
+    "masks_fingerprint",
+    "parse_mask_choice",
     "read_table",
     "read_tables",
 ]

@@ -4,7 +4,7 @@ import logging
 import math
 import os
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -77,11 +77,19 @@ def find_version(root: Path) -> str:
     raise DatasetError(f"several version folders with scene.json: {versions}; pass version=", path=root)
 
 
-def load_dataset(root: Path, version: str | None = None, *, check_files: bool = True) -> Dataset:
+def load_dataset(
+    root: Path,
+    version: str | None = None,
+    *,
+    check_files: bool = True,
+    mask_roots: Sequence[Path] | None = None,
+) -> Dataset:
     """Read and validate the tables, CAN files and image paths of a data set (images are not decoded).
 
     `version` is the table folder under `root` (found automatically when None). `check_files=False`
     skips the per-image existence check (e.g. for a partial download); masks are looked up either way.
+    `mask_roots` are the folders the masks are looked up in, in order, each laid out like a data set's masks
+    (`cama_pipeline.data.masks.mask_roots` resolves a `--masks` choice to them); None: the data set's own.
     """
     root = Path(root).absolute()
     if not root.is_dir():
@@ -95,7 +103,8 @@ def load_dataset(root: Path, version: str | None = None, *, check_files: bool = 
             f"version folder {version!r} has no scene.json; subfolders found: {found}", path=root
         )
     tables = read_tables(version_dir, REQUIRED_TABLES)
-    loader = _Loader(root, version_dir, tables, check_files)
+    roots = (root,) if mask_roots is None else tuple(Path(r).absolute() for r in mask_roots)
+    loader = _Loader(root, version_dir, tables, check_files, roots)
     loader.check_links()
     dataset = loader.build(version)
     n_images = sum(1 for _ in dataset.camera_images())
@@ -106,14 +115,24 @@ def load_dataset(root: Path, version: str | None = None, *, check_files: bool = 
 class _Loader:
     """Turns validated tables into the model; every error names table, token and field."""
 
-    def __init__(self, root: Path, version_dir: Path, tables: dict[str, Table], check_files: bool) -> None:
+    def __init__(
+        self,
+        root: Path,
+        version_dir: Path,
+        tables: dict[str, Table],
+        check_files: bool,
+        mask_roots: tuple[Path, ...],
+    ) -> None:
         self.root = root
         self.root_str = str(root)
         self.version_dir = version_dir
         self.tables = tables
         self.check_files = check_files
-        self.has_semantic = (root / SEMANTIC_DIR).is_dir()
-        self.has_instance = (root / INSTANCE_DIR).is_dir()
+        self.mask_roots = mask_roots
+        self.mask_dirs = {
+            kind: [str(r) for r in mask_roots if (r / kind).is_dir()] for kind in (SEMANTIC_DIR, INSTANCE_DIR)
+        }
+        """Per mask kind, the roots that have its folder (the others are not listed image by image)."""
         self.mask_files = _FolderListings()
         self.calibrations: dict[str, CameraCalibration] = {}
 
@@ -151,7 +170,7 @@ class _Loader:
                     "scene", scene.token, "name", f"name {scene.name!r} also used by {names[scene.name]}"
                 )
             names[scene.name] = scene.token
-        return Dataset(root=self.root, version=version, scenes=scenes)
+        return Dataset(root=self.root, version=version, scenes=scenes, mask_roots=self.mask_roots)
 
     # -- values ---------------------------------------------------------------------------------------------
 
@@ -287,16 +306,18 @@ class _Loader:
             path=Path(path),
             global_from_ego=self.pose("ego_pose", record["ego_pose_token"]),
             calibration=self.calibration(record["calibrated_sensor_token"], channel, token),
-            semantic_mask_path=self.mask_path(self.has_semantic, SEMANTIC_DIR, filename),
-            instance_mask_path=self.mask_path(self.has_instance, INSTANCE_DIR, filename),
+            semantic_mask_path=self.mask_path(SEMANTIC_DIR, filename),
+            instance_mask_path=self.mask_path(INSTANCE_DIR, filename),
         )
 
-    def mask_path(self, enabled: bool, mask_dir: str, filename: str) -> Path | None:
-        """Absolute path of an image's mask when the mask folder exists and holds it."""
-        if not enabled:
-            return None
-        path = os.path.join(self.root_str, mask_relpath(mask_dir, filename))
-        return Path(path) if self.mask_files.exists(path) else None
+    def mask_path(self, mask_dir: str, filename: str) -> Path | None:
+        """Absolute path of an image's mask in the first mask root that holds it; None when none does."""
+        relative = mask_relpath(mask_dir, filename)
+        for root in self.mask_dirs[mask_dir]:
+            path = os.path.join(root, relative)
+            if self.mask_files.exists(path):
+                return Path(path)
+        return None
 
     # -- scenes ---------------------------------------------------------------------------------------------
 

@@ -187,6 +187,16 @@ class CameraImage:
             )
         return image
 
+    def _require_mask(self, path: Path | None, what: str) -> None:
+        """A DatasetError naming the image when none of the mask roots holds its mask, and the way out."""
+        if path is None:
+            raise DatasetError(
+                f"no {what} for this image in the mask folders searched; make masks with `cama segment` or "
+                "`cama import-masks`, or name other ones with --masks",
+                path=self.path,
+                record=self.token,
+            )
+
     def load_rgb(self) -> np.ndarray:
         """The image as (H, W, 3) RGB uint8."""
         bgr = _read_image(self.path, cv2.IMREAD_COLOR, "image", self.token)
@@ -194,6 +204,7 @@ class CameraImage:
 
     def load_semantic(self) -> np.ndarray:
         """The semantic mask as (H, W) uint8 label ids."""
+        self._require_mask(self.semantic_mask_path, "semantic mask")
         mask = _read_image(self.semantic_mask_path, cv2.IMREAD_UNCHANGED, "semantic mask", self.token)
         if mask.ndim != 2 or mask.dtype != np.uint8:
             raise DatasetError(
@@ -205,6 +216,7 @@ class CameraImage:
 
     def load_instance(self) -> np.ndarray:
         """The instance mask as (H, W) uint16 ids (class * 1000 + index, 0 = none)."""
+        self._require_mask(self.instance_mask_path, "instance mask")
         mask = _read_image(self.instance_mask_path, cv2.IMREAD_UNCHANGED, "instance mask", self.token)
         if mask.ndim != 2 or mask.dtype != np.uint16:
             raise DatasetError(
@@ -338,6 +350,9 @@ class Dataset:
     """Version folder name, e.g. `v1.0-mini`."""
     scenes: tuple[Scene, ...]
     """Scenes in scene-table order."""
+    mask_roots: tuple[Path, ...] = ()
+    """The folders the images' masks were looked up in, in order (`cama_pipeline.data.masks`); a worker process
+    loading the data set again passes them on."""
     _scene_by_token: dict[str, Scene] = field(init=False, repr=False)
     _scene_by_name: dict[str, Scene] = field(init=False, repr=False)
     _frame_by_token: dict[str, Frame] = field(init=False, repr=False)
