@@ -12,3 +12,12 @@ WorkspaceOpt = Annotated[
 ]
 ScenesOpt = Annotated[list[str] | None, typer.Option("--scene", help="Only this scene (repeatable).")]
 OverwriteOpt = Annotated[bool, typer.Option(help="Recompute even when the outputs are up to date.")]
+MasksOpt = Annotated[
+    str,
+    typer.Option(
+        "--masks",
+        help="Image masks: auto (the data set's, else the workspace's predicted, else imported), dataset, "
+        "predicted (`cama segment`), imported (`cama import-masks`) or a folder laid out like a data set's masks "
+        "(cama_pipeline.data.masks).",
+    ),
+]

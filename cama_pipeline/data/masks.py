@@ -34,10 +34,6 @@ MASK_SOURCES: tuple[str, ...] = get_args(MaskSource)
 """The named choices; any other value is a folder."""
 MaskChoice: TypeAlias = MaskSource | Path
 """Where a run's masks come from (see the module docstring)."""
-MASK_CHOICE_HELP = (
-    "Image masks: auto (the data set's, else the workspace's predicted, else imported), dataset, predicted "
-    "(`cama segment`), imported (`cama import-masks`) or a folder laid out like a data set's masks."
-)
 MAKERS = {"predicted": "cama segment", "imported": "cama import-masks"}
 """The command that writes each workspace mask source."""
 MANIFEST_NAME = "manifest.json"

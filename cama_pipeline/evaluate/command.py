@@ -8,9 +8,9 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from cama_pipeline.cli_options import DatasetArg
+from cama_pipeline.cli_options import DatasetArg, MasksOpt, WorkspaceOpt
 from cama_pipeline.console import bad_input, console
-from cama_pipeline.data import DatasetError, load_dataset
+from cama_pipeline.data import DatasetError, load_dataset, mask_roots
 from cama_pipeline.evaluate.inputs import EvaluationInputError, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.projection import ProjectionConfig
 from cama_pipeline.evaluate.sre import SreConfig
@@ -45,8 +45,11 @@ def eval_command(
     scene: Annotated[list[str] | None, typer.Option(help="Evaluate only this scene (repeatable).")] = None,
     gate_px: Annotated[float, typer.Option(help="Matching gate in pixels at 960 px width.")] = 30.0,
     range_m: Annotated[float, typer.Option(help="Crop the map to this distance from each camera.")] = 50.0,
+    masks: MasksOpt = "auto",
+    workspace: WorkspaceOpt = None,
 ) -> None:
-    """Semantic reprojection error (CAMAv2 Algorithm 2) of a vector map against the image lane instances."""
+    """Semantic reprojection error (CAMAv2 Algorithm 2) of a vector map against the image lane instances (the
+    data set's own, or the workspace's with --masks)."""
     try:
         pairs = [("divider", int(Semantic.LANE_MARKING))] + (
             [("boundary", int(Semantic.CURB))] if boundaries else []
@@ -58,7 +61,7 @@ def eval_command(
             raise EvaluationInputError("--poses true needs --true-poses PATH (the ground-truth poses.json)")
         pose_table = load_true_poses(true_poses) if poses is PoseSource.true and true_poses else None
         elements = load_vector_map(vector_map)
-        data = load_dataset(dataset)
+        data = load_dataset(dataset, mask_roots=mask_roots(masks, dataset, workspace))
         report = evaluate_sre(data, elements, config, true_poses=pose_table, scenes=scene, show_progress=True)
     except (EvaluationInputError, DatasetError, FileNotFoundError, ValueError) as err:
         raise bad_input(err) from err

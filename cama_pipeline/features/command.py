@@ -4,7 +4,7 @@ from typing import Annotated
 
 import typer
 
-from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.cli_options import DatasetArg, MasksOpt, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.stage import run
@@ -24,6 +24,7 @@ def features_command(
             help="Descriptor matcher: blas (matrix products, fast) or colmap (COLMAP's CPU matcher)."
         ),
     ] = "blas",
+    masks: MasksOpt = "auto",
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Extract masked SIFT into each site's COLMAP database and match the pairs from `cama pairs`."""
@@ -34,7 +35,7 @@ def features_command(
             num_threads=threads,
             matcher=matcher,  # type: ignore[arg-type]  # checked by FeaturesConfig
         )
-        result = run(config, dataset, workspace, overwrite=overwrite)
+        result = run(config, dataset, workspace, masks=masks, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     for site in result.items:

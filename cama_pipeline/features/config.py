@@ -1,8 +1,9 @@
 """Parameters of feature extraction, masking and matching in one frozen, validated config."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
+from cama_pipeline.segment.ego import EgoConfig
 from cama_pipeline.semantics import Semantic
 
 
@@ -18,6 +19,11 @@ class FeaturesConfig:
     """Semantic classes whose pixels carry no features: moving/parked vehicles and the ego body."""
     mask_dilation_px: int = 9
     """Masked regions grow by this many pixels (SIFT support regions reach past object outlines)."""
+    ego_from_clip: bool = True
+    """When the masks label no ego pixel (or there are none), mask the ego body estimated from the pixels that stay
+    constant through each clip (`ego`); masks that label it are used as they are."""
+    ego: EgoConfig = field(default_factory=EgoConfig)
+    """How the ego body is estimated from a clip (`cama_pipeline.segment.ego`)."""
     min_features_warning: int = 150
     """Images with fewer features than this are reported (night, blank or blurred images)."""
     max_ratio: float = 0.8

@@ -20,38 +20,50 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
-from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data import Dataset, MaskChoice, load_dataset, mask_roots, masks_fingerprint
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import FeatureStore, open_database, prune_unlisted, verified_pairs
 from cama_pipeline.features.interface import FeatureExtractor, Features, PairMatcher
 from cama_pipeline.features.io import read_report, write_report
-from cama_pipeline.features.masks import blocked_pixels, keypoints_allowed
+from cama_pipeline.features.masks import ego_estimates, feature_block, keypoints_allowed, masks_label_ego
 from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.io import WorkspaceError
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
 
+EgoMasks = dict[tuple[str, str], np.ndarray]
+"""Estimated ego body by (scene, channel), for the cameras whose masks label none."""
+
+
 def image_features(
-    dataset: Dataset, view: CameraView, extractor: FeatureExtractor, config: FeaturesConfig
+    dataset: Dataset,
+    view: CameraView,
+    extractor: FeatureExtractor,
+    config: FeaturesConfig,
+    ego: np.ndarray | None = None,
 ) -> tuple[Features, int]:
-    """The view's features with those on the ego body and vehicles removed, and how many were removed."""
+    """The view's features with those on the ego body and vehicles removed, and how many were removed; `ego`
+    is the estimated ego body, used when the view's mask labels none."""
     image = dataset.image(view.token)
     gray = cv2.cvtColor(image.load_rgb(), cv2.COLOR_RGB2GRAY)
     features = extractor.extract(gray)
-    if image.semantic_mask_path is None:
-        logger.warning("%s has no semantic mask: its features are not masked", view.name)
+    semantic = image.load_semantic() if image.semantic_mask_path is not None else None
+    blocked = feature_block(semantic, ego, config.masked_classes, config.mask_dilation_px)
+    if blocked is None:
+        logger.warning("%s has no semantic mask and no ego estimate: its features are not masked", view.name)
         return features, 0
-    blocked = blocked_pixels(image.load_semantic(), config.masked_classes, config.mask_dilation_px)
     keep = keypoints_allowed(features.keypoints[:, :2], blocked)
     return features.subset(keep), int((~keep).sum())
 
@@ -59,34 +71,62 @@ def image_features(
 MIN_IMAGES_PER_PROCESS = 16
 """Extraction runs in worker processes only when each gets at least this many images (a process takes about a
 second to start and import pycolmap)."""
-_worker_state: tuple[Dataset, FeatureExtractor, FeaturesConfig] | None = None
+_worker_state: tuple[Dataset, FeatureExtractor, FeaturesConfig, EgoMasks] | None = None
 
 
-def _start_worker(root: Path, version: str, extractor: FeatureExtractor, config: FeaturesConfig) -> None:
-    """Worker-process set-up: its own data set tables and extractor (unpickled from the parent's)."""
+def _start_worker(
+    root: Path,
+    version: str,
+    roots: tuple[Path, ...],
+    extractor: FeatureExtractor,
+    config: FeaturesConfig,
+    ego: EgoMasks,
+) -> None:
+    """Worker-process set-up: its own data set tables (masks from the same roots) and extractor."""
     global _worker_state
-    _worker_state = (load_dataset(root, version, check_files=False), extractor, config)
+    _worker_state = (load_dataset(root, version, check_files=False, mask_roots=roots), extractor, config, ego)
 
 
 def _extract_in_worker(view: CameraView) -> tuple[Features, int]:
     if _worker_state is None:
         raise RuntimeError("extraction worker used before _start_worker")
-    return image_features(_worker_state[0], view, _worker_state[1], _worker_state[2])
+    dataset, extractor, config, ego = _worker_state
+    return image_features(dataset, view, extractor, config, ego.get((view.scene, view.channel)))
 
 
 def _extracted(
-    dataset: Dataset, todo: list[CameraView], extractor: FeatureExtractor, config: FeaturesConfig
+    dataset: Dataset,
+    todo: list[CameraView],
+    extractor: FeatureExtractor,
+    config: FeaturesConfig,
+    ego: EgoMasks,
 ) -> Iterator[tuple[Features, int]]:
     """Masked features of `todo` in order: in `config.num_threads` processes when there are enough images
     (pycolmap's SIFT holds the GIL, so threads do not help), else here."""
     workers = min(config.num_threads, len(todo) // MIN_IMAGES_PER_PROCESS)
     if workers < 2:
-        yield from (image_features(dataset, view, extractor, config) for view in todo)
+        for view in todo:
+            yield image_features(dataset, view, extractor, config, ego.get((view.scene, view.channel)))
         return
-    setup = (dataset.root, dataset.version, extractor, config)
+    setup = (dataset.root, dataset.version, dataset.mask_roots, extractor, config, ego)
     context = multiprocessing.get_context("spawn")  # forking a process that may hold threads is unsafe
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=setup) as pool:
         yield from pool.map(_extract_in_worker, todo, chunksize=4)
+
+
+def site_ego_masks(dataset: Dataset, views: list[CameraView], config: FeaturesConfig) -> EgoMasks:
+    """The ego body estimated per scene and camera when the site's masks label none (`FeaturesConfig.ego`)."""
+    if not config.ego_from_clip or int(Semantic.EGO) not in config.masked_classes:
+        return {}
+    if masks_label_ego(dataset, views):
+        return {}
+    estimates = ego_estimates(dataset, views, config.ego)
+    logger.info(
+        "the masks label no ego body: estimated from the clips for %d of %d cameras",
+        sum(bool(mask.any()) for mask in estimates.values()),
+        len({(view.scene, view.channel) for view in views}),
+    )
+    return estimates
 
 
 def extract_missing(
@@ -95,14 +135,19 @@ def extract_missing(
     store: FeatureStore,
     extractor: FeatureExtractor,
     config: FeaturesConfig,
+    ego: EgoMasks | None = None,
 ) -> dict[str, dict[str, int | None]]:
     """Extract the views the database lacks into it, with a progress bar; counts per newly extracted image.
-    A multi-process run needs a picklable extractor."""
+    `ego`: the estimated ego bodies (`site_ego_masks` of the views to extract when None). A multi-process run
+    needs a picklable extractor."""
     counts: dict[str, dict[str, int | None]] = {}
     todo = [view for view in views if not store.has(view.name)]
+    if ego is None:
+        ego = site_ego_masks(dataset, todo, config) if todo else {}
     with StageProgress("features", logger=logger, transient=True) as progress:
         task = progress.add_task("extract", total=len(todo))
-        for view, (features, masked) in zip(todo, _extracted(dataset, todo, extractor, config), strict=True):
+        extracted = _extracted(dataset, todo, extractor, config, ego)
+        for view, (features, masked) in zip(todo, extracted, strict=True):
             store.add(view, features)
             counts[view.name] = {"features": len(features.keypoints), "masked": masked}
             progress.advance(task)
@@ -130,9 +175,11 @@ def run_site(
     *,
     extractor: FeatureExtractor,
     matcher: PairMatcher,
+    masks: MaskChoice | str = "auto",
     overwrite: bool = False,
 ) -> ItemResult:
-    """Extract and match one site (see the module docstring); its item: the site's features folder and report."""
+    """Extract and match one site (see the module docstring); its item: the site's features folder and report.
+    `masks` is the choice the data set's mask roots came from (`dataset.mask_roots`), for the fingerprint."""
     folder = workspace.features_dir(site_id)
     database, report_path = workspace.features_db(site_id), workspace.features_report(site_id)
     pairs_file = workspace.pairs_txt(site_id)
@@ -149,6 +196,7 @@ def run_site(
         extractor.name,
         matcher.name,
         file_stats([manifest_path, pairs_file]),
+        masks_fingerprint(masks, dataset.mask_roots, dataset.root),
     )
     size = database.stat().st_size if database.is_file() else None
     if size is not None and is_up_to_date(report_path, digest) and previous.get("database_bytes") == size:
@@ -158,9 +206,11 @@ def run_site(
     started = time.perf_counter()
     with open_database(database) as db:
         store = FeatureStore(db)
+        todo = [view for view in views if not store.has(view.name)]
+        ego = site_ego_masks(dataset, todo, config) if todo else {}
         counts = {
             **previous.get("images", {}),
-            **extract_missing(dataset, views, store, extractor, config),
+            **extract_missing(dataset, views, store, extractor, config, ego),
         }
         for view in views:  # extracted by an interrupted run that wrote no report: masked pixels unknown
             if view.name not in counts:
@@ -184,6 +234,11 @@ def run_site(
         "matcher": matcher.name,
         "images": counts,
         "low_feature_images": low,
+        "masks": [list(part) for part in masks_fingerprint(masks, dataset.mask_roots, dataset.root)],
+        "ego_estimated": {
+            **previous.get("ego_estimated", {}),
+            **{f"{scene}/{channel}": float(mask.mean()) for (scene, channel), mask in ego.items()},
+        },
         "pairs_listed": len(listed),
         "pairs_pruned": pruned,
         "pairs_verified": len(verified),
@@ -203,18 +258,30 @@ def run(
     *,
     extractor: FeatureExtractor | None = None,
     matcher: PairMatcher | None = None,
+    masks: MaskChoice | str = "auto",
     overwrite: bool = False,
 ) -> StageResult:
     """Features and matches for every site of the workspace (after `cama pairs`); SIFT and the matcher named by
-    the config unless another extractor/matcher pair is given."""
+    the config unless another extractor/matcher pair is given; vehicles and the ego body masked by the masks of
+    `masks` (`cama_pipeline.data.masks`)."""
     started = time.perf_counter()
     ws = Workspace.resolve(workspace, Path(dataset_root))
     site_ids = read_site_ids(ws.sites_index())
-    dataset = load_dataset(Path(dataset_root))
+    roots = mask_roots(masks, Path(dataset_root), ws)
+    dataset = load_dataset(Path(dataset_root), mask_roots=roots)
     extractor = extractor or SiftExtractor(config)
     matcher = matcher or (BlasMatcher(config) if config.matcher == "blas" else ColmapMatcher(config))
     items = tuple(
-        run_site(dataset, ws, site_id, config, extractor=extractor, matcher=matcher, overwrite=overwrite)
+        run_site(
+            dataset,
+            ws,
+            site_id,
+            config,
+            extractor=extractor,
+            matcher=matcher,
+            masks=masks,
+            overwrite=overwrite,
+        )
         for site_id in site_ids
     )
     return StageResult("features", ws, items, time.perf_counter() - started)

@@ -4,7 +4,7 @@ from typing import Annotated
 
 import typer
 
-from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.cli_options import DatasetArg, MasksOpt, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console, failure
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
@@ -22,6 +22,7 @@ def sfm_command(
         str, typer.Option(help="Where clips run: local (process pool) or ray (local Ray instance).")
     ] = "local",
     workers: Annotated[int, typer.Option(min=1, help="Clips reconstructed at once.")] = 2,
+    masks: MasksOpt = "auto",
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Reconstruct each site: every clip on its own from the WIGO poses, then merged and adjusted as one."""
@@ -29,7 +30,9 @@ def sfm_command(
         raise bad_input(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     try:
         config = SfmConfig.preset(preset)
-        result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
+        result = run(
+            config, dataset, workspace, executor=executor, workers=workers, masks=masks, overwrite=overwrite
+        )
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     except SfmError as err:  # every clip failed: the reconstruction, not its input

@@ -21,7 +21,7 @@ import pycolmap
 
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.code_version import code_version
-from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data import Dataset, MaskChoice, load_dataset, mask_roots, masks_fingerprint
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date, stored_fingerprint
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
@@ -326,11 +326,12 @@ def run_site(
     *,
     executor: Executor,
     merge_config: MergeConfig,
+    masks: MaskChoice | str = "auto",
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> ItemResult:
     """Reconstruct one site into `sfm/<site_id>/` unless its outputs are up to date; its item: that folder and
-    the site's report."""
+    the site's report. `masks`: the choice `dataset.mask_roots` came from (the points' labels read them)."""
     manifest_path = workspace.site_manifest(site_id)
     database = workspace.features_db(site_id)
     if not database.is_file():
@@ -343,6 +344,7 @@ def run_site(
         asdict(merge_config),
         file_stats([manifest_path]),
         features,
+        masks_fingerprint(masks, dataset.mask_roots, dataset.root),
     )
     if not overwrite and is_up_to_date(report_path, digest):
         return ItemResult(site_id, folder, read_report(report_path), skipped=True)
@@ -387,15 +389,17 @@ def run(
     executor: str = "local",
     workers: int = 2,
     merge_config: MergeConfig | None = None,
+    masks: MaskChoice | str = "auto",
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> StageResult:
-    """Reconstruct every site of the workspace (after `cama features`) on the named executor."""
+    """Reconstruct every site of the workspace (after `cama features`) on the named executor; the sparse
+    points are labelled by the masks of `masks` (`cama_pipeline.data.masks`)."""
     started = time.perf_counter()
     ws = Workspace.resolve(workspace, Path(dataset_root))
     site_ids = read_site_ids(ws.sites_index())
     runner = make_executor(executor, workers)
-    dataset = load_dataset(Path(dataset_root))
+    dataset = load_dataset(Path(dataset_root), mask_roots=mask_roots(masks, Path(dataset_root), ws))
     sites = tuple(
         run_site(
             dataset,
@@ -404,6 +408,7 @@ def run(
             config,
             executor=runner,
             merge_config=merge_config or MergeConfig(),
+            masks=masks,
             overwrite=overwrite,
             show_progress=show_progress,
         )

@@ -5,7 +5,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.cli_options import DatasetArg, MasksOpt, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.stage import run
@@ -29,6 +29,7 @@ def surface_command(
     ] = True,
     threads: Annotated[int, typer.Option(help="torch threads on the CPU.")] = 1,
     device: Annotated[str, typer.Option(help="auto, cpu or cuda.")] = "auto",
+    masks: MasksOpt = "auto",
     overwrite: OverwriteOpt = False,
 ) -> None:
     """RoMe-style road surface: elevation MLP, mesh colour and semantics, BEV rasters per site."""
@@ -40,7 +41,7 @@ def surface_command(
             torch_threads=threads,
             device=device,  # type: ignore[arg-type]  # validated by SurfaceConfig
         )
-        result = run(config, dataset, workspace, poses=poses, overwrite=overwrite)
+        result = run(config, dataset, workspace, poses=poses, masks=masks, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     table = Table(title=f"surface ({poses} poses)")

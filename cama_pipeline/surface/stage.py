@@ -15,8 +15,9 @@ from typing import Any
 import torch
 
 from cama_pipeline.bev import write_bev
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.code_version import code_version
-from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data import Dataset, DatasetError, MaskChoice, load_dataset, mask_roots, masks_fingerprint
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
@@ -78,13 +79,35 @@ class _Phases:
 
 
 def _site_digest(
-    config: SurfaceConfig, dataset_root: Path, workspace: Workspace, site_id: str, poses: str
+    config: SurfaceConfig,
+    dataset_root: Path,
+    workspace: Workspace,
+    site_id: str,
+    poses: str,
+    masks: list[tuple[str, str | None]],
 ) -> str:
-    """Fingerprint of the config, the pose source and the files the site's surface is made from."""
+    """Fingerprint of the config, the pose source, the masks (`masks_fingerprint`) and the files the site's
+    surface is made from."""
     inputs = [workspace.site_manifest(site_id), *pose_inputs(dataset_root, workspace, site_id, poses)]
     if config.use_sfm_points:
         inputs.append(workspace.sfm_points(site_id))
-    return fingerprint(code_version("cama_pipeline.surface"), asdict(config), poses, file_stats(inputs))
+    return fingerprint(
+        code_version("cama_pipeline.surface"), asdict(config), poses, file_stats(inputs), masks
+    )
+
+
+def check_masks(dataset: Dataset, views: list[CameraView], site_id: str) -> None:
+    """Every view has a semantic mask (the observation reads them all), else a DatasetError naming the first
+    image without one, before any work."""
+    missing = [view for view in views if dataset.image(view.token).semantic_mask_path is None]
+    if missing:
+        searched = ", ".join(str(root) for root in dataset.mask_roots) or "none (the data set has no masks)"
+        raise DatasetError(
+            f"site {site_id}: {len(missing)} of {len(views)} keyframe images have no semantic mask (mask folders "
+            f"searched: {searched}); make them with `cama segment` or `cama import-masks`, or name others with "
+            "--masks",
+            path=dataset.image(missing[0].token).path,
+        )
 
 
 def reconstruct_site(
@@ -95,6 +118,7 @@ def reconstruct_site(
     views = posed_views(
         dataset, read_site_manifest(workspace.site_manifest(site_id)), workspace, site_id, poses
     )
+    check_masks(dataset, views, site_id)
     try:
         points = surface_points(views, sfm_surface_points(workspace, site_id, config), config)
     except NoRoadPointsError as err:
@@ -136,16 +160,20 @@ def run(
     workspace: Path | Workspace | None = None,
     *,
     poses: str = "wigo",
+    masks: MaskChoice | str = "auto",
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> StageResult:
     """Surface mesh and BEV rasters of every site in `sites/index.json` (after `cama sites`), posed by
-    `poses` (ground_truth: synthetic sites only; wigo: the site manifest; sfm: after `cama sfm`)."""
+    `poses` (ground_truth: synthetic sites only; wigo: the site manifest; sfm: after `cama sfm`), observed
+    through the semantic masks of `masks` (`cama_pipeline.data.masks`)."""
     if poses not in POSE_SOURCES:
         raise ValueError(f"poses must be one of {', '.join(POSE_SOURCES)}, got {poses!r}")
     started = time.perf_counter()
     ws = Workspace.resolve(workspace, Path(dataset_root))
     site_ids = read_site_ids(ws.sites_index())
+    roots = mask_roots(masks, Path(dataset_root), ws)
+    masks_part = masks_fingerprint(masks, roots, Path(dataset_root))
     dataset: Dataset | None = None
     done: list[ItemResult] = []
     with (
@@ -153,12 +181,12 @@ def run(
         torch_threads(config.torch_threads),
     ):
         for site_id in site_ids:
-            digest = _site_digest(config, Path(dataset_root), ws, site_id, poses)
+            digest = _site_digest(config, Path(dataset_root), ws, site_id, poses, masks_part)
             path, folder = ws.surface_report(site_id), ws.surface_dir(site_id)
             if not overwrite and is_up_to_date(path, digest):
                 done.append(ItemResult(site_id, folder, read_report(path), skipped=True))
                 continue
-            dataset = dataset or load_dataset(Path(dataset_root))
+            dataset = dataset or load_dataset(Path(dataset_root), mask_roots=roots)
             torch.manual_seed(config.seed)
             report = reconstruct_site(dataset, ws, site_id, config, poses, _Phases(progress, site_id))
             report = write_report(path, {**report, "fingerprint": digest})
