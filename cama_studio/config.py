@@ -4,7 +4,7 @@ or YAML and written as TOML.
 A file sets any stage parameter; what it leaves out keeps its default, so a file need hold only what differs:
 
 ```toml
-workers = 4                      # run-level choices: executor, workers, proposer, checkpoint, surface_poses
+workers = 4                      # run-level choices: executor, workers, proposer, checkpoint, surface_poses, masks
 
 [features]
 max_num_features = 2048          # a table per stage, named as in `cama run --stop-after`: [wigo] [keyframes]
@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin
 
+from cama_pipeline.data.masks import parse_mask_choice
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.pairs.config import PairsConfig
@@ -101,6 +102,10 @@ class PipelineConfig:
     package (`models.vma.shipped`), found from any working directory."""
     surface_poses: Literal["sfm", "wigo"] = "sfm"
     """Poses the surface stage projects the images with."""
+    masks: str = "auto"
+    """Where the image masks come from (`cama_pipeline.data.masks`): auto (the data set's own, else the workspace's
+    predicted, else its imported; the segment stage runs when none is there), dataset, predicted (the segment
+    stage makes them), imported (`cama import-masks`) or a folder laid out like a data set's masks."""
     wigo: WigoConfig = field(default_factory=WigoConfig)
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
     sites: SiteConfig = field(default_factory=SiteConfig)
@@ -121,6 +126,11 @@ class PipelineConfig:
             raise ValueError(f"surface_poses must be sfm or wigo, got {self.surface_poses!r}")
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
             raise ValueError(f"workers must be an integer >= 1, got {self.workers!r}")
+        if not isinstance(self.masks, str) or not self.masks.strip():
+            raise ValueError(
+                f"masks must be auto, dataset, predicted, imported or a folder, got {self.masks!r}"
+            )
+        parse_mask_choice(self.masks)
 
 
 HIDDEN_FIELDS: dict[type, frozenset[str]] = {

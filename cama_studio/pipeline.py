@@ -1,6 +1,10 @@
-"""The whole reconstruction path as one call: wigo -> keyframes -> sites -> pairs -> features -> sfm -> surface
--> VMA proposals, for any nuScenes-layout data set. Only composes the stages' own `run`s (each skips what is up
-to date), times them, and names the stage that failed.
+"""The whole reconstruction path as one call: wigo -> keyframes -> sites -> pairs -> segment -> features -> sfm ->
+surface -> VMA proposals, for any nuScenes-layout data set. Only composes the stages' own `run`s (each skips what
+is up to date), times them, and names the stage that failed.
+
+Image masks come from the run's `masks` choice (`cama_pipeline.data.masks`): the segment stage runs only when that
+choice needs predicted masks (`prediction_needed`: a data set without masks and no imported ones, or `predicted`),
+else it is recorded as skipped with the reason; features, SfM and the surface read the masks the choice resolves to.
 
 Outputs are the stages' own files in the workspace (`cama_pipeline.workspace`); the proposals of site `s` are
 `proposals/<s>.json` (an annotation set in the frame of that site's reconstructed rasters, `surface/<s>/bev/`).
@@ -19,7 +23,14 @@ from cama_studio.config import PipelineConfig
 
 logger = logging.getLogger(__name__)
 
-STAGES = ("wigo", "keyframes", "sites", "pairs", "features", "sfm", "surface", "propose")
+STAGES = ("wigo", "keyframes", "sites", "pairs", "segment", "features", "sfm", "surface", "propose")
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """What a stage call returns when the run does not need the stage, and why."""
+
+    reason: str
 
 
 class PipelineError(RuntimeError):
@@ -56,6 +67,8 @@ class PipelineResult:
     proposals: dict[str, Path] = field(default_factory=dict)
     checkpoint: Path | None = None
     """The VMA checkpoint version folder the learned proposer used (None: rule-based, or not reached)."""
+    skipped: dict[str, str] = field(default_factory=dict)
+    """Stages the run did not need, with the reason (e.g. segment: the data set has its own masks)."""
 
 
 def _stage_calls(
@@ -73,11 +86,12 @@ def _stage_calls(
 
     root, ws, c = dataset_root, workspace, config
     return {
+        "segment": lambda: _segment(root, ws, c, overwrite),
         "wigo": lambda: run_wigo(c.wigo, root, ws, overwrite=overwrite),
         "keyframes": lambda: run_keyframes(c.keyframes, root, ws, overwrite=overwrite),
         "sites": lambda: run_sites(c.sites, root, ws, overwrite=overwrite),
         "pairs": lambda: run_pairs(c.pairs, root, ws, overwrite=overwrite),
-        "features": lambda: run_features(c.features, root, ws, overwrite=overwrite),
+        "features": lambda: run_features(c.features, root, ws, masks=c.masks, overwrite=overwrite),
         "sfm": lambda: run_sfm(
             c.sfm,
             root,
@@ -85,10 +99,35 @@ def _stage_calls(
             executor=c.executor,
             workers=c.workers,
             merge_config=c.sfm_merge,
+            masks=c.masks,
             overwrite=overwrite,
         ),
-        "surface": lambda: run_surface(c.surface, root, ws, poses=c.surface_poses, overwrite=overwrite),
+        "surface": lambda: run_surface(
+            c.surface, root, ws, poses=c.surface_poses, masks=c.masks, overwrite=overwrite
+        ),
     }
+
+
+def _segment(dataset_root: Path, workspace: Path, config: PipelineConfig, overwrite: bool) -> Skipped | None:
+    """The segment stage when the run's mask choice needs predicted masks, else why not (`prediction_needed`)."""
+    from cama_pipeline.data.masks import prediction_needed
+
+    reason = prediction_needed(config.masks, dataset_root, workspace)
+    if reason is not None:
+        logger.info("segment skipped: %s", reason)
+        return Skipped(reason)
+    from cama_pipeline.segment.config import SegmentConfig
+    from cama_pipeline.segment.stage import run as run_segment
+
+    run_segment(
+        SegmentConfig(),
+        dataset_root,
+        workspace,
+        executor=config.executor,
+        workers=config.workers,
+        overwrite=overwrite,
+    )
+    return None
 
 
 def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool, result: PipelineResult) -> None:
@@ -135,8 +174,8 @@ def run(
         try:
             if stage == "propose":
                 _propose_sites(workspace, config, overwrite, result)
-            else:
-                calls[stage]()
+            elif isinstance(outcome := calls[stage](), Skipped):
+                result.skipped[stage] = outcome.reason
         except (ValueError, FileNotFoundError, RuntimeError) as err:
             raise PipelineError(stage, err, bad_input=_is_bad_input(stage, err)) from err
         result.seconds[stage] = time.perf_counter() - started

@@ -44,6 +44,13 @@ def run_command(
             help="VMA checkpoint registry or version folder; default: the model shipped with the package."
         ),
     ] = None,
+    masks: Annotated[
+        str | None,
+        typer.Option(
+            help="Image masks: auto (the data set's, else the workspace's predicted, else imported; runs the "
+            "segmenter when there are none), dataset, predicted, imported or a folder (sets masks)."
+        ),
+    ] = None,
     stop_after: Annotated[str, typer.Option(help="Last stage to run.")] = "propose",
     overwrite: Annotated[bool, typer.Option(help="Recompute every stage even if up to date.")] = False,
 ) -> None:
@@ -54,7 +61,7 @@ def run_command(
     from cama_studio.pipeline import STAGES, PipelineError, run
 
     try:
-        config = effective_config(config_file, executor, workers, max_features, proposer, checkpoint)
+        config = effective_config(config_file, executor, workers, max_features, proposer, checkpoint, masks)
         if print_config:
             console.out(dump_toml(config), end="", highlight=False)
             return
@@ -75,7 +82,8 @@ def run_command(
     except ValueError as err:
         raise bad_input(err) from err
     for stage, seconds in result.seconds.items():
-        console.print(f"  {stage:<10} {seconds:8.1f} s")
+        skipped = f"  skipped: {result.skipped[stage]}" if stage in result.skipped else ""
+        console.print(f"  {stage:<10} {seconds:8.1f} s{skipped}")
     for site_id, path in result.proposals.items():
         console.print(f"[green]proposals[/green] {site_id}: {path}")
     if result.checkpoint is not None:
@@ -91,6 +99,7 @@ def effective_config(
     max_features: int | None,
     proposer: str | None,
     checkpoint: Path | None,
+    masks: str | None = None,
 ) -> "PipelineConfig":
     """The --config file's configuration (the defaults without one), with the options given on top; ValueError
     naming the option or the file and key at fault."""
@@ -111,6 +120,11 @@ def effective_config(
         config = replace(config, workers=workers)
     if checkpoint is not None:
         config = replace(config, checkpoint=checkpoint)
+    if masks is not None:
+        try:
+            config = replace(config, masks=masks)
+        except ValueError as err:
+            raise ValueError(f"--masks: {err}") from None
     if max_features is not None:
         try:
             config = replace(config, features=replace(config.features, max_num_features=max_features))

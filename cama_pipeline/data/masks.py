@@ -139,3 +139,25 @@ def _tree_digest(root: Path) -> str:
                 relative = os.path.relpath(os.path.join(folder, name), root)
                 digest.update(f"{relative}\0{stat.st_size}\0{stat.st_mtime_ns}\n".encode())
     return digest.hexdigest()[:16]
+
+
+def prediction_needed(
+    choice: MaskChoice | str, dataset_root: Path, workspace: Path | Workspace | None = None
+) -> str | None:
+    """Whether a whole run must run the segmenter (`cama segment`) for `choice`: None when it must (the segment
+    stage itself then skips masks that are up to date), else why not. `predicted` always needs it; `auto` needs
+    it unless the data set has masks or the workspace has imported masks and no predicted ones (predicted masks
+    already there are kept up to date); `dataset`, `imported` and a folder never do."""
+    choice = parse_mask_choice(choice)
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    if isinstance(choice, Path):
+        return f"masks from {choice}"
+    if choice in ("dataset", "imported"):
+        return f"--masks {choice}"
+    if choice == "predicted":
+        return None
+    if has_masks(Path(dataset_root)):
+        return "the data set has its own masks"
+    if _workspace_root(ws, "imported") is not None and _workspace_root(ws, "predicted") is None:
+        return f"imported masks in {ws.masks_dir('imported')}"
+    return None

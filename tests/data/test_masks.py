@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cama_pipeline.data import DatasetError, load_dataset, mask_roots, masks_fingerprint, parse_mask_choice
+from cama_pipeline.data.masks import prediction_needed
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.workspace import Workspace
@@ -137,3 +138,17 @@ def test_fingerprint_follows_choice_and_manifest(bare: NuScenesFixture, tmp_path
     cv2.imwrite(str(first), np.zeros((bare.height, bare.width + 1), np.uint8))  # one mask rewritten
     assert masks_fingerprint(folder, (folder,), bare.root) != before
     assert not (folder / INSTANCE_DIR).exists()
+
+
+def test_when_a_run_must_predict_masks(bare: NuScenesFixture, tmp_path: Path) -> None:
+    ws = Workspace(tmp_path / "workspace")
+    assert prediction_needed("auto", bare.root, ws) is None  # nothing anywhere: predict
+    assert prediction_needed("dataset", bare.root, ws) == "--masks dataset"
+    assert prediction_needed(tmp_path / "mine", bare.root, ws) == f"masks from {tmp_path / 'mine'}"
+    write_mask_root(ws.masks_dir("imported"), bare, int(Semantic.ROAD))
+    assert "imported masks" in (prediction_needed("auto", bare.root, ws) or "")
+    assert prediction_needed("predicted", bare.root, ws) is None
+    write_mask_root(ws.masks_dir("predicted"), bare, int(Semantic.ROAD))
+    assert prediction_needed("auto", bare.root, ws) is None  # predicted masks are kept up to date
+    with_masks = write_nuscenes_fixture(tmp_path / "with-masks" / "nuscenes", n_samples=1)
+    assert prediction_needed("auto", with_masks.root, None) == "the data set has its own masks"

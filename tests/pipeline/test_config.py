@@ -44,6 +44,7 @@ def _changed() -> PipelineConfig:
         proposer="rule",
         checkpoint=Path("/models/vma/v7"),
         surface_poses="wigo",
+        masks="masks/from-oneformer",
         features=FeaturesConfig(max_num_features=1024, masked_classes=(5,), matcher="colmap"),
         sfm=SfmConfig(first_ba_max_iterations=None, loss="huber"),
         propose=ProposeConfig(boundary_source="curb", rule=RuleConfig(join_gap_m=5.5)),
@@ -79,6 +80,8 @@ def test_a_file_sets_only_what_it_names_and_numbers_keep_their_fingerprint(tmp_p
         ("[surface]\ndevice = 'tpu'\n", ["surface.device", "'cuda'"]),
         ("[sfm]\nmax_iterations = 0\n", ["[sfm]", "SfmConfig.max_iterations must be >= 1"]),
         ("executor = 'cloud'\n", ["executor", "'ray'"]),
+        ("masks = ''\n", ["masks must be auto, dataset, predicted, imported or a folder"]),
+        ("masks = 3\n", ["masks must be a string"]),
         ("wigo = 3\n", ["wigo must be a table"]),
         ("[propose.rule]\nboundary_source = 'curb'\n", ["propose.rule.boundary_source"]),
         ("[sfm\n", ["not valid TOML"]),
@@ -109,12 +112,18 @@ def test_print_config_shows_the_effective_configuration_and_exits_0(tmp_path: Pa
     assert plain.output == dump_toml(PipelineConfig())
     path = _write(tmp_path, "[sfm]\nrigid = false\n[features]\nmax_num_features = 2048\n")
     argv = ["run", "--config", str(path), "--max-features", "512", "--proposer", "rule", "--print-config"]
-    effective = runner.invoke(app, argv)
+    effective = runner.invoke(app, [*argv, "--masks", "imported"])
     assert effective.exit_code == 0, effective.output
+    assert 'masks = "imported"' in effective.output.splitlines()
     printed = load_config(_write(tmp_path, effective.output, "printed.toml"))
     assert printed == PipelineConfig(
-        proposer="rule", sfm=SfmConfig(rigid=False), features=FeaturesConfig(max_num_features=512)
+        proposer="rule",
+        masks="imported",
+        sfm=SfmConfig(rigid=False),
+        features=FeaturesConfig(max_num_features=512),
     )
+    empty = runner.invoke(app, ["run", "--masks", "", "--print-config"])
+    assert empty.exit_code == 2 and "--masks" in empty.output
 
 
 def test_cama_run_refuses_a_bad_config_file_with_exit_2(tmp_path: Path) -> None:
@@ -154,6 +163,7 @@ def test_each_stage_runs_with_its_table_of_the_file(tmp_path: Path, monkeypatch:
             """
             workers = 3
             surface_poses = "wigo"
+            masks = "dataset"
             [wigo]
             node_rate_hz = 5.0
             [keyframes]
@@ -191,10 +201,13 @@ def test_each_stage_runs_with_its_table_of_the_file(tmp_path: Path, monkeypatch:
     workspace.sites_index().parent.mkdir(parents=True)
     index = {"schema": "cama.sites/1", "sites": [{"site_id": "site-001"}], "dropped": []}
     workspace.sites_index().write_text(json.dumps(index))
-    run(tmp_path / "nuscenes", workspace.root, config)
+    (tmp_path / "nuscenes" / "semantic").mkdir(parents=True)  # the data set's masks: no segment stage
+    result = run(tmp_path / "nuscenes", workspace.root, config)
 
     for stage in ("wigo", "keyframes", "sites", "pairs", "features", "sfm", "surface"):
         assert calls[stage][0][0] == getattr(config, stage), stage
+    assert result.skipped == {"segment": "--masks dataset"} and "segment" in result.seconds
+    assert all(calls[stage][1]["masks"] == "dataset" for stage in ("features", "sfm", "surface"))
     assert calls["sfm"][1]["merge_config"] == config.sfm_merge and calls["sfm"][1]["workers"] == 3
     assert calls["surface"][1]["poses"] == "wigo"
     proposed = calls["propose"][1]
