@@ -46,25 +46,43 @@ def synth(
             help="Force mask degradation on (jitter 2 px, 5% missed markings) or off; the preset's when omitted."
         ),
     ] = None,
+    random_seed: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            help="Draw a randomised site (layout, terrain, look, paint wear, light, camera) from this seed, the "
+            "size of --preset; its location is synth-random-SEED. Not with --seed.",
+        ),
+    ] = None,
 ) -> None:
     """Generate a synthetic driving site in nuScenes layout, with its ground truth kept beside it."""
+    from dataclasses import replace
+
     from cama_pipeline.synthetic.config import MaskNoiseConfig
     from cama_pipeline.synthetic.config import preset as make_preset
     from cama_pipeline.synthetic.generate import run
+    from cama_pipeline.synthetic.randomise import randomised_config
 
+    if seed is not None and random_seed is not None:
+        raise bad_input("--seed and --random-seed exclude each other (a randomised site uses its random seed)")
     overrides: dict[str, object] = {}
     if seed is not None:
         overrides["seed"] = seed
     if degrade_masks is not None:
         overrides["masks"] = MaskNoiseConfig(2, 0.05) if degrade_masks else MaskNoiseConfig()
     try:
-        cfg = make_preset(preset, **overrides)
+        if random_seed is not None:
+            cfg = replace(randomised_config(random_seed, base=preset), **overrides)  # type: ignore[arg-type]
+        else:
+            cfg = make_preset(preset, **overrides)
         result = run(cfg, out, images=images, overwrite=overwrite, workers=workers)
     except (ValueError, FileExistsError) as err:
         raise bad_input(err) from err
     state = "up to date, nothing generated" if result.skipped else f"generated in {result.seconds:.0f} s"
     console.print(f"[green]site[/green] {result.out_dir} ({state})")
     console.print(f"  data set (nuScenes layout): {result.dataset_root}  version {result.version}")
+    if random_seed is not None:
+        console.print(f"  randomised site {random_seed} (location {cfg.log_location}), config in the manifest")
     console.print(f"  ground truth:               {result.ground_truth_dir}")
     kinds = ", ".join(f"{name} ({kind})" for name, kind in result.scenes.items())
     console.print(f"  {len(result.scenes)} scenes: {kinds}")
@@ -85,6 +103,7 @@ def _register_stage_commands() -> None:
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.pairs.command import pairs_command
+    from cama_pipeline.segment.import_masks import import_masks_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
     from cama_pipeline.surface.command import surface_command
@@ -109,6 +128,7 @@ def _register_stage_commands() -> None:
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)
     app.command("pairs")(pairs_command)
+    app.command("import-masks")(import_masks_command)
     app.command("features")(features_command)
     app.command("surface")(surface_command)
     app.command("sfm")(sfm_command)

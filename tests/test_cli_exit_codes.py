@@ -57,6 +57,10 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "keyframes": ([nowhere], str(workspace.stage_dir("wigo"))),
         "sites": ([nowhere], nowhere),
         "pairs": ([nowhere], sites_index),
+        "import-masks": (
+            [nowhere, str(tmp / "masks"), "--class-map", "mapillary-vistas"],
+            str(tmp / "masks"),
+        ),
         "features": ([nowhere], sites_index),
         "sfm": ([nowhere], sites_index),
         "surface": ([nowhere], sites_index),

@@ -51,13 +51,22 @@ def ego_estimates(
     dataset: Dataset, views: Sequence[CameraView], config: EgoConfig
 ) -> dict[tuple[str, str], np.ndarray]:
     """The ego body of each (scene, channel) of `views` from the pixels that stay constant through the scene
-    (`cama_pipeline.segment.ego`, on every image of the scene's camera); pairs without an estimate are left out."""
+    (`cama_pipeline.segment.ego`, on every image of the scene's camera). A scene that cannot tell (standing, night)
+    takes the body found in another scene of the same camera (the same calibrated_sensor: the body does not move
+    on the car); pairs left without an estimate are left out."""
     estimates: dict[tuple[str, str], np.ndarray] = {}
+    calibration: dict[tuple[str, str], str] = {}
     for scene, channel in sorted({(view.scene, view.channel) for view in views}):
         images = dataset.scene_by_name(scene).images.get(channel, ())
+        if images:
+            calibration[(scene, channel)] = images[0].calibration.token
         estimate = estimate_ego_mask(images, config)
         if estimate is not None:
             estimates[(scene, channel)] = estimate
+    by_camera = {calibration[key]: mask for key, mask in estimates.items() if key in calibration}
+    for key, token in calibration.items():
+        if key not in estimates and token in by_camera:
+            estimates[key] = by_camera[token]
     return estimates
 
 
