@@ -22,7 +22,7 @@ Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-cou
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
 
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|rule]
-       [--out bench/results/end_to_end.json] [--measure-only]
+       [--masks auto|dataset|predicted|DIR] [--out bench/results/end_to_end.json] [--measure-only]
 """
 
 import argparse
@@ -52,7 +52,8 @@ from app.simulation.workbench import (
 )
 from cama_pipeline.bev import read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
-from cama_pipeline.data import Pose, load_dataset
+from cama_pipeline.data import Dataset, Pose, load_dataset
+from cama_pipeline.data.masks import has_masks
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
@@ -225,6 +226,13 @@ def simulated_pass(
     return figures, kept
 
 
+def truth_dataset(site: Path) -> Dataset:
+    """The site's data set with the generator's true masks: its own, or for a mask-free site (`cama synth
+    --no-masks`) the ones kept in `ground_truth/` (the SRE is always measured against the true lane masks)."""
+    truth = site / "ground_truth"
+    return load_dataset(site / "nuscenes", mask_roots=None if has_masks(site / "nuscenes") else (truth,))
+
+
 def sre_rows(
     site: Path,
     workspace: Workspace,
@@ -233,7 +241,7 @@ def sre_rows(
     images: set[str],
 ) -> dict[str, Any]:
     """SRE / precision / recall / F1 of each map over the same images: the site's key-frame images SfM posed."""
-    dataset = load_dataset(site / "nuscenes")
+    dataset = truth_dataset(site)
     config = SreConfig(class_pairs=(("divider", int(Semantic.LANE_MARKING)),))
     scenes = [s["scene"] for s in read_site_manifest(workspace.site_manifest(site_id))["scenes"]]
     out = {}
@@ -336,6 +344,11 @@ def main() -> None:
     parser.add_argument("--proposer", choices=("learned", "rule"), default="learned")
     parser.add_argument("--max-features", type=int, default=None)
     parser.add_argument(
+        "--masks",
+        default="auto",
+        help="the run's mask choice (cama run --masks): auto, dataset, predicted, DIR",
+    )
+    parser.add_argument(
         "--out", type=Path, default=RESULTS / "end_to_end.json", help="figures JSON (plots beside)"
     )
     parser.add_argument(
@@ -357,7 +370,7 @@ def main() -> None:
         result = run_pipeline(
             site / "nuscenes",
             workspace.root,
-            PipelineConfig(proposer=args.proposer, features=features),
+            PipelineConfig(proposer=args.proposer, features=features, masks=args.masks),
             on_stage=lambda s: print(f"== {s}", flush=True),
         )
         stage_seconds = {k: round(v, 1) for k, v in result.seconds.items()}
@@ -370,6 +383,7 @@ def main() -> None:
         "site": str(site),
         "site_id": site_id,
         "proposer": args.proposer,
+        "masks": args.masks,
         "stage_seconds": stage_seconds,
         "keyframes": keyframes,
         "stage_seconds_per_keyframe": {
