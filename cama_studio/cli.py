@@ -64,7 +64,9 @@ def synth(
     from cama_pipeline.synthetic.randomise import randomised_config
 
     if seed is not None and random_seed is not None:
-        raise bad_input("--seed and --random-seed exclude each other (a randomised site uses its random seed)")
+        raise bad_input(
+            "--seed and --random-seed exclude each other (a randomised site uses its random seed)"
+        )
     overrides: dict[str, object] = {}
     if seed is not None:
         overrides["seed"] = seed
@@ -82,7 +84,9 @@ def synth(
     console.print(f"[green]site[/green] {result.out_dir} ({state})")
     console.print(f"  data set (nuScenes layout): {result.dataset_root}  version {result.version}")
     if random_seed is not None:
-        console.print(f"  randomised site {random_seed} (location {cfg.log_location}), config in the manifest")
+        console.print(
+            f"  randomised site {random_seed} (location {cfg.log_location}), config in the manifest"
+        )
     console.print(f"  ground truth:               {result.ground_truth_dir}")
     kinds = ", ".join(f"{name} ({kind})" for name, kind in result.scenes.items())
     console.print(f"  {len(result.scenes)} scenes: {kinds}")

@@ -1,11 +1,14 @@
 """Configuration of the synthetic driving-site generator, with the named presets tiny/default/large."""
 
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
 from cama_pipeline.synthetic.sensors import SensorNoiseConfig
 
 PresetName = Literal["tiny", "default", "large"]
+MAX_IMAGE_SIDE_PX = 4096
+"""Largest image width or height the generator renders."""
 
 
 @dataclass(frozen=True)
@@ -50,8 +53,27 @@ class LayoutConfig:
         for name in ("main_west_length_m", "main_east_length_m", "curve_radius_m", "lane_width_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"LayoutConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in (
+            "dash_length_m",
+            "dash_gap_m",
+            "marking_width_m",
+            "sidewalk_width_m",
+            "crosswalk_depth_m",
+        ):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"LayoutConfig.{name} must be > 0, got {getattr(self, name)}")
+        if not 0 < self.curve_angle_deg <= 120:
+            raise ValueError(f"LayoutConfig.curve_angle_deg must be in (0, 120], got {self.curve_angle_deg}")
         if not 1 <= self.main_lanes_per_direction <= 3 or not 1 <= self.cross_lanes_per_direction <= 3:
             raise ValueError("LayoutConfig: lanes per direction must be 1..3")
+        outer_half_width = (
+            self.main_lanes_per_direction * self.lane_width_m + self.bike_lane_width_m + self.sidewalk_width_m
+        )
+        if self.curve_radius_m <= outer_half_width:
+            raise ValueError(
+                f"LayoutConfig.curve_radius_m ({self.curve_radius_m}) must exceed the main road's half width "
+                f"with its sidewalk ({outer_half_width:.1f} m), or the curve's inside edge folds over"
+            )
         if not 0.10 <= self.curb_height_m <= 0.15:
             raise ValueError(
                 f"LayoutConfig.curb_height_m must be in [0.10, 0.15] m, got {self.curb_height_m}"
@@ -77,7 +99,11 @@ class TerrainConfig:
     """Lipschitz bound used by the ray marcher; validated against the other fields."""
 
     def __post_init__(self) -> None:
-        steepest = self.rise_m / (2 * self.ramp_width_m) + self.cross_slope
+        if self.ramp_width_m <= 0 or self.wave_length_m <= 0 or self.wave_amplitude_m < 0:
+            raise ValueError(
+                "TerrainConfig: ramp_width_m and wave_length_m must be > 0 and wave_amplitude_m >= 0"
+            )
+        steepest = abs(self.rise_m) / (2 * self.ramp_width_m) + abs(self.cross_slope)
         steepest += 2 * 3.14159 * self.wave_amplitude_m / self.wave_length_m * 1.5
         if steepest > self.max_grade:
             raise ValueError(f"TerrainConfig: grade up to {steepest:.3f} exceeds max_grade {self.max_grade}")
@@ -85,15 +111,103 @@ class TerrainConfig:
 
 @dataclass(frozen=True)
 class CameraConfig:
-    """Image size; nuScenes intrinsics (1600x900) are scaled to it."""
+    """Image size and the camera's optical and sensor imperfections; nuScenes intrinsics (1600x900) are scaled
+    to the size."""
 
     width_px: int = 512
+    """Image width, 64..4096 pixels."""
     height_px: int = 288
+    """Image height, 36..4096 pixels."""
     jpeg_quality: int = 92
+    """JPEG quality of the written images, 1..100 (lower: stronger block artefacts)."""
+    noise_sigma: float = 0.0
+    """Standard deviation of white Gaussian sensor noise added to every image (linear [0, 1] intensity), 0..0.2;
+    night clips add their own 0.012 on top."""
+    blur_sigma_px: float = 0.0
+    """Gaussian blur (optics, focus) applied before the noise, in pixels, 0..5; 0 leaves images sharp."""
 
     def __post_init__(self) -> None:
-        if self.width_px < 64 or self.height_px < 36:
-            raise ValueError(f"CameraConfig: image {self.width_px}x{self.height_px} is too small")
+        for name in ("width_px", "height_px", "jpeg_quality"):
+            if not isinstance(getattr(self, name), int) or isinstance(getattr(self, name), bool):
+                raise ValueError(f"CameraConfig.{name} must be an integer, got {getattr(self, name)!r}")
+        if not 64 <= self.width_px <= MAX_IMAGE_SIDE_PX or not 36 <= self.height_px <= MAX_IMAGE_SIDE_PX:
+            raise ValueError(
+                f"CameraConfig: image {self.width_px}x{self.height_px} is out of range "
+                f"(width 64..{MAX_IMAGE_SIDE_PX}, height 36..{MAX_IMAGE_SIDE_PX} pixels)"
+            )
+        if not 1 <= self.jpeg_quality <= 100:
+            raise ValueError(f"CameraConfig.jpeg_quality must be in 1..100, got {self.jpeg_quality}")
+        if not 0.0 <= self.noise_sigma <= 0.2:
+            raise ValueError(f"CameraConfig.noise_sigma must be in [0, 0.2], got {self.noise_sigma}")
+        if not 0.0 <= self.blur_sigma_px <= 5.0:
+            raise ValueError(f"CameraConfig.blur_sigma_px must be in [0, 5] px, got {self.blur_sigma_px}")
+
+
+def parse_image_size(text: str) -> tuple[int, int]:
+    """`"1600x900"` -> (1600, 900); a ValueError naming the text and the expected form otherwise."""
+    parts = text.strip().lower().split("x")
+    if len(parts) != 2 or not all(part.strip().isdigit() for part in parts):
+        raise ValueError(f"image size {text!r} is not WIDTHxHEIGHT in pixels (e.g. 1600x900)")
+    width, height = (int(part) for part in parts)
+    CameraConfig(width_px=width, height_px=height)  # the range check, with its message
+    return width, height
+
+
+RGB = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class AppearanceConfig:
+    """How surfaces look and how they are lit; the defaults are the generator's one look (randomised sites draw
+    others, see `cama_pipeline.synthetic.randomise`). Colours are linear RGB albedos in [0, 1]."""
+
+    asphalt_rgb: RGB = (0.34, 0.34, 0.35)
+    """Base colour of the road surface (brightness and tint of the asphalt)."""
+    concrete_rgb: RGB = (0.60, 0.59, 0.56)
+    """Base colour of the sidewalks."""
+    curb_rgb: RGB = (0.70, 0.69, 0.66)
+    """Base colour of the curb stones."""
+    grass_rgb: RGB = (0.33, 0.42, 0.22)
+    """Base colour of the verges beyond the sidewalks."""
+    white_paint_rgb: RGB = (0.92, 0.92, 0.89)
+    """Colour of white paint (lane lines, crosswalk stripes)."""
+    yellow_paint_rgb: RGB = (0.90, 0.74, 0.20)
+    """Colour of yellow paint (centre lines)."""
+    sky_zenith_rgb: RGB = (0.42, 0.58, 0.85)
+    """Sky colour straight up."""
+    sky_horizon_rgb: RGB = (0.78, 0.82, 0.86)
+    """Sky colour at the horizon (also the colour distant surfaces fade to)."""
+    texture_contrast: float = 1.0
+    """Scale of the ground's grain and wear marks (patches, stains, cracks), 0..3; 0 gives flat surfaces."""
+    paint_fade: float = 0.0
+    """Fraction by which all paint is faded towards the surface under it, 0..0.9."""
+    paint_missing: float = 0.0
+    """Fraction of the painted area where the paint is worn away entirely (in blotches), 0..0.9. The masks still
+    label the whole marking, as an annotator draws a worn line whole."""
+    sun_direction: tuple[float, float, float] = (0.45, 0.30, 0.84)
+    """Unit vector towards the sun (layout frame, z up); its length must be within 2 % of 1, z >= 0.2."""
+    exposure_gain: float = 1.0
+    """Overall exposure multiplier (on top of each clip's small random exposure), 0.4..2."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if f.name.endswith("_rgb"):
+                value = getattr(self, f.name)
+                if len(value) != 3 or not all(0.0 <= float(c) <= 1.0 for c in value):
+                    raise ValueError(f"AppearanceConfig.{f.name} must be 3 values in [0, 1], got {value!r}")
+        ranges = {"texture_contrast": (0.0, 3.0), "paint_fade": (0.0, 0.9), "paint_missing": (0.0, 0.9)}
+        ranges["exposure_gain"] = (0.4, 2.0)
+        for name, (low, high) in ranges.items():
+            if not low <= getattr(self, name) <= high:
+                raise ValueError(
+                    f"AppearanceConfig.{name} must be in [{low}, {high}], got {getattr(self, name)}"
+                )
+        sun = self.sun_direction
+        norm = math.sqrt(sum(float(c) ** 2 for c in sun)) if len(sun) == 3 else 0.0
+        if len(sun) != 3 or not 0.98 <= norm <= 1.02 or sun[2] < 0.2:
+            raise ValueError(
+                f"AppearanceConfig.sun_direction must be a unit (x, y, z) with z >= 0.2, got {sun!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -141,6 +255,7 @@ class SynthConfig:
     clips: ClipConfig = field(default_factory=ClipConfig)
     masks: MaskNoiseConfig = field(default_factory=MaskNoiseConfig)
     sensors: SensorNoiseConfig = field(default_factory=SensorNoiseConfig)
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
     ground_texel_m: float = 0.04
     """Resolution of the ground texture atlas the renderer samples."""
     bev_resolution_m: float = 0.1
@@ -148,10 +263,21 @@ class SynthConfig:
     site_origin_xy: tuple[float, float] = (412.0, 1085.0)
     """Global coordinates of the layout's origin (nuScenes-like, not zero, so nothing assumes it)."""
     version: str = "v1.0-synth"
+    location: str | None = None
+    """`log.location` of every scene (each location is its own map frame); None: `synthetic-<preset>`."""
+    random_seed: int | None = None
+    """The seed `randomise.randomised_config` drew this config from; None for a named preset as it is."""
 
     def __post_init__(self) -> None:
         if self.ground_texel_m <= 0 or self.bev_resolution_m <= 0:
             raise ValueError("SynthConfig: ground_texel_m and bev_resolution_m must be > 0")
+        if self.location is not None and not self.location.strip():
+            raise ValueError("SynthConfig.location must not be blank (None for the preset's own)")
+
+    @property
+    def log_location(self) -> str:
+        """The `log.location` written for every scene."""
+        return self.location if self.location is not None else f"synthetic-{self.preset}"
 
 
 def preset(name: str, **overrides: object) -> SynthConfig:

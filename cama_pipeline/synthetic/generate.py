@@ -7,7 +7,8 @@ Output (`out_dir`):
         baseline_map.json     a flawed 2D map (the paper's baseline)
         poses.json            true ego pose of every sample_data token
         bev/                  true BEV rasters, a raster folder (cama_pipeline.bev) with every layer
-    manifest.json             config, fingerprint and counts; written last, so its presence means complete;
+    manifest.json             config (a randomised site's drawn config, with its `random_seed`), location,
+                              fingerprint and counts; written last, so its presence means complete;
                               `images_rendered` false marks a site made with `images=False` (`cama synth
                               --no-images`): every table, CAN file and ground-truth file is written, byte for byte
                               as a normal run would, but no camera image and no mask file (the tables still list
@@ -38,6 +39,7 @@ from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth as gt
+from cama_pipeline.synthetic.camera_effects import apply_camera_effects
 from cama_pipeline.synthetic.config import SynthConfig
 from cama_pipeline.synthetic.masks import degrade_masks
 from cama_pipeline.synthetic.motion import TrueMotion, matrix_to_quat
@@ -53,7 +55,7 @@ GENERATOR_VERSION = 2
 DATASET_DIR = "nuscenes"
 GROUND_TRUTH_DIR = "ground_truth"
 MANIFEST = "manifest.json"
-SEED_SENSORS, SEED_MASKS = 11, 12
+SEED_SENSORS, SEED_MASKS, SEED_CAMERA = 11, 12, 13
 
 
 @dataclass(frozen=True)
@@ -127,6 +129,8 @@ def run(
         "fingerprint": digest,
         "preset": cfg.preset,
         "seed": cfg.seed,
+        "random_seed": cfg.random_seed,
+        "location": cfg.log_location,
         "version": cfg.version,
         "config": dataclasses.asdict(cfg),
         "scenes": scenes,
@@ -196,7 +200,7 @@ def _description(site: SyntheticSite, clip_index: int) -> str:
 def _write_tables_and_can(site: SyntheticSite, dataset_root: Path) -> dict[str, dict]:
     """nuScenes tables with coarse ego poses, CAN messages per scene; returns the true pose per sample_data."""
     cfg = site.config
-    tables = NuScenesTables(location=f"synthetic-{cfg.preset}")
+    tables = NuScenesTables(location=cfg.log_location)
     tables.add_rig(site.rig)
     true_poses: dict[str, dict] = {}
     for clip in site.clips:
@@ -258,6 +262,8 @@ def render_shot(site: SyntheticSite, clip_index: int, shot_index: int, dataset_r
     rgb = rendering.rgb
     if clip.kind == "night":
         rgb = rgb + rng.normal(0.0, 0.012, size=rgb.shape).astype(np.float32)
+    camera_rng = sub_rng(site.config.seed, SEED_CAMERA, clip_index, shot_index)
+    rgb = apply_camera_effects(rgb, site.config.camera, camera_rng)
     semantic, instance = degrade_masks(rendering.semantic, rendering.instance, site.config.masks, rng)
     filename = image_filename(_log_name(site, clip_index), shot)
     bgr = cv2.cvtColor((np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8), cv2.COLOR_RGB2BGR)

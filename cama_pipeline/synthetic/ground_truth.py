@@ -75,7 +75,9 @@ def render_bev(
         yy, xx = np.meshgrid(ys[r0 : r0 + chunk_rows], xs, indexing="ij")
         x = torch.from_numpy(xx.ravel().astype(np.float32))
         y = torch.from_numpy(yy.ravel().astype(np.float32))
-        albedo, label, _ = ground_color(world.atlas, world.noise, x, y, torch.full_like(x, grid.resolution_m))
+        albedo, label, _ = ground_color(
+            world.atlas, world.noise, x, y, torch.full_like(x, grid.resolution_m), world.look
+        )
         shape = xx.shape
         semantic[r0 : r0 + shape[0]] = label.numpy().reshape(shape)
         photometric[r0 : r0 + shape[0]] = (albedo.numpy().reshape(*shape, 3) * 255 + 0.5).astype(np.uint8)

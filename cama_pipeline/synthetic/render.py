@@ -13,8 +13,9 @@ import torch
 
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic.atlas import GroundAtlas
+from cama_pipeline.synthetic.config import AppearanceConfig
 from cama_pipeline.synthetic.scenery import Boxes, BoxKind
-from cama_pipeline.synthetic.shading import SUN_DIRECTION, NoiseBank, box_color, ground_color, sky_color
+from cama_pipeline.synthetic.shading import NoiseBank, box_color, ground_color, sky_color
 from cama_pipeline.synthetic.terrain import Terrain
 
 FAR_M = 220.0
@@ -30,13 +31,19 @@ _BOX_LABEL = {
 
 @dataclass(frozen=True)
 class World:
-    """What the renderer needs of the site: terrain, ground atlas, static boxes and the noise bank."""
+    """What the renderer needs of the site: terrain, ground atlas, static boxes, the noise bank and the look."""
 
     terrain: Terrain
     atlas: GroundAtlas
     static_boxes: Boxes
     noise: NoiseBank
     curb_height_m: float
+    look: AppearanceConfig
+
+    @property
+    def sun(self) -> torch.Tensor:
+        """Direction towards the sun, (3,) float32."""
+        return torch.tensor(self.look.sun_direction, dtype=torch.float32)
 
     def ground_height(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """Height of the ground surface (terrain plus raised sidewalks) at layout points."""
@@ -127,7 +134,7 @@ def render_view(
     face_axis = torch.zeros(n, dtype=torch.long)
     _zbuffer_boxes(view, boxes, origin, dirs, depth, box_id, face_axis)
 
-    rgb = sky_color(dirs[:, 2])
+    rgb = sky_color(dirs[:, 2], world.look)
     semantic = torch.full((n,), int(Semantic.SKY), dtype=torch.uint8)
     instance = torch.zeros(n, dtype=torch.int32)
     focal = float(view.K[0, 0])
@@ -152,7 +159,9 @@ def render_view(
 
     visible = torch.isfinite(depth)
     fog = (1.0 - torch.exp(-depth[visible] / 320.0))[:, None]
-    rgb[visible] = rgb[visible] + (sky_color(torch.zeros(int(visible.sum()))) - rgb[visible]) * fog
+    rgb[visible] = (
+        rgb[visible] + (sky_color(torch.zeros(int(visible.sum())), world.look) - rgb[visible]) * fog
+    )
     rgb = rgb * exposure
     if night:
         rgb = 0.02 + 0.16 * rgb**1.3
@@ -180,11 +189,11 @@ def _shade_ground(
     x = float(origin[0]) + t * d[:, 0]
     y = float(origin[1]) + t * d[:, 1]
     footprint = t / focal / d[:, 2].abs().clamp(min=0.05).sqrt()  # geometric mean of the footprint axes
-    albedo, label, inst = ground_color(world.atlas, world.noise, x, y, footprint)
+    albedo, label, inst = ground_color(world.atlas, world.noise, x, y, footprint, world.look)
     gx, gy = world.terrain.gradient(x, y)
     normal = torch.stack([-gx, -gy, torch.ones_like(gx)], dim=1)
     normal = normal / torch.linalg.norm(normal, dim=1, keepdim=True)
-    rgb[sel] = albedo * (0.62 + 0.38 * (normal @ torch.tensor(SUN_DIRECTION, dtype=torch.float32)))[:, None]
+    rgb[sel] = albedo * (0.62 + 0.38 * (normal @ world.sun))[:, None]
     semantic[sel] = label
     instance[sel] = inst
 
@@ -280,7 +289,7 @@ def _shade_boxes(
     base = torch.from_numpy(boxes.color.astype(np.float32))[ids]
     albedo = box_color(kind, base, world.noise, u, height, 2 * half[:, 2], is_top, t / focal)
     normal = torch.einsum("nij,nj->ni", rot, normal_local)
-    lambert = (normal @ torch.tensor(SUN_DIRECTION, dtype=torch.float32)).clamp(min=0.0)
+    lambert = (normal @ world.sun).clamp(min=0.0)
     rgb[sel] = albedo * (0.45 + 0.55 * lambert)[:, None]
     labels = torch.tensor([int(_BOX_LABEL[k]) for k in BoxKind], dtype=torch.uint8)
     semantic[sel] = labels[kind]

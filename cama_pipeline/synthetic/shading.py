@@ -5,26 +5,20 @@ the pixel footprint fade out (a cheap mip-map), so far ground does not alias int
 """
 
 import math
+from statistics import NormalDist
 
 import numpy as np
 import torch
 
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic.atlas import PAINT_YELLOW, GroundAtlas
+from cama_pipeline.synthetic.config import AppearanceConfig
 from cama_pipeline.synthetic.scenery import BoxKind
 
 TILE_PX = 256
 _TEXELS_PER_WAVELENGTH = 4.0
-
-ASPHALT_RGB = (0.34, 0.34, 0.35)
-CONCRETE_RGB = (0.60, 0.59, 0.56)
-CURB_RGB = (0.70, 0.69, 0.66)
-GRASS_RGB = (0.33, 0.42, 0.22)
-WHITE_PAINT_RGB = (0.92, 0.92, 0.89)
-YELLOW_PAINT_RGB = (0.90, 0.74, 0.20)
-SKY_ZENITH_RGB = (0.42, 0.58, 0.85)
-SKY_HORIZON_RGB = (0.78, 0.82, 0.86)
-SUN_DIRECTION = (0.45, 0.30, 0.84)
+_PAINT_BLOTCHES = ((0.9, 0.7), (0.25, 0.5))
+"""Octaves (wavelength_m, amplitude) of the field whose highest values are the worn-away paint blotches."""
 
 
 class NoiseBank:
@@ -85,12 +79,18 @@ def _rgb(color: tuple[float, float, float], like: torch.Tensor) -> torch.Tensor:
 
 
 def ground_color(
-    atlas: GroundAtlas, noise: NoiseBank, x: torch.Tensor, y: torch.Tensor, footprint_m: torch.Tensor
+    atlas: GroundAtlas,
+    noise: NoiseBank,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    footprint_m: torch.Tensor,
+    look: AppearanceConfig,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Albedo (N, 3), semantic label (N,) and instance value (N,) of the ground at layout points (x, y).
 
-    One multi-scale grain is shared by all surfaces, each with its own base colour and grain strength:
-    asphalt (with aggregate specks), curb stone, sidewalk concrete (with slab joints) and grass.
+    One multi-scale grain is shared by all surfaces, each with its own base colour (from `look`) and grain
+    strength: asphalt (with aggregate specks), curb stone, sidewalk concrete (with slab joints) and grass.
+    `look.texture_contrast` scales grain, specks and wear marks together.
     """
     label = atlas.nearest(atlas.label, x, y)
     instance = atlas.nearest(atlas.instance, x, y)
@@ -100,11 +100,12 @@ def ground_color(
     is_background = label == Semantic.BACKGROUND
     sidewalk = is_background & raised
     grass = is_background & ~raised
-    base = _rgb(ASPHALT_RGB, x).clone()
-    base[is_curb] = torch.tensor(CURB_RGB)
-    base[sidewalk] = torch.tensor(CONCRETE_RGB)
-    base[grass] = torch.tensor(GRASS_RGB)
-    strength = torch.where(grass, 1.8, torch.where(is_curb | sidewalk, 0.7, 1.0))
+    base = _rgb(look.asphalt_rgb, x).clone()
+    base[is_curb] = torch.tensor(look.curb_rgb)
+    base[sidewalk] = torch.tensor(look.concrete_rgb)
+    base[grass] = torch.tensor(look.grass_rgb)
+    contrast = float(look.texture_contrast)
+    strength = torch.where(grass, 1.8, torch.where(is_curb | sidewalk, 0.7, 1.0)) * contrast
     specks = (
         (noise.octave(4, x, y, 0.035, footprint_m) > 1.6).float() * 0.12 * (~is_background & ~is_curb).float()
     )
@@ -114,11 +115,13 @@ def ground_color(
         & (footprint_m < 0.05)
     )
     wear = _wear_marks(noise, x, y, footprint_m) * (~is_background & ~is_curb).float()
-    color = base * (1.0 + strength * grain + specks - 0.25 * joints.float() - wear)[:, None]
+    color = (
+        base * (1.0 + strength * grain + contrast * specks - 0.25 * joints.float() - contrast * wear)[:, None]
+    )
     painted = torch.nonzero(atlas.nearest(atlas.paint_alpha, x, y) > 0).squeeze(1)
     if painted.numel():
         color[painted] = _paint_over(
-            atlas, noise, x[painted], y[painted], footprint_m[painted], color[painted]
+            atlas, noise, x[painted], y[painted], footprint_m[painted], color[painted], look
         )
     return color.clamp(0.0, 1.0), label.to(torch.uint8), instance.to(torch.int32)
 
@@ -140,22 +143,46 @@ def _paint_over(
     y: torch.Tensor,
     footprint: torch.Tensor,
     under: torch.Tensor,
+    look: AppearanceConfig,
 ) -> torch.Tensor:
-    """Blend slightly worn white or yellow paint over the surface colour (anti-aliased edges)."""
+    """Blend slightly worn white or yellow paint over the surface colour (anti-aliased edges), faded by
+    `look.paint_fade` and with `look.paint_missing` of it worn away."""
     alpha = atlas.bilinear(atlas.paint_alpha, x, y)
     wear = (noise.fbm(x, y, footprint, ((0.6, 0.6), (0.12, 0.5)), first_index=11) - 0.55).clamp(0.0, 1.0)
     alpha = alpha * (1.0 - 1.4 * wear).clamp(0.0, 1.0)
+    if look.paint_fade > 0:
+        alpha = alpha * (1.0 - look.paint_fade)
+    if look.paint_missing > 0:
+        alpha = alpha * _paint_kept(noise, x, y, footprint, look.paint_missing)
     yellow = atlas.nearest(atlas.paint_color, x, y) == PAINT_YELLOW
-    paint = torch.where(yellow[:, None], _rgb(YELLOW_PAINT_RGB, x), _rgb(WHITE_PAINT_RGB, x))
+    paint = torch.where(yellow[:, None], _rgb(look.yellow_paint_rgb, x), _rgb(look.white_paint_rgb, x))
     paint = paint * (1.0 + 0.08 * noise.octave(3, x, y, 0.25, footprint))[:, None]
     return under + (paint - under) * alpha[:, None]
 
 
-def sky_color(direction_z: torch.Tensor) -> torch.Tensor:
+def _paint_kept(
+    noise: NoiseBank, x: torch.Tensor, y: torch.Tensor, footprint: torch.Tensor, missing: float
+) -> torch.Tensor:
+    """Share of the paint left (0 or 1 in crisp blotches where pixels resolve them) so that about `missing` of
+    the painted area is bare. Where the footprint blurs the blotch field, its spread shrinks; the threshold
+    follows that spread, and the unresolved part tends to the area average 1 - missing."""
+    field = noise.fbm(x, y, footprint, _PAINT_BLOTCHES, first_index=7)
+    full = math.sqrt(sum(a * a for _, a in _PAINT_BLOTCHES))
+    resolved_var = torch.zeros_like(footprint)
+    for wavelength, amplitude in _PAINT_BLOTCHES:
+        resolved_var = resolved_var + (amplitude * (2.0 - 4.0 * footprint / wavelength).clamp(0.0, 1.0)) ** 2
+    resolved = torch.sqrt(resolved_var)
+    threshold = NormalDist().inv_cdf(1.0 - missing) * resolved
+    crisp = (field <= threshold).float()
+    share = resolved / full
+    return share * crisp + (1.0 - share) * (1.0 - missing)
+
+
+def sky_color(direction_z: torch.Tensor, look: AppearanceConfig) -> torch.Tensor:
     """Sky gradient from the horizon colour to the zenith colour by ray elevation."""
     w = direction_z.clamp(0.0, 1.0).sqrt()[:, None]
-    horizon = _rgb(SKY_HORIZON_RGB, direction_z)
-    return horizon + (_rgb(SKY_ZENITH_RGB, direction_z) - horizon) * w
+    horizon = _rgb(look.sky_horizon_rgb, direction_z)
+    return horizon + (_rgb(look.sky_zenith_rgb, direction_z) - horizon) * w
 
 
 def box_color(

@@ -78,6 +78,7 @@ def build_synthetic_site(cfg: SynthConfig) -> SyntheticSite:
         static,
         NoiseBank(int(sub_rng(cfg.seed, SEED_NOISE).integers(2**31))),
         cfg.layout.curb_height_m,
+        cfg.appearance,
     )
     rig = build_rig(cfg.camera)
     clips = tuple(plan_clips(cfg, layout, terrain, sub_rng(cfg.seed, SEED_ROUTES)))
@@ -97,5 +98,6 @@ def build_synthetic_site(cfg: SynthConfig) -> SyntheticSite:
         for c in clips
     )
     exposure_rng = sub_rng(cfg.seed, SEED_EXPOSURE)
-    exposures = tuple(float(exposure_rng.uniform(0.93, 1.07)) for _ in clips)
+    gain = cfg.appearance.exposure_gain
+    exposures = tuple(float(exposure_rng.uniform(0.93, 1.07)) * gain for _ in clips)
     return SyntheticSite(cfg, layout, world, rig, clips, schedules, traffic, exposures)
