@@ -100,3 +100,27 @@ def test_missing_masks_are_named_before_any_work(mask_free: Path, tmp_path: Path
         app, ["surface", str(mask_free), "--workspace", str(workspace.root), "--masks", "predicted"]
     )
     assert result.exit_code == 2 and "cama segment" in result.output
+
+
+def test_eval_reads_the_lane_instances_of_the_chosen_masks(
+    mask_free: Path, tiny_site: GeneratedSite, tmp_path: Path
+) -> None:
+    workspace = Workspace(tmp_path / "workspace")
+    vector_map = tiny_site.result.ground_truth_dir / "vector_map.json"
+    argv = [
+        "eval",
+        str(mask_free),
+        str(vector_map),
+        "--scene",
+        "scene-0001",
+        "--workspace",
+        str(workspace.root),
+    ]
+    runner = CliRunner()
+    missing = runner.invoke(app, [*argv, "--out", str(tmp_path / "none.json")])
+    assert missing.exit_code == 2 and "no instance mask" in missing.output
+    import_generator_masks(tiny_site, workspace, "for eval")
+    done = runner.invoke(app, [*argv, "--masks", "imported", "--out", str(tmp_path / "sre.json")])
+    assert done.exit_code == 0, done.output
+    report = json.loads((tmp_path / "sre.json").read_text())
+    assert report["overall"]["image_instances"] > 0 and report["overall"]["matched"] > 0
