@@ -1,0 +1,107 @@
+"""`cama segment` (masks for a data set without its own) and `cama train-segmenter` (the network behind it)."""
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.console import INPUT_ERRORS, bad_input, console
+from cama_pipeline.segment.checkpoint import read_meta
+from cama_pipeline.segment.config import SegmentConfig, TrainConfig
+from cama_pipeline.segment.predict import resolve_device
+from cama_pipeline.segment.stage import EXECUTORS, run
+from cama_pipeline.segment.train import train
+
+logger = logging.getLogger(__name__)
+
+DeviceOpt = Annotated[str, typer.Option(help="auto (CUDA when present, else CPU), cpu or cuda.")]
+
+
+def segment_command(
+    dataset: DatasetArg,
+    workspace: WorkspaceOpt = None,
+    checkpoint: Annotated[
+        Path | None,
+        typer.Option(help="Segmenter checkpoint folder; default: the one shipped with the package."),
+    ] = None,
+    batch_size: Annotated[int, typer.Option(min=1, help="Images per network call.")] = 8,
+    executor: Annotated[
+        str, typer.Option(help="Where batches run: local (this process or a process pool) or ray.")
+    ] = "local",
+    workers: Annotated[int, typer.Option(min=1, help="Processes segmenting at once (CPU).")] = 2,
+    device: DeviceOpt = "auto",
+    overwrite: OverwriteOpt = False,
+) -> None:
+    """Predict semantic masks and lane instances for every image the pipeline uses, into the workspace's
+    masks/predicted/ (the data set is left as it is); `--masks predicted` (or auto) then reads them."""
+    try:
+        if executor not in EXECUTORS:
+            raise ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+        config = SegmentConfig(checkpoint=checkpoint, batch_size=batch_size, device=device)  # type: ignore[arg-type]
+        result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
+    except INPUT_ERRORS as err:
+        raise bad_input(err) from err
+    (item,) = result.items
+    report = item.report
+    state = (
+        "up to date"
+        if item.skipped
+        else f"{report['segmented']} segmented, {report['reused']} kept, {result.seconds:.1f} s"
+    )
+    console.print(
+        f"[green]predicted masks[/green] for {len(report['images'])} images with "
+        f"{report['made_by']['checkpoint']} ({state})"
+    )
+    console.print(f"  -> {item.path}")
+
+
+def train_segmenter_command(
+    sites: Annotated[
+        list[Path],
+        typer.Option(
+            "--sites", help="Generated site folders, or folders of them (repeatable); randomised sites."
+        ),
+    ],
+    out: Annotated[Path, typer.Option(help="Checkpoint folder to write (replaced if there).")],
+    held_out: Annotated[
+        list[Path] | None,
+        typer.Option("--held-out", help="Sites to report per-class IoU on (never trained on; repeatable)."),
+    ] = None,
+    epochs: Annotated[int, typer.Option(min=1, help="Passes over the training images.")] = 12,
+    batch_size: Annotated[int, typer.Option(min=1, help="Crops per step.")] = 8,
+    learning_rate: Annotated[float, typer.Option(help="Peak learning rate (one-cycle).")] = 3e-3,
+    threads: Annotated[int, typer.Option(min=1, help="torch CPU threads.")] = 2,
+    seed: Annotated[int, typer.Option(help="Seed of the crops, augmentations and initial weights.")] = 0,
+    device: DeviceOpt = "auto",
+    label: Annotated[
+        str | None, typer.Option(help="Name recorded in the checkpoint (default: folder).")
+    ] = None,
+) -> None:
+    """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
+    checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
+    try:
+        config = TrainConfig(
+            epochs=epochs, batch_size=batch_size, learning_rate=learning_rate, threads=threads, seed=seed
+        )
+        folder = train(
+            config, sites, out, held_out=held_out or [], device=resolve_device(device), label=label
+        )
+        meta = read_meta(folder)
+    except INPUT_ERRORS as err:
+        raise bad_input(err) from err
+    held = meta["metrics"].get("held_out")
+    if held:
+        table = Table(title=f"held-out IoU ({held['images']} images)")
+        for name in held["per_class_iou"]:
+            table.add_column(name)
+        table.add_row(*("-" if v is None else f"{v:.3f}" for v in held["per_class_iou"].values()))
+        console.print(table)
+    console.print(
+        f"[green]trained[/green] on {meta['images']} images of {len(meta['training_sites'])} sites in "
+        f"{meta['seconds']:.0f} s; {meta['metrics']['cpu_seconds_per_512x288']:.3f} s per 512x288 image on one "
+        "CPU thread"
+    )
+    console.print(f"  -> {folder}")

@@ -1,0 +1,144 @@
+"""Configurations of the segmentation network, its training and the segment stage: frozen, validated on creation.
+
+The network's config travels inside every checkpoint (a checkpoint loads only into the architecture it was
+trained with); the training config is recorded beside it; the stage config says which checkpoint runs and how.
+"""
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+DeviceName = Literal["auto", "cpu", "cuda"]
+DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+
+MEASUREMENT_SEEDS = range(9000, 10000)
+"""Seeds of the randomised generator sites kept for measuring the segmenter (`bench/segment.py` draws its
+held-out sites from here): `cama train-segmenter` refuses a site of one of these seeds."""
+MEASUREMENT_PRESET_SEED = 7
+"""The named presets (tiny, default, large) at this, their default seed, are the sites the tests, the demo and
+the whole-path benchmarks measure on: `cama train-segmenter` refuses them too."""
+
+
+def _positive_int(owner: str, name: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{owner}.{name} must be an integer >= 1, got {value!r}")
+
+
+def _positive_float(owner: str, name: str, value: object) -> None:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or not math.isfinite(value)
+        or value <= 0
+    ):
+        raise ValueError(f"{owner}.{name} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """Architecture and input geometry of the segmentation network (a compact U-Net)."""
+
+    widths: tuple[int, ...] = (16, 32, 64, 128, 192)
+    """Feature channels at strides 2, 4, 8, 16, 32 of the encoder; the decoder mirrors them."""
+    input_width_px: int = 512
+    """Images are resized to this width (aspect kept) before the network and its output back to the image's
+    size, so a 1600x900 image and a 256x144 one are seen at the scale the network was trained at."""
+
+    def __post_init__(self) -> None:
+        if len(self.widths) != 5:
+            raise ValueError(f"NetworkConfig.widths must have 5 entries (strides 2..32), got {self.widths!r}")
+        for i, width in enumerate(self.widths):
+            _positive_int("NetworkConfig", f"widths[{i}]", width)
+        _positive_int("NetworkConfig", "input_width_px", self.input_width_px)
+        if self.input_width_px % 32:
+            raise ValueError(
+                f"NetworkConfig.input_width_px must be a multiple of 32, got {self.input_width_px}"
+            )
+
+    def to_json(self) -> dict[str, Any]:
+        return {"widths": list(self.widths), "input_width_px": self.input_width_px}
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> "NetworkConfig":
+        """The config of a checkpoint's JSON; ValueError naming the field when it does not fit."""
+        try:
+            return cls(widths=tuple(data["widths"]), input_width_px=data["input_width_px"])
+        except (KeyError, TypeError) as err:
+            raise ValueError(f"network config {data!r} lacks or mistypes a field ({err})") from None
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How `cama train-segmenter` trains: crops, schedule, loss weights, augmentation strength."""
+
+    epochs: int = 12
+    """Passes over the training images."""
+    batch_size: int = 8
+    crop_height_px: int = 192
+    """Training crops are taken from images rescaled to the network's input width (height and width below)."""
+    crop_width_px: int = 320
+    learning_rate: float = 3e-3
+    """Peak AdamW learning rate (one-cycle schedule)."""
+    weight_decay: float = 1e-4
+    scale_range: tuple[float, float] = (0.7, 1.3)
+    """Random rescale of each training image around the input scale, for robustness to image size."""
+    max_class_weight: float = 6.0
+    """Cross-entropy class weights are inverse square-root frequencies, capped at this."""
+    held_out_share: float = 0.0
+    """Part of the training images kept aside (by site) to report metrics on; 0: metrics on `--held-out`
+    sites only."""
+    seed: int = 0
+    threads: int = 2
+    """torch CPU threads (the machine is shared)."""
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "crop_height_px", "crop_width_px", "threads"):
+            _positive_int("TrainConfig", name, getattr(self, name))
+        for name in ("learning_rate", "max_class_weight"):
+            _positive_float("TrainConfig", name, getattr(self, name))
+        if isinstance(self.weight_decay, bool) or not self.weight_decay >= 0:
+            raise ValueError(f"TrainConfig.weight_decay must be >= 0, got {self.weight_decay!r}")
+        if self.crop_height_px % 32 or self.crop_width_px % 32:
+            raise ValueError("TrainConfig: crop_height_px and crop_width_px must be multiples of 32")
+        low, high = self.scale_range
+        if not 0 < low <= high:
+            raise ValueError(f"TrainConfig.scale_range must be 0 < low <= high, got {self.scale_range!r}")
+        if not 0 <= self.held_out_share < 1:
+            raise ValueError(f"TrainConfig.held_out_share must be in [0, 1), got {self.held_out_share!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        out = dataclasses.asdict(self)
+        out["scale_range"] = list(self.scale_range)
+        return out
+
+
+@dataclass(frozen=True)
+class SegmentConfig:
+    """What `cama segment` runs: which checkpoint, on what device, in what batches."""
+
+    checkpoint: Path | None = None
+    """A checkpoint folder (`model.pt` + `checkpoint.json`); None: the one shipped with the package."""
+    batch_size: int = 8
+    """Images per network call."""
+    device: DeviceName = "auto"
+    """`auto`: CUDA when present, else the CPU."""
+    threads_per_worker: int = 1
+    """torch CPU threads of each worker process."""
+
+    def __post_init__(self) -> None:
+        _positive_int("SegmentConfig", "batch_size", self.batch_size)
+        _positive_int("SegmentConfig", "threads_per_worker", self.threads_per_worker)
+        if self.device not in DEVICES:
+            raise ValueError(f"SegmentConfig.device must be one of {', '.join(DEVICES)}, got {self.device!r}")
+        if self.checkpoint is not None:
+            object.__setattr__(self, "checkpoint", Path(self.checkpoint))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "checkpoint": None if self.checkpoint is None else str(self.checkpoint),
+            "batch_size": self.batch_size,
+            "device": self.device,
+            "threads_per_worker": self.threads_per_worker,
+        }

@@ -1,0 +1,247 @@
+"""The segment stage (`cama segment`): semantic and lane-instance masks for every image the pipeline uses, from a
+segmenter checkpoint, into the workspace's `masks/predicted/` root (never into the data set).
+
+Images: the keyframe images of every scene the keyframes stage wrote (`keyframes/<scene>.json`) and every
+key-frame (sample) camera image of the data set. They go in chunks of `batch_size` to one network call each,
+in this process (one worker, or CUDA) or in a local process pool or on Ray (`executor`, `workers`); masks are
+written atomically as each chunk ends. Resumable: the manifest (written last) records the checkpoint and the
+images, so a rerun with the same ones does nothing; while running, a journal (`segment.io`) lists the images
+done, so a run after an interruption segments only the rest. A run with another checkpoint redoes them all.
+"""
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from cama_pipeline.code_version import code_version
+from cama_pipeline.data import Dataset, DatasetError, load_dataset
+from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
+from cama_pipeline.fingerprints import fingerprint
+from cama_pipeline.io import atomic_write_image
+from cama_pipeline.keyframes.io import read_keyframes
+from cama_pipeline.progress import StageProgress
+from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.segment.checkpoint import load_checkpoint, shipped_checkpoint
+from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.io import (
+    MaskManifest,
+    progress_path,
+    read_mask_manifest,
+    read_progress,
+    write_mask_manifest,
+    write_progress,
+)
+from cama_pipeline.segment.predict import resolve_device, segment_images
+from cama_pipeline.workspace import Workspace
+
+logger = logging.getLogger(__name__)
+
+SOURCE = "predicted"
+EXECUTORS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One network call's images: what a worker needs to segment and write them (picklable)."""
+
+    checkpoint: str
+    device: str
+    threads: int
+    dataset_root: str
+    mask_root: str
+    filenames: tuple[str, ...]
+
+
+def image_filename(dataset: Dataset, path: Path) -> str:
+    """An image's sample_data filename (its path under the data set root, `/`-separated)."""
+    return path.relative_to(dataset.root).as_posix()
+
+
+def needed_images(dataset: Dataset, workspace: Workspace) -> list[str]:
+    """Filenames of the images to segment: keyframe images of the scenes the keyframes stage wrote, then every
+    key-frame camera image, each once, in data set order."""
+    wanted: set[str] = set()
+    for scene in dataset.scenes:
+        path = workspace.keyframes(scene.name)
+        if path.is_file():
+            for frame in read_keyframes(path).keyframes:
+                wanted.update(frame.images.values())
+    ordered = []
+    for image in dataset.camera_images():
+        if image.is_key_frame or image.token in wanted:
+            ordered.append(image_filename(dataset, image.path))
+    return ordered
+
+
+@lru_cache(maxsize=2)
+def _worker_net(checkpoint: str, device: str, threads: int) -> Any:
+    """The network of a checkpoint, loaded once per worker process."""
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(1)
+    return load_checkpoint(Path(checkpoint)).net.to(torch.device(device))
+
+
+def segment_chunk(chunk: Chunk) -> tuple[str, ...]:
+    """Segment one chunk's images and write their masks (atomically); returns the filenames written."""
+    net = _worker_net(chunk.checkpoint, chunk.device, chunk.threads)
+    images = []
+    for name in chunk.filenames:
+        path = Path(chunk.dataset_root) / name
+        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise DatasetError("image file cannot be read or decoded", path=path)
+        images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+    root = Path(chunk.mask_root)
+    for name, (semantic, instances) in zip(
+        chunk.filenames, segment_images(net, images, torch.device(chunk.device)), strict=True
+    ):
+        atomic_write_image(root / mask_relpath(SEMANTIC_DIR, name), semantic)
+        atomic_write_image(root / mask_relpath(INSTANCE_DIR, name), instances.astype(np.uint16))
+    return chunk.filenames
+
+
+def _run_chunks(
+    chunks: Sequence[Chunk], executor: str, workers: int, on_done: Callable[[Chunk], None]
+) -> None:
+    """Run every chunk: here (one worker or CUDA), in a local process pool, or on Ray; `on_done` as each ends."""
+    if executor == "ray":
+        import ray
+
+        started = not ray.is_initialized()
+        if started:
+            ray.init(
+                num_cpus=workers, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+            )
+        try:
+            remote = ray.remote(num_cpus=1, max_retries=0)(segment_chunk)
+            pending = {remote.remote(chunk): chunk for chunk in chunks}
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                ray.get(ready[0])
+                on_done(pending.pop(ready[0]))
+        finally:
+            if started:
+                ray.shutdown()
+        return
+    if workers <= 1 or not chunks or chunks[0].device != "cpu":
+        for chunk in chunks:
+            segment_chunk(chunk)
+            on_done(chunk)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    with ProcessPoolExecutor(
+        min(workers, len(chunks)), mp_context=multiprocessing.get_context("spawn")
+    ) as pool:
+        futures = {pool.submit(segment_chunk, chunk): chunk for chunk in chunks}
+        while futures:
+            finished, _ = wait(futures, return_when=FIRST_COMPLETED)
+            for future in finished:
+                future.result()
+                on_done(futures.pop(future))
+
+
+def _already_done(mask_root: Path, manifest: Path, made_with: str, overwrite: bool) -> set[str]:
+    """Images whose masks are there from this checkpoint: from the journal of an interrupted run and from a
+    finished run's manifest (none when `overwrite`)."""
+    if overwrite:
+        return set()
+    done = read_progress(mask_root, made_with)
+    if manifest.is_file():
+        previous = read_mask_manifest(manifest)
+        if previous.made_by.get("made_with") == made_with:
+            done |= set(previous.images)
+    return {
+        name
+        for name in done
+        if (mask_root / mask_relpath(SEMANTIC_DIR, name)).is_file()
+        and (mask_root / mask_relpath(INSTANCE_DIR, name)).is_file()
+    }
+
+
+def run(
+    config: SegmentConfig,
+    dataset_root: Path,
+    workspace: Path | Workspace | None = None,
+    *,
+    executor: str = "local",
+    workers: int = 2,
+    overwrite: bool = False,
+    show_progress: bool = True,
+) -> StageResult:
+    """Segment the images the pipeline uses (see the module docstring) into `masks/predicted/`; one item, that
+    folder, with the manifest as its report."""
+    started = time.perf_counter()
+    if executor not in EXECUTORS:
+        raise ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    ws = Workspace.resolve(workspace, Path(dataset_root))
+    dataset = load_dataset(Path(dataset_root), mask_roots=())
+    checkpoint_dir = config.checkpoint or shipped_checkpoint()
+    checkpoint = load_checkpoint(checkpoint_dir)
+    device = resolve_device(config.device)
+    images = needed_images(dataset, ws)
+    made_with = fingerprint("segment", code_version("cama_pipeline.segment"), checkpoint.digest)
+    digest = fingerprint(made_with, images)
+    mask_root, manifest_path = ws.masks_dir(SOURCE), ws.masks_manifest(SOURCE)
+    if not overwrite and manifest_path.is_file():
+        previous = read_mask_manifest(manifest_path)
+        if previous.fingerprint == digest:
+            logger.info("predicted masks in %s up to date", mask_root)
+            item = ItemResult(SOURCE, mask_root, previous.to_json(), skipped=True)
+            return StageResult("segment", ws, (item,), time.perf_counter() - started)
+    done = _already_done(mask_root, manifest_path, made_with, overwrite)
+    todo = [name for name in images if name not in done]
+    manifest_path.unlink(missing_ok=True)  # the root is incomplete until the new manifest is written
+    written = set(done) & set(images)
+    write_progress(mask_root, made_with, sorted(written))
+    chunks = [
+        Chunk(
+            str(Path(checkpoint_dir).absolute()),
+            device.type,
+            config.threads_per_worker,
+            str(dataset.root),
+            str(mask_root.absolute()),
+            tuple(todo[i : i + config.batch_size]),
+        )
+        for i in range(0, len(todo), config.batch_size)
+    ]
+    logger.info("segmenting %d images (%d already done) on %s", len(todo), len(written), device)
+    with StageProgress("segment", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task("images", total=len(todo))
+
+        def finished(chunk: Chunk) -> None:
+            written.update(chunk.filenames)
+            write_progress(mask_root, made_with, sorted(written))
+            progress.advance(bar, len(chunk.filenames))
+
+        _run_chunks(chunks, executor, workers if device.type == "cpu" else 1, finished)
+    seconds = time.perf_counter() - started
+    manifest = MaskManifest(
+        source=SOURCE,
+        made_by={
+            "command": "cama segment",
+            "checkpoint": checkpoint.label,
+            "checkpoint_path": str(Path(checkpoint_dir).absolute()),
+            "weights_digest": checkpoint.digest,
+            "made_with": made_with,
+        },
+        images=tuple(images),
+        fingerprint=digest,
+        seconds=round(seconds, 2),
+        extra={"segmented": len(todo), "reused": len(images) - len(todo), "device": device.type},
+    )
+    write_mask_manifest(manifest_path, manifest)
+    progress_path(mask_root).unlink(missing_ok=True)
+    item = ItemResult(SOURCE, mask_root, manifest.to_json(), skipped=False)
+    return StageResult("segment", ws, (item,), seconds)

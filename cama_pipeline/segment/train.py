@@ -1,0 +1,268 @@
+"""Training the segmentation network on generated sites (`cama train-segmenter`).
+
+Training pairs are a site's camera images and the generator's semantic masks. Only randomised generator sites
+may be used, never a measurement site (`config.MEASUREMENT_SEEDS`, the named presets at their default seed)
+and never one sharing a seed, layout or location with a held-out site; the checkpoint records every site it
+saw, so that it can refuse to be scored on one (`checkpoint.ensure_unseen`).
+
+Images are held in memory at the network's input width; each step takes random crops after a random rescale
+and flip, with photometric changes (brightness, contrast, gamma, colour balance, blur, noise) on top of the
+generator's own variety. Loss: class-weighted cross-entropy (inverse square-root frequency, capped) plus a soft
+Dice term for thin classes; AdamW with a one-cycle schedule.
+"""
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from cama_pipeline.progress import StageProgress
+from cama_pipeline.segment.checkpoint import SeenSiteError, SiteIdentity, save_checkpoint, site_identity
+from cama_pipeline.segment.config import (
+    MEASUREMENT_PRESET_SEED,
+    MEASUREMENT_SEEDS,
+    NetworkConfig,
+    TrainConfig,
+)
+from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet
+from cama_pipeline.segment.predict import score_held_out, site_images
+
+logger = logging.getLogger(__name__)
+
+IGNORE = 255
+"""Label of padding pixels (no loss)."""
+NAMED_PRESETS = ("tiny", "default", "large")
+
+
+@dataclass(frozen=True)
+class TrainingSet:
+    """Images (N arrays (H, W, 3) uint8 RGB) and masks (N arrays (H, W) uint8) at the network's input width."""
+
+    images: list[np.ndarray]
+    masks: list[np.ndarray]
+
+
+def find_sites(paths: Sequence[Path]) -> list[Path]:
+    """Generated site folders: each path is one (it holds `manifest.json`) or a folder of them; FileNotFoundError
+    naming a path that is neither."""
+    sites: list[Path] = []
+    for path in map(Path, paths):
+        if (path / "manifest.json").is_file():
+            sites.append(path)
+            continue
+        inner = sorted(p for p in path.iterdir() if (p / "manifest.json").is_file()) if path.is_dir() else []
+        if not inner:
+            raise FileNotFoundError(f"{path}: neither a generated site (manifest.json) nor a folder of them")
+        sites.extend(inner)
+    return sites
+
+
+def is_measurement_site(identity: SiteIdentity) -> bool:
+    """Whether a site is kept for measurement: a seed of `MEASUREMENT_SEEDS`, or a named preset at its default
+    seed (the site of the tests, the demo and the benchmarks)."""
+    return identity.seed in MEASUREMENT_SEEDS or (
+        identity.preset in NAMED_PRESETS and identity.seed == MEASUREMENT_PRESET_SEED
+    )
+
+
+def check_training_sites(train: Sequence[Path], held_out: Sequence[Path]) -> list[SiteIdentity]:
+    """The identities of the training sites; SeenSiteError naming the first site that is a measurement site or
+    shares a seed, layout or location with a held-out site."""
+    kept = [site_identity(site) for site in held_out]
+    identities = []
+    for site in train:
+        identity = site_identity(site)
+        if is_measurement_site(identity):
+            raise SeenSiteError(
+                f"{site}: a measurement site (preset {identity.preset}, seed {identity.seed}; seeds "
+                f"{MEASUREMENT_SEEDS.start}-{MEASUREMENT_SEEDS.stop - 1} and the named presets at seed "
+                f"{MEASUREMENT_PRESET_SEED} are kept for measuring); train on other randomised sites"
+            )
+        for other in kept:
+            shared = identity.shares_with(other)
+            if shared is not None:
+                raise SeenSiteError(f"{site}: has the same {shared} as held-out site {other.path}")
+        identities.append(identity)
+    return identities
+
+
+def load_training_set(sites: Sequence[Path], input_width_px: int) -> TrainingSet:
+    """Every camera image of the sites with its semantic mask, rescaled to `input_width_px` wide."""
+    images, masks = [], []
+    for site in sites:
+        for image in site_images(site, night=True):
+            rgb, mask = image.load_rgb(), image.load_semantic()
+            height = max(32, round(rgb.shape[0] * input_width_px / rgb.shape[1]))
+            if rgb.shape[1] != input_width_px:
+                rgb = cv2.resize(rgb, (input_width_px, height), interpolation=cv2.INTER_AREA)
+                mask = cv2.resize(mask, (input_width_px, height), interpolation=cv2.INTER_NEAREST)
+            images.append(rgb)
+            masks.append(mask)
+    if not images:
+        raise ValueError(f"no images with semantic masks in {', '.join(map(str, sites))}")
+    return TrainingSet(images, masks)
+
+
+def class_weights(masks: Sequence[np.ndarray], cap: float) -> torch.Tensor:
+    """Inverse square-root class frequencies relative to the median class, clipped to [1 / cap, cap]."""
+    counts = np.zeros(NUM_CLASSES)
+    for mask in masks[:: max(1, len(masks) // 200)]:
+        counts += np.bincount(mask.ravel(), minlength=256)[:NUM_CLASSES]
+    freq = counts / counts.sum()
+    present = freq > 0
+    weights = np.ones(NUM_CLASSES)
+    weights[present] = np.sqrt(np.median(freq[present]) / freq[present])
+    return torch.tensor(np.clip(weights, 1.0 / cap, cap), dtype=torch.float32)
+
+
+def augment(
+    image: np.ndarray, mask: np.ndarray, config: TrainConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """A random crop (after a random rescale and flip) with photometric changes; float32 RGB in [0, 1]."""
+    scale = float(rng.uniform(*config.scale_range))
+    height, width = image.shape[:2]
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    image = cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
+    mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST)
+    ch, cw = config.crop_height_px, config.crop_width_px
+    pad_y, pad_x = max(0, ch - size[1]), max(0, cw - size[0])
+    if pad_y or pad_x:
+        image = cv2.copyMakeBorder(image, 0, pad_y, 0, pad_x, cv2.BORDER_CONSTANT, value=(0, 0, 0))
+        mask = cv2.copyMakeBorder(mask, 0, pad_y, 0, pad_x, cv2.BORDER_CONSTANT, value=IGNORE)
+    y = int(rng.integers(0, image.shape[0] - ch + 1))
+    x = int(rng.integers(0, image.shape[1] - cw + 1))
+    image, mask = image[y : y + ch, x : x + cw], mask[y : y + ch, x : x + cw]
+    if rng.uniform() < 0.5:
+        image, mask = image[:, ::-1], mask[:, ::-1]
+    if rng.uniform() < 0.3:
+        image = cv2.GaussianBlur(np.ascontiguousarray(image), (0, 0), float(rng.uniform(0.3, 1.2)))
+    rgb = image.astype(np.float32) / 255.0
+    rgb = rgb ** float(rng.uniform(0.7, 1.4))
+    rgb = (rgb - 0.5) * float(rng.uniform(0.7, 1.3)) + 0.5 + float(rng.uniform(-0.15, 0.15))
+    rgb = rgb * rng.uniform(0.85, 1.15, size=3).astype(np.float32)
+    if rng.uniform() < 0.5:
+        rgb = rgb + rng.normal(0.0, float(rng.uniform(0.0, 0.04)), size=rgb.shape).astype(np.float32)
+    return np.clip(rgb, 0.0, 1.0), np.ascontiguousarray(mask)
+
+
+def loss_fn(logits: torch.Tensor, target: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """Weighted cross-entropy plus 0.5 x soft Dice (mean over the classes present in the batch)."""
+    ce = F.cross_entropy(logits, target, weight=weights, ignore_index=IGNORE)
+    valid = (target != IGNORE).unsqueeze(1)
+    probs = logits.softmax(dim=1) * valid
+    onehot = F.one_hot(target.clamp(max=NUM_CLASSES - 1), NUM_CLASSES).permute(0, 3, 1, 2) * valid
+    inter = (probs * onehot).sum(dim=(0, 2, 3))
+    total = probs.sum(dim=(0, 2, 3)) + onehot.sum(dim=(0, 2, 3))
+    present = onehot.sum(dim=(0, 2, 3)) > 0
+    dice = 1.0 - (2 * inter[present] + 1.0) / (total[present] + 1.0)
+    return ce + 0.5 * dice.mean()
+
+
+def _batches(count: int, batch_size: int, rng: np.random.Generator) -> list[np.ndarray]:
+    order = rng.permutation(count)
+    return [order[i : i + batch_size] for i in range(0, count - batch_size + 1, batch_size)]
+
+
+def fit(
+    net: SegmentationNet, data: TrainingSet, config: TrainConfig, device: torch.device, *, show_progress: bool
+) -> list[float]:
+    """Train `net` in place; the mean loss of each epoch."""
+    rng = np.random.default_rng(config.seed)
+    weights = class_weights(data.masks, config.max_class_weight).to(device)
+    steps_per_epoch = max(1, len(data.images) // config.batch_size)
+    optimiser = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(
+        optimiser, max_lr=config.learning_rate, total_steps=config.epochs * steps_per_epoch, pct_start=0.15
+    )
+    losses = []
+    # channels-last: mkldnn convolutions run faster so on the CPU (the stubs lack `to`'s memory_format)
+    net.to(memory_format=torch.channels_last).train()  # type: ignore[call-overload]
+    with StageProgress("train-segmenter", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task("steps", total=config.epochs * steps_per_epoch)
+        for epoch in range(config.epochs):
+            total = 0.0
+            batches = _batches(len(data.images), config.batch_size, rng)[:steps_per_epoch]
+            for batch in batches:
+                pairs = [augment(data.images[i], data.masks[i], config, rng) for i in batch]
+                x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2).to(device)
+                x = x.contiguous(memory_format=torch.channels_last)
+                y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64)).to(device)
+                loss = loss_fn(net(x), y, weights)
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                optimiser.step()
+                schedule.step()
+                total += float(loss.detach())
+                progress.advance(bar)
+            losses.append(round(total / max(1, len(batches)), 4))
+            logger.info("epoch %d/%d: loss %.4f", epoch + 1, config.epochs, losses[-1])
+    return losses
+
+
+def cpu_seconds_per_image(
+    net: SegmentationNet, width: int = 512, height: int = 288, repeats: int = 5
+) -> float:
+    """Median seconds one CPU thread takes to segment one `width` x `height` image (the stage's cost)."""
+    cpu = SegmentationNet(net.config)
+    cpu.load_state_dict(net.state_dict())
+    cpu.eval()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        image = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
+        cpu.predict([image], torch.device("cpu"))
+        times = []
+        for _ in range(repeats):
+            started = time.perf_counter()
+            cpu.predict([image], torch.device("cpu"))
+            times.append(time.perf_counter() - started)
+    finally:
+        torch.set_num_threads(threads)
+    return round(float(np.median(times)), 4)
+
+
+def train(
+    config: TrainConfig,
+    sites: Sequence[Path],
+    out: Path,
+    *,
+    held_out: Sequence[Path] = (),
+    network: NetworkConfig | None = None,
+    device: torch.device | None = None,
+    label: str | None = None,
+    show_progress: bool = True,
+) -> Path:
+    """Train on `sites` (checked by `check_training_sites`), score on `held_out`, save the checkpoint `out`."""
+    started = time.perf_counter()
+    device = device or torch.device("cpu")
+    torch.set_num_threads(config.threads)
+    torch.manual_seed(config.seed)
+    train_sites = find_sites(sites)
+    held_sites = find_sites(held_out) if held_out else []
+    identities = check_training_sites(train_sites, held_sites)
+    net = SegmentationNet(network or NetworkConfig())
+    data = load_training_set(train_sites, net.config.input_width_px)
+    logger.info("training on %d images of %d sites", len(data.images), len(train_sites))
+    losses = fit(net.to(device), data, config, device, show_progress=show_progress)
+    net.eval()
+    metrics: dict[str, Any] = {"loss": losses, "cpu_seconds_per_512x288": cpu_seconds_per_image(net)}
+    if held_sites:
+        metrics["held_out"] = score_held_out(net, held_sites, device)
+    meta = {
+        "label": label or Path(out).name,
+        "train": config.to_json(),
+        "epochs": config.epochs,
+        "images": len(data.images),
+        "seconds": round(time.perf_counter() - started, 1),
+        "training_sites": [identity.to_json() for identity in identities],
+        "held_out_sites": [site_identity(site).to_json() for site in held_sites],
+        "metrics": metrics,
+    }
+    return save_checkpoint(Path(out), net.cpu(), meta)
