@@ -107,6 +107,7 @@ def _register_stage_commands() -> None:
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.pairs.command import pairs_command
+    from cama_pipeline.segment.command import segment_command, train_segmenter_command
     from cama_pipeline.segment.import_masks import import_masks_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
@@ -132,6 +133,7 @@ def _register_stage_commands() -> None:
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)
     app.command("pairs")(pairs_command)
+    app.command("segment")(segment_command)
     app.command("import-masks")(import_masks_command)
     app.command("features")(features_command)
     app.command("surface")(surface_command)
@@ -142,6 +144,7 @@ def _register_stage_commands() -> None:
     app.command("retrain")(retrain_command)
     app.command("vma-eval")(vma_eval_command)
     app.command("vma-split")(vma_split_command)
+    app.command("train-segmenter")(train_segmenter_command)
 
 
 _register_stage_commands()

@@ -61,6 +61,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
             [nowhere, str(tmp / "masks"), "--class-map", "mapillary-vistas"],
             str(tmp / "masks"),
         ),
+        "segment": ([nowhere], nowhere),
         "features": ([nowhere], sites_index),
         "sfm": ([nowhere], sites_index),
         "surface": ([nowhere], sites_index),
@@ -73,6 +74,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         ),
         "vma-eval": ([nowhere, "--proposer", "rule", "--out", str(tmp / "eval.json")], nowhere),
         "vma-split": ([nowhere, "--out", str(tmp / "split.json")], nowhere),
+        "train-segmenter": (["--sites", nowhere, "--out", str(tmp / "segmenter")], nowhere),
     }
 
 
