@@ -8,7 +8,7 @@ workers = 4                      # run-level choices: executor, workers, propose
 
 [features]
 max_num_features = 2048          # a table per stage, named as in `cama run --stop-after`: [wigo] [keyframes]
-                                 # [sites] [pairs] [features] [sfm] [sfm_merge] [surface] [propose]
+                                 # [sites] [pairs] [segment] [features] [sfm] [sfm_merge] [surface] [propose]
 [propose.rule]
 join_gap_m = 6.0                 # nested settings are nested tables
 ```
@@ -39,6 +39,7 @@ from cama_pipeline.data.masks import parse_mask_choice
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.segment.config import SegmentConfig
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.merge import MergeConfig
 from cama_pipeline.site.config import SiteConfig
@@ -110,6 +111,8 @@ class PipelineConfig:
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
     sites: SiteConfig = field(default_factory=SiteConfig)
     pairs: PairsConfig = field(default_factory=PairsConfig)
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    """The segmenter, when the run needs predicted masks (`masks`)."""
     features: FeaturesConfig = field(default_factory=FeaturesConfig)
     sfm: SfmConfig = field(default_factory=SfmConfig)
     sfm_merge: MergeConfig = field(default_factory=MergeConfig)

@@ -116,11 +116,10 @@ def _segment(dataset_root: Path, workspace: Path, config: PipelineConfig, overwr
     if reason is not None:
         logger.info("segment skipped: %s", reason)
         return Skipped(reason)
-    from cama_pipeline.segment.config import SegmentConfig
     from cama_pipeline.segment.stage import run as run_segment
 
     run_segment(
-        SegmentConfig(),
+        config.segment,
         dataset_root,
         workspace,
         executor=config.executor,

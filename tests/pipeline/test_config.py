@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.keyframes.config import KeyframeConfig
 from cama_pipeline.pairs.config import PairsConfig
+from cama_pipeline.segment.config import SegmentConfig
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
@@ -45,6 +46,7 @@ def _changed() -> PipelineConfig:
         checkpoint=Path("/models/vma/v7"),
         surface_poses="wigo",
         masks="masks/from-oneformer",
+        segment=SegmentConfig(batch_size=2, device="cpu"),
         features=FeaturesConfig(max_num_features=1024, masked_classes=(5,), matcher="colmap"),
         sfm=SfmConfig(first_ba_max_iterations=None, loss="huber"),
         propose=ProposeConfig(boundary_source="curb", rule=RuleConfig(join_gap_m=5.5)),
@@ -213,6 +215,21 @@ def test_each_stage_runs_with_its_table_of_the_file(tmp_path: Path, monkeypatch:
     proposed = calls["propose"][1]
     assert proposed["min_confidence"] == 0.2 and proposed["inference"] == config.propose.inference
     assert proposed["rule"] == RuleConfig(join_gap_m=5.0, boundary_source="curb")
+
+
+def test_the_segment_stage_runs_with_its_table_when_the_masks_need_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = load_config(_write(tmp_path, 'masks = "predicted"\nworkers = 3\n[segment]\nbatch_size = 4\n'))
+    assert config.segment == SegmentConfig(batch_size=4)
+    for stage in ("wigo", "keyframes", "sites", "pairs"):
+        monkeypatch.setattr(STAGE_RUNS[stage], lambda *a, **k: None)
+    calls: list[tuple[tuple[Any, ...], dict[str, Any]]] = []
+    monkeypatch.setattr("cama_pipeline.segment.stage.run", lambda *a, **k: calls.append((a, k)))
+    result = run(tmp_path / "nuscenes", tmp_path / "workspace", config, stop_after="segment")
+    ((args, kwargs),) = calls
+    assert args[0] == config.segment and kwargs["workers"] == 3 and kwargs["executor"] == "local"
+    assert list(result.seconds)[-1] == "segment" and result.skipped == {}
 
 
 def _outputs_by_folder(workspace: Path) -> dict[str, dict[str, int]]:
