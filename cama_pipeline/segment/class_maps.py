@@ -8,6 +8,7 @@ as published):
     cityscapes-trainids   Cityscapes trainIds 0-18 and 255 (the ignored classes), what most networks output
     mapillary-vistas      Mapillary Vistas v1.2, 66 classes (ids 0-65)
     mapillary-vistas-v2   Mapillary Vistas v2.0, 124 classes (ids 0-123)
+    cama                  the project's own ids 0-8 (masks already in them, e.g. the generator's in ground_truth/)
 
 A class map file (`--class-map FILE.json`) has the same form:
 
@@ -49,6 +50,7 @@ BUILTIN_CLASS_MAPS: tuple[str, ...] = (
     "cityscapes-trainids",
     "mapillary-vistas",
     "mapillary-vistas-v2",
+    "cama",
 )
 TARGETS: dict[str, Semantic] = {m.name.lower(): m for m in Semantic if m is not Semantic.UNOBSERVED}
 """The project classes a label may map to, by the name a class map uses."""

@@ -34,6 +34,7 @@ VISTAS_CAR, VISTAS_EGO, VISTAS_SKY, VISTAS_BUILDING = 55, 64, 27, 17
         ("cityscapes-trainids", [*range(19), 255]),
         ("mapillary-vistas", list(range(66))),
         ("mapillary-vistas-v2", list(range(124))),
+        ("cama", list(range(9))),
     ],
 )
 def test_built_in_maps_list_every_published_id(name: str, ids: list[int]) -> None:
@@ -65,7 +66,10 @@ def test_built_in_maps_send_the_published_classes_where_the_project_wants_them()
         "cityscapes-trainids",
         "mapillary-vistas",
         "mapillary-vistas-v2",
+        "cama",
     }
+    cama = load_class_map("cama")
+    assert all(int(target) == label for label, target in cama.targets.items())
 
 
 def write_map(tmp_path: Path, classes: object, **fields: object) -> Path:
