@@ -2,11 +2,15 @@
 
 import logging
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from cama_pipeline.console import bad_input, console
+
+if TYPE_CHECKING:
+    from cama_pipeline.synthetic.config import SynthConfig
+    from cama_pipeline.synthetic.generate import SynthResult
 
 app = typer.Typer(
     help="CAMA Studio: consistent, accurate 3D HD-map annotation from surround-view video.",
@@ -54,48 +58,92 @@ def synth(
             "size of --preset; its location is synth-random-SEED. Not with --seed.",
         ),
     ] = None,
+    masks: Annotated[
+        bool,
+        typer.Option(
+            help="Masks in the data set; --no-masks writes a data set as real nuScenes is: no semantic/ and "
+            "lane_instance/ (they go to ground_truth/ for evaluation) and no GNSS CAN file."
+        ),
+    ] = True,
+    image_size: Annotated[
+        str | None,
+        typer.Option(
+            metavar="WxH",
+            help="Camera image size in pixels, e.g. 1600x900 (nuScenes' own); the preset's when omitted. "
+            "Intrinsics scale with it; render time grows with the pixel count.",
+        ),
+    ] = None,
 ) -> None:
     """Generate a synthetic driving site in nuScenes layout, with its ground truth kept beside it."""
-    from dataclasses import replace
-
-    from cama_pipeline.synthetic.config import MaskNoiseConfig
-    from cama_pipeline.synthetic.config import preset as make_preset
     from cama_pipeline.synthetic.generate import run
-    from cama_pipeline.synthetic.randomise import randomised_config
 
     if seed is not None and random_seed is not None:
         raise bad_input(
             "--seed and --random-seed exclude each other (a randomised site uses its random seed)"
         )
+    try:
+        cfg = _synth_config(preset, seed, random_seed, degrade_masks, image_size)
+        result = run(cfg, out, images=images, masks=masks, gnss=masks, overwrite=overwrite, workers=workers)
+    except (ValueError, FileExistsError) as err:
+        raise bad_input(err) from err
+    _print_site(result, cfg)
+
+
+def _synth_config(
+    preset: str,
+    seed: int | None,
+    random_seed: int | None,
+    degrade_masks: bool | None,
+    image_size: str | None,
+) -> "SynthConfig":
+    """The config `cama synth`'s options ask for (ValueError for a bad preset, size or value)."""
+    from dataclasses import replace
+
+    from cama_pipeline.synthetic.config import MaskNoiseConfig, parse_image_size
+    from cama_pipeline.synthetic.config import preset as make_preset
+    from cama_pipeline.synthetic.randomise import randomised_config
+
     overrides: dict[str, object] = {}
     if seed is not None:
         overrides["seed"] = seed
     if degrade_masks is not None:
         overrides["masks"] = MaskNoiseConfig(2, 0.05) if degrade_masks else MaskNoiseConfig()
-    try:
-        if random_seed is not None:
-            cfg = replace(randomised_config(random_seed, base=preset), **overrides)  # type: ignore[arg-type]
-        else:
-            cfg = make_preset(preset, **overrides)
-        result = run(cfg, out, images=images, overwrite=overwrite, workers=workers)
-    except (ValueError, FileExistsError) as err:
-        raise bad_input(err) from err
+    if random_seed is not None:
+        cfg = replace(randomised_config(random_seed, base=preset), **overrides)  # type: ignore[arg-type]
+    else:
+        cfg = make_preset(preset, **overrides)
+    if image_size is not None:
+        width, height = parse_image_size(image_size)
+        cfg = replace(cfg, camera=replace(cfg.camera, width_px=width, height_px=height))
+    return cfg
+
+
+def _print_site(result: "SynthResult", cfg: "SynthConfig") -> None:
+    """What `cama synth` made (or found up to date) and where."""
     state = "up to date, nothing generated" if result.skipped else f"generated in {result.seconds:.0f} s"
     console.print(f"[green]site[/green] {result.out_dir} ({state})")
     console.print(f"  data set (nuScenes layout): {result.dataset_root}  version {result.version}")
-    if random_seed is not None:
+    if cfg.random_seed is not None:
         console.print(
-            f"  randomised site {random_seed} (location {cfg.log_location}), config in the manifest"
+            f"  randomised site {cfg.random_seed} (location {cfg.log_location}), config in the manifest"
         )
     console.print(f"  ground truth:               {result.ground_truth_dir}")
     kinds = ", ".join(f"{name} ({kind})" for name, kind in result.scenes.items())
     console.print(f"  {len(result.scenes)} scenes: {kinds}")
-    if result.images_rendered:
-        console.print(f"  {result.images} camera images with semantic and lane-instance masks")
-    else:
+    size = f"{cfg.camera.width_px}x{cfg.camera.height_px}"
+    if not result.images_rendered:
         console.print(
             f"  {result.images} camera images listed, NOT rendered (--no-images): no image or mask files"
         )
+    elif result.masks_in_dataset:
+        console.print(f"  {result.images} camera images ({size}) with semantic and lane-instance masks")
+    else:
+        console.print(
+            f"  {result.images} camera images ({size}); no masks in the data set (--no-masks): they are in "
+            f"{result.mask_root}"
+        )
+    if not result.gnss:
+        console.print("  no GNSS CAN files (as real nuScenes)")
 
 
 def _register_stage_commands() -> None:

@@ -7,12 +7,18 @@ Output (`out_dir`):
         baseline_map.json     a flawed 2D map (the paper's baseline)
         poses.json            true ego pose of every sample_data token
         bev/                  true BEV rasters, a raster folder (cama_pipeline.bev) with every layer
+        semantic/, lane_instance/
+                              only for a site made with `masks=False` (`cama synth --no-masks`): the per-image
+                              masks, laid out as in a data set (`mask_relpath`), which then has none
     manifest.json             config (a randomised site's drawn config, with its `random_seed`), location,
                               fingerprint and counts; written last, so its presence means complete;
                               `images_rendered` false marks a site made with `images=False` (`cama synth
                               --no-images`): every table, CAN file and ground-truth file is written, byte for byte
                               as a normal run would, but no camera image and no mask file (the tables still list
-                              them, so a stage that reads images fails naming the missing file)
+                              them, so a stage that reads images fails naming the missing file);
+                              `masks_in_dataset` false: the masks are in ground_truth/, not in the data set;
+                              `gnss` false: no `can_bus/<scene>_gnss.json` (real nuScenes has none; the
+                              IMU and wheel files are those of a run with GNSS, byte for byte)
 
 The whole tree is built in a sibling staging folder and renamed into place, so an interrupted run never
 leaves a half-written site; a rerun with the same config finds the manifest and does nothing.
@@ -22,31 +28,25 @@ import dataclasses
 import hashlib
 import json
 import logging
-import multiprocessing
 import shutil
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
-import torch
 
 from cama_pipeline.bev import BevRasters, write_bev
-from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
+from cama_pipeline.data.schema import GNSS_MESSAGE
 from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth as gt
-from cama_pipeline.synthetic.camera_effects import apply_camera_effects
 from cama_pipeline.synthetic.config import SynthConfig
-from cama_pipeline.synthetic.masks import degrade_masks
 from cama_pipeline.synthetic.motion import TrueMotion, matrix_to_quat
-from cama_pipeline.synthetic.render import render_view
+from cama_pipeline.synthetic.render_jobs import render_all
 from cama_pipeline.synthetic.sensors import coarse_ego_poses, simulate_can
 from cama_pipeline.synthetic.site_model import SyntheticSite, build_synthetic_site, sub_rng
-from cama_pipeline.synthetic.writer import NuScenesTables, image_filename, make_token, write_can
+from cama_pipeline.synthetic.writer import NuScenesTables, make_token, write_can
 
 logger = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ GENERATOR_VERSION = 2
 DATASET_DIR = "nuscenes"
 GROUND_TRUTH_DIR = "ground_truth"
 MANIFEST = "manifest.json"
-SEED_SENSORS, SEED_MASKS, SEED_CAMERA = 11, 12, 13
+SEED_SENSORS = 11
 
 
 @dataclass(frozen=True)
@@ -74,14 +74,24 @@ class SynthResult:
     skipped: bool
     images_rendered: bool = True
     """False for a site generated with `images=False`: its image and mask files do not exist."""
+    masks_in_dataset: bool = True
+    """False for a site generated with `masks=False`: its masks are under `ground_truth_dir`."""
+    gnss: bool = True
+    """False for a site generated with `gnss=False`: no GNSS CAN file."""
+
+    @property
+    def mask_root(self) -> Path:
+        """The folder holding `semantic/` and `lane_instance/` (the data set, or ground truth for `masks=False`)."""
+        return self.dataset_root if self.masks_in_dataset else self.ground_truth_dir
 
 
-def fingerprint(cfg: SynthConfig, *, images: bool = True) -> str:
-    """Hash of everything that determines the output; a site without images hashes apart from the full one,
-    so that a later full run over it is never skipped as up to date."""
+def fingerprint(cfg: SynthConfig, *, images: bool = True, masks: bool = True, gnss: bool = True) -> str:
+    """Hash of everything that determines the output; a site without images, masks in the data set or GNSS
+    hashes apart from the full one, so that a later full run over it is never skipped as up to date."""
     content: dict[str, object] = {"config": dataclasses.asdict(cfg), "generator": GENERATOR_VERSION}
-    if not images:
-        content["images"] = False
+    for name, value in (("images", images), ("masks", masks), ("gnss", gnss)):
+        if not value:
+            content[name] = False
     payload = json.dumps(content, sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
@@ -91,6 +101,8 @@ def run(
     out_dir: Path,
     *,
     images: bool = True,
+    masks: bool = True,
+    gnss: bool = True,
     overwrite: bool = False,
     workers: int = 2,
     show_progress: bool = True,
@@ -98,11 +110,13 @@ def run(
     """Generate the site of `cfg` into `out_dir`, or do nothing if it is already there and up to date.
 
     `images=False` skips rendering (most of the time on big presets): tables, CAN and ground truth only, for
-    work that needs poses but no pixels (the pairs benchmark); the manifest records it.
+    work that needs poses but no pixels (the pairs benchmark). `masks=False` writes the masks into the
+    ground truth instead of the data set, and `gnss=False` leaves out the GNSS CAN files (`cama synth
+    --no-masks` does both: a data set as real nuScenes is). The manifest records all three.
     """
     out_dir = Path(out_dir)
     existing = _read_manifest(out_dir)
-    digest = fingerprint(cfg, images=images)
+    digest = fingerprint(cfg, images=images, masks=masks, gnss=gnss)
     if existing is not None and existing.get("fingerprint") == digest and not overwrite:
         logger.info("%s is up to date; nothing to do", out_dir)
         return _result_from_manifest(out_dir, existing, skipped=True)
@@ -117,10 +131,11 @@ def run(
     staging.mkdir(parents=True)
     site = build_synthetic_site(cfg)
     dataset_root = staging / DATASET_DIR
-    true_poses = _write_tables_and_can(site, dataset_root)
+    true_poses = _write_tables_and_can(site, dataset_root, gnss=gnss)
     n_images = sum(len(site.schedules[clip.index].shots) for clip in site.clips)
     if images:
-        _render_all(site, dataset_root, workers, show_progress)
+        mask_root = dataset_root if masks else staging / GROUND_TRUTH_DIR
+        render_all(site, dataset_root, mask_root, workers, show_progress)
     else:
         logger.info("images not rendered (images=False): %d image files listed but absent", n_images)
     _write_ground_truth(site, staging / GROUND_TRUTH_DIR, true_poses, dataset_root, show_progress)
@@ -136,6 +151,8 @@ def run(
         "scenes": scenes,
         "images": n_images,
         "images_rendered": images,
+        "masks_in_dataset": masks,
+        "gnss": gnss,
         "seconds": round(time.perf_counter() - started, 2),
     }
     atomic_write_json(staging / MANIFEST, manifest, indent=2)
@@ -164,6 +181,8 @@ def _result_from_manifest(out_dir: Path, manifest: dict, *, skipped: bool) -> Sy
         manifest["seconds"],
         skipped,
         bool(manifest.get("images_rendered", True)),
+        bool(manifest.get("masks_in_dataset", True)),
+        bool(manifest.get("gnss", True)),
     )
 
 
@@ -185,11 +204,6 @@ def _global_motion(motion: TrueMotion, origin_xy: tuple[float, float]) -> TrueMo
     return TrueMotion(motion.times_us, motion.global_from_ego_R, motion.global_from_ego_t + shift)
 
 
-def _log_name(site: SyntheticSite, clip_index: int) -> str:
-    clip = site.clips[clip_index]
-    return f"synth-{site.config.preset}-{clip.index + 1:04d}-{clip.kind}"
-
-
 def _description(site: SyntheticSite, clip_index: int) -> str:
     clip = site.clips[clip_index]
     if clip.kind == "stationary":
@@ -197,8 +211,9 @@ def _description(site: SyntheticSite, clip_index: int) -> str:
     return f"{'Night' if clip.kind == 'night' else 'Day'}, moving, route {clip.route_name}"
 
 
-def _write_tables_and_can(site: SyntheticSite, dataset_root: Path) -> dict[str, dict]:
-    """nuScenes tables with coarse ego poses, CAN messages per scene; returns the true pose per sample_data."""
+def _write_tables_and_can(site: SyntheticSite, dataset_root: Path, *, gnss: bool) -> dict[str, dict]:
+    """nuScenes tables with coarse ego poses, CAN messages per scene (GNSS only if `gnss`; it is simulated
+    either way, so the other messages do not change); returns the true pose per sample_data."""
     cfg = site.config
     tables = NuScenesTables(location=cfg.log_location)
     tables.add_rig(site.rig)
@@ -212,7 +227,7 @@ def _write_tables_and_can(site: SyntheticSite, dataset_root: Path) -> dict[str, 
         true_R, true_t = motion.interpolate(times)
         tables.add_clip(
             clip.name,
-            _log_name(site, clip.index),
+            site.log_name(clip.index),
             _description(site, clip.index),
             clip.start_time_us,
             schedule.sample_times_us,
@@ -221,7 +236,10 @@ def _write_tables_and_can(site: SyntheticSite, dataset_root: Path) -> dict[str, 
             coarse_t,
             (cfg.camera.width_px, cfg.camera.height_px),
         )
-        write_can(dataset_root, clip.name, simulate_can(motion, cfg.sensors, rng))
+        messages = simulate_can(motion, cfg.sensors, rng)
+        if not gnss:
+            del messages[GNSS_MESSAGE]
+        write_can(dataset_root, clip.name, messages)
         for i, shot in enumerate(schedule.shots):
             token = make_token(clip.name, "sample_data", shot.channel, shot.sweep_index)
             true_poses[token] = {
@@ -235,71 +253,6 @@ def _write_tables_and_can(site: SyntheticSite, dataset_root: Path) -> dict[str, 
     tables.add_map("maps/drivable_area.png")
     tables.write(dataset_root / cfg.version)
     return true_poses
-
-
-# ---- rendering, in worker processes that rebuild the site from its config --------------------------
-
-_WORKER_SITE: SyntheticSite | None = None
-
-
-def _init_worker(cfg: SynthConfig) -> None:
-    global _WORKER_SITE
-    torch.set_num_threads(1)
-    cv2.setNumThreads(1)
-    _WORKER_SITE = build_synthetic_site(cfg)
-
-
-def render_shot(site: SyntheticSite, clip_index: int, shot_index: int, dataset_root: Path) -> None:
-    """Render one camera image and write it with its semantic and instance masks."""
-    clip = site.clips[clip_index]
-    shot = site.schedules[clip_index].shots[shot_index]
-    view, R_ego, t_ego = site.view(clip_index, shot_index)
-    boxes = site.boxes_at(clip_index, shot.timestamp_us, R_ego, t_ego)
-    rendering = render_view(
-        site.world, view, boxes, night=clip.kind == "night", exposure=site.exposures[clip_index]
-    )
-    rng = sub_rng(site.config.seed, SEED_MASKS, clip_index, shot_index)
-    rgb = rendering.rgb
-    if clip.kind == "night":
-        rgb = rgb + rng.normal(0.0, 0.012, size=rgb.shape).astype(np.float32)
-    camera_rng = sub_rng(site.config.seed, SEED_CAMERA, clip_index, shot_index)
-    rgb = apply_camera_effects(rgb, site.config.camera, camera_rng)
-    semantic, instance = degrade_masks(rendering.semantic, rendering.instance, site.config.masks, rng)
-    filename = image_filename(_log_name(site, clip_index), shot)
-    bgr = cv2.cvtColor((np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8), cv2.COLOR_RGB2BGR)
-    atomic_write_image(dataset_root / filename, bgr, jpeg_quality=site.config.camera.jpeg_quality)
-    atomic_write_image(dataset_root / mask_relpath(SEMANTIC_DIR, filename), semantic)
-    atomic_write_image(dataset_root / mask_relpath(INSTANCE_DIR, filename), instance.astype(np.uint16))
-
-
-def _render_task(task: tuple[int, int, str]) -> None:
-    if _WORKER_SITE is None:
-        raise RuntimeError("render worker used before its initialiser ran")
-    render_shot(_WORKER_SITE, task[0], task[1], Path(task[2]))
-
-
-def _tasks(site: SyntheticSite, dataset_root: Path) -> Iterator[tuple[int, int, str]]:
-    for clip in site.clips:
-        for shot_index in range(len(site.schedules[clip.index].shots)):
-            yield clip.index, shot_index, str(dataset_root)
-
-
-def _render_all(site: SyntheticSite, dataset_root: Path, workers: int, show_progress: bool) -> None:
-    """Render every shot of every clip, in `workers` processes (1 = in this process)."""
-    tasks = list(_tasks(site, dataset_root))
-    with StageProgress("synthetic", logger=logger, enabled=show_progress) as progress:
-        bar = progress.add_task("render images", total=len(tasks))
-        if workers <= 1:
-            for clip_index, shot_index, root in tasks:
-                render_shot(site, clip_index, shot_index, Path(root))
-                progress.advance(bar)
-        else:
-            context = multiprocessing.get_context("spawn")
-            with context.Pool(workers, initializer=_init_worker, initargs=(site.config,)) as pool:
-                for _ in pool.imap_unordered(_render_task, tasks, chunksize=4):
-                    progress.advance(bar)
-                pool.close()  # let the workers exit: the with-block's terminate() SIGTERMs them mid-exit, and
-                pool.join()  # a native library's signal handler then prints a stack trace into the user's terminal
 
 
 # ---- ground truth ----------------------------------------------------------------------------------

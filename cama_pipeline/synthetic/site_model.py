@@ -60,6 +60,11 @@ class SyntheticSite:
         )
         return view, R_ego, t_ego
 
+    def log_name(self, clip_index: int) -> str:
+        """`log.logfile` of a clip (also the stem of its image file names)."""
+        clip = self.clips[clip_index]
+        return f"synth-{self.config.preset}-{clip.index + 1:04d}-{clip.kind}"
+
     def boxes_at(self, clip_index: int, time_us: int, R_ego: np.ndarray, t_ego: np.ndarray) -> Boxes:
         """Static scenery, the clip's traffic at `time_us` and the ego trunk."""
         moving = traffic_boxes(self.traffic[clip_index], self.world.terrain, time_us)

@@ -12,9 +12,10 @@ from typer.testing import CliRunner
 
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic.config import AppearanceConfig, SynthConfig, preset
-from cama_pipeline.synthetic.generate import MANIFEST, render_shot
+from cama_pipeline.synthetic.generate import MANIFEST
 from cama_pipeline.synthetic.layout import build_layout
 from cama_pipeline.synthetic.randomise import randomised_config
+from cama_pipeline.synthetic.render_jobs import render_shot
 from cama_pipeline.synthetic.routes import plan_clips
 from cama_pipeline.synthetic.site_model import SEED_ROUTES, SyntheticSite, build_synthetic_site, sub_rng
 from cama_pipeline.synthetic.terrain import Terrain
