@@ -1,5 +1,7 @@
-"""`cama wigo`: fuse wheel, IMU and GNSS of every scene into ego poses at the camera timestamps."""
+"""`cama wigo`: fuse wheel, IMU and GNSS (or, without GNSS, the logged ego pose) of every scene into ego poses at
+the camera timestamps."""
 
+from collections import Counter
 from typing import Annotated
 
 import typer
@@ -33,3 +35,6 @@ def wigo_command(
         f"[green]wigo[/green] {done} scene(s) fused, {len(result.skipped)} up to date, "
         f"in {result.seconds:.1f} s -> {result.workspace.stage_dir('wigo')}"
     )
+    constraints = Counter(str(item.report.get("global_constraint", "unrecorded")) for item in result.items)
+    summary = ", ".join(f"{name} ({count} scene(s))" for name, count in sorted(constraints.items()))
+    console.print(f"  global constraint: {summary}")

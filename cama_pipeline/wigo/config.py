@@ -53,8 +53,8 @@ class WigoConfig:
     """(horizontal m, vertical m, heading deg, roll/pitch deg) of the logged `ego_pose` as an input. Its
     errors are slow drifts (lateral wander, a calibration yaw, a sync offset), so the sigmas are spread over
     `logged_pose_correlation_s`; heading is loose because the IMU and GNSS track know it better. A value
-    <= 0 leaves that component free; all <= 0 leaves the logged pose out (except as the anchor of a clip
-    without GNSS)."""
+    <= 0 leaves that component free; all <= 0 leaves the logged pose out, which a clip without GNSS cannot
+    afford (it is then refused: nothing else ties it to the global frame)."""
     logged_pose_correlation_s: float = 8.0
     """Correlation time of the logged pose's errors: its factors count as one measurement per this long."""
     max_iterations: int = 100

@@ -5,9 +5,14 @@ Nodes sit on a regular grid over the clip (plus one at every GNSS fix time, so f
 interpolation). Each camera pose is the odometry propagated from the two nodes around it, blended on
 SE(3) (`Pose3.slerp`), so poses between nodes keep the odometry's fine motion.
 
-Degraded inputs: no GNSS -> the logged ego pose anchors the clip (at least its first pose); no IMU ->
-wheel yaw rate and no gravity factors; a one-image clip -> one node (plus the nodes of GNSS fixes within
-`margin_s`), solved all the same.
+Global constraint (what ties the clip to the global frame, named in the report's `global_constraint`): the
+GNSS fixes and the logged ego pose (`gnss+logged_pose`, the default), GNSS alone (`gnss`, when the config
+leaves the logged pose out), or the logged ego pose alone (`logged_pose`: a clip without GNSS, as every
+real nuScenes clip is). A clip without GNSS whose config leaves the logged pose out has none and is refused
+(`NoGlobalConstraint`), rather than left floating on its dead reckoning.
+
+Degraded inputs: no IMU -> wheel yaw rate and no gravity factors; a one-image clip -> one node (plus the nodes
+of GNSS fixes within `margin_s`), solved all the same.
 """
 
 import logging
@@ -37,6 +42,10 @@ _LOOSE_TILT_RAD = 0.5
 """Sigma left on roll and pitch by priors that only mean to fix the heading."""
 _FREE_SIGMA = 1e3
 """Sigma of a prior component the configuration leaves free."""
+
+
+class NoGlobalConstraint(ValueError):
+    """A clip with neither GNSS fixes nor the logged ego pose to tie it to the global frame."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,7 +170,7 @@ class _GraphBuilder:
         gnss = self.inputs.gnss
         used: list[tuple[int, np.ndarray, np.ndarray]] = []
         if gnss is None:
-            self.report["degraded"].append("no GNSS: the logged ego pose anchors the clip")
+            self.report["degraded"].append("no GNSS: the logged ego pose is the global constraint")
             return used
         index = {int(t): k for k, t in enumerate(self.nodes)}
         for t, pos, std in zip(gnss.utime, gnss.pos_m, gnss.std_m, strict=True):
@@ -185,19 +194,34 @@ class _GraphBuilder:
         self.graph.add(gtsam.PoseRotationPrior3D(X(0), gtsam.Rot3.Quaternion(w, x, y, z), noise))
         self.report["heading_prior"] = True
 
-    def logged_pose_factors(self, anchor_only: bool) -> None:
-        """The logged ego pose as priors whose sigmas are spread over its errors' correlation time; with
-        `anchor_only`, one prior at the first image (default sigmas) that places a clip without GNSS."""
+    def global_constraint(self, gnss_used: int) -> str:
+        """Which measurements tie the clip to the global frame (recorded in the report); NoGlobalConstraint
+        when none does."""
+        logged = self.config.uses_logged_pose
+        if gnss_used:
+            constraint = "gnss+logged_pose" if logged else "gnss"
+        elif logged:
+            constraint = "logged_pose"
+        else:
+            why = "no GNSS fixes" if self.inputs.gnss is None else "no GNSS fix within the clip's span"
+            raise NoGlobalConstraint(
+                f"scene {self.inputs.scene!r}: {why} and the logged ego pose is left out (--no-logged-pose, "
+                "or every logged_pose_sigmas <= 0): nothing ties the clip to the global frame; fuse the "
+                "logged pose (drop --no-logged-pose) for a data set without GNSS"
+            )
+        self.report["global_constraint"] = constraint
+        return constraint
+
+    def logged_pose_factors(self) -> None:
+        """The logged ego pose as priors at the nodes within the camera span (the first node when none is),
+        their sigmas spread over its errors' correlation time; none when the config leaves it out."""
+        if not self.config.uses_logged_pose:
+            return
         cam = self.inputs.cameras
         first = np.array([int(np.argmin(np.abs(self.nodes - cam.times_us[0])))])
-        if anchor_only:
-            chosen, sigmas = first, WigoConfig.logged_pose_sigmas
-        elif self.config.uses_logged_pose:
-            inside = np.flatnonzero((self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1]))
-            chosen, sigmas = (inside if len(inside) else first), self.config.logged_pose_sigmas
-        else:
-            return
-        horizontal, vertical, heading_deg, tilt_deg = sigmas
+        inside = np.flatnonzero((self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1]))
+        chosen = inside if len(inside) else first
+        horizontal, vertical, heading_deg, tilt_deg = self.config.logged_pose_sigmas
         # n factors within one correlation time carry the information of one measurement
         per_window = self.config.logged_pose_correlation_s * self.config.node_rate_hz
         spread = math.sqrt(min(len(chosen), max(per_window, 1.0)))
@@ -210,7 +234,6 @@ class _GraphBuilder:
             prior = logged_pose_at(cam, int(self.nodes[k]))
             self.graph.add(gtsam.PriorFactorPose3(X(int(k)), prior, noise))
         self.report["logged_pose_factors"] = len(chosen)
-        self.report["logged_pose_anchor_only"] = anchor_only
 
 
 def _solve(builder: _GraphBuilder) -> gtsam.Values:
@@ -270,7 +293,8 @@ def camera_poses(
 
 
 def fuse_clip(inputs: ClipInputs, config: WigoConfig) -> FusedPoses:
-    """Fuse one clip's (checked) inputs into poses at its camera timestamps.
+    """Fuse one clip's (checked) inputs into poses at its camera timestamps; NoGlobalConstraint (a ValueError)
+    for a clip without GNSS when the config leaves the logged pose out.
 
     Camera covariances are the neighbour nodes' marginals blended linearly (an approximation: the
     odometry between nodes adds little over 0.1 s)."""
@@ -284,8 +308,9 @@ def fuse_clip(inputs: ClipInputs, config: WigoConfig) -> FusedPoses:
     builder.odometry_factors()
     builder.gravity_factors()
     used = builder.gnss_factors()
+    constraint = builder.global_constraint(len(used))
     builder.heading_prior()
-    builder.logged_pose_factors(anchor_only=not used and not config.uses_logged_pose)
+    builder.logged_pose_factors()
     result = _solve(builder)
     builder.report.update(_gnss_report(result, used, config.gnss_robust_k))
     node_cov = _node_covariances(builder, result)
@@ -293,8 +318,9 @@ def fuse_clip(inputs: ClipInputs, config: WigoConfig) -> FusedPoses:
     upper = np.minimum(index + 1, len(nodes) - 1)
     covariance = (1 - alpha)[:, None, None] * node_cov[index] + alpha[:, None, None] * node_cov[upper]
     logger.info(
-        "scene %s: %d nodes, %d GNSS factors (%d down-weighted), %d LM iterations",
+        "scene %s: global constraint %s, %d nodes, %d GNSS factors (%d down-weighted), %d LM iterations",
         inputs.scene,
+        constraint,
         len(nodes),
         builder.report.get("gnss_factors", 0),
         builder.report["gnss_downweighted"],

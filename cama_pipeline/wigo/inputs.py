@@ -48,7 +48,7 @@ class ClipInputs:
     imu: ImuSeries | None
     """IMU, or None (yaw rate then comes from the wheels, roll and pitch from the logged pose)."""
     gnss: GnssSeries | None
-    """GNSS fixes, or None (the logged pose then anchors the clip in the global frame)."""
+    """GNSS fixes, or None (the logged ego pose is then the clip's only global constraint)."""
 
 
 def clip_inputs(scene: Scene) -> ClipInputs:
@@ -97,7 +97,7 @@ def checked_inputs(inputs: ClipInputs) -> ClipInputs:
     gnss = _in_time_order(inputs.gnss, name, GNSS_MESSAGE) if inputs.gnss is not None else None
     if gnss is None or len(gnss.utime) == 0:
         logger.warning(
-            "scene %s: no GNSS fixes (%s): the logged ego pose anchors the clip instead", name, GNSS_MESSAGE
+            "scene %s: no GNSS fixes (%s): the logged ego pose is the global constraint", name, GNSS_MESSAGE
         )
         gnss = None
     return replace(inputs, wheel=wheel, imu=imu, gnss=gnss)

@@ -9,7 +9,7 @@ import pytest
 from cama_pipeline.data import GnssSeries, ImuSeries, WheelSeries
 from cama_pipeline.synthetic.sensors import SensorNoiseConfig
 from cama_pipeline.wigo import WigoConfig, checked_inputs, fuse_clip
-from cama_pipeline.wigo.fusion import graph_span
+from cama_pipeline.wigo.fusion import NoGlobalConstraint, graph_span
 from cama_pipeline.wigo.odometry import dead_reckon, integration_grid
 from tests.wigo.wigo_sim_inputs import drive, heading_rmse_deg, position_rmse, simulate, with_gnss_jumps
 
@@ -75,13 +75,24 @@ def test_no_gnss_falls_back_to_the_logged_pose(clip, caplog: pytest.LogCaptureFi
     with caplog.at_level(logging.WARNING):
         inputs = checked_inputs(replace(clip.inputs, gnss=None))
     assert "no GNSS" in caplog.text
-    for config, anchor_only in ((WigoConfig(), False), (GNSS_ONLY, True)):
-        fused = fuse_clip(inputs, config)
-        assert any("no GNSS" in d for d in fused.report["degraded"])
-        assert fused.report["logged_pose_anchor_only"] is anchor_only
-        assert position_rmse(fused.rotation, fused.translation, clip) < 1.0
-        # anchored, not floating: the first pose's position sigma is the logged pose's
-        assert np.sqrt(fused.covariance[0, 3, 3]) < 1.0
+    fused = fuse_clip(inputs, WigoConfig())
+    assert any("no GNSS" in d for d in fused.report["degraded"])
+    assert fused.report["global_constraint"] == "logged_pose"
+    assert fused.report["logged_pose_factors"] > 10
+    assert position_rmse(fused.rotation, fused.translation, clip) < 1.0
+    # anchored, not floating: the position sigma is the logged pose's, at the start and at the end
+    assert np.sqrt(fused.covariance[[0, -1], 3, 3]).max() < 1.0
+
+
+def test_no_gnss_and_no_logged_pose_is_refused_naming_the_scene(clip) -> None:
+    inputs = checked_inputs(replace(clip.inputs, gnss=None))
+    with pytest.raises(NoGlobalConstraint, match=f"scene '{clip.inputs.scene}'.*no GNSS.*--no-logged-pose"):
+        fuse_clip(inputs, GNSS_ONLY)
+
+
+def test_the_report_names_the_global_constraint(clip) -> None:
+    assert fuse_clip(clip.inputs, WigoConfig()).report["global_constraint"] == "gnss+logged_pose"
+    assert fuse_clip(clip.inputs, GNSS_ONLY).report["global_constraint"] == "gnss"
 
 
 def test_empty_gnss_file_counts_as_no_gnss(clip) -> None:
