@@ -1,6 +1,10 @@
-"""Site aggregation as pure functions over scene tracks: moving day scenes whose trajectories come within
-`overlap_radius_m` of each other share a site (transitively); each stationary clip joins the site of its
-nearest moving clip; night scenes and stationary clips with no moving clip near are dropped with a reason."""
+"""Site aggregation as pure functions over scene tracks: moving day scenes of one location whose trajectories
+come within `overlap_radius_m` of each other share a site (transitively); each stationary clip joins the site of
+its nearest moving clip of its location; night scenes and stationary clips with no moving clip near are dropped
+with a reason.
+
+Scenes of different locations (nuScenes' `log.location`) never share a site: each location has its own map
+frame, and the coordinates of two cities overlap."""
 
 import logging
 from dataclasses import dataclass, field
@@ -23,6 +27,8 @@ class SceneTrack:
     stationary: bool
     night_reason: str | None = None
     """Why it is a night scene, None for day."""
+    location: str = ""
+    """The scene's `log.location`; only scenes of the same location are compared."""
 
 
 @dataclass(frozen=True)
@@ -33,6 +39,8 @@ class Site:
     scenes: tuple[str, ...]
     merged: dict[str, str] = field(default_factory=dict)
     """stationary scene -> the moving scene it was merged into."""
+    location: str = ""
+    """The location every scene of the site shares."""
 
 
 @dataclass(frozen=True)
@@ -52,7 +60,7 @@ def track_distance_m(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _overlap_groups(moving: list[SceneTrack], radius_m: float) -> list[list[int]]:
-    """Connected components of the "trajectories within radius" graph (union-find)."""
+    """Connected components of the "same location and trajectories within radius" graph (union-find)."""
     parent = list(range(len(moving)))
 
     def root(i: int) -> int:
@@ -63,6 +71,8 @@ def _overlap_groups(moving: list[SceneTrack], radius_m: float) -> list[list[int]
 
     for i in range(len(moving)):
         for j in range(i + 1, len(moving)):
+            if moving[i].location != moving[j].location:
+                continue
             if track_distance_m(moving[i].positions, moving[j].positions) <= radius_m:
                 parent[root(j)] = root(i)
     groups: dict[int, list[int]] = {}
@@ -84,26 +94,38 @@ def aggregate(tracks: list[SceneTrack], config: SiteConfig) -> Aggregation:
     groups = _overlap_groups(moving, config.overlap_radius_m)
     merged_into: dict[str, str] = {}
     for still in (t for t in day if t.stationary):
-        if not moving:
-            dropped[still.name] = "stationary and no moving day clip to merge with"
-            continue
-        distances = [track_distance_m(still.positions, m.positions) for m in moving]
-        best = int(np.argmin(distances))
-        if distances[best] > config.stationary_merge_max_m:
-            dropped[still.name] = (
-                f"stationary and the nearest moving clip ({moving[best].name}) is {distances[best]:.0f} m away "
-                f"(> {config.stationary_merge_max_m:g} m)"
-            )
-            continue
-        merged_into[still.name] = moving[best].name
-        logger.info(
-            "scene %s: stationary, merged into %s (%.1f m)", still.name, moving[best].name, distances[best]
-        )
+        target = _merge_target(still, moving, config, dropped)
+        if target is not None:
+            merged_into[still.name] = target
     sites = []
     for number, group in enumerate(sorted(groups, key=min), start=1):
         names = [moving[i].name for i in group]
         merged = {s: m for s, m in merged_into.items() if m in names}
-        sites.append(Site(f"site-{number:03d}", tuple(names + list(merged)), merged))
+        location = moving[group[0]].location
+        sites.append(Site(f"site-{number:03d}", tuple(names + list(merged)), merged, location))
     for name, reason in dropped.items():
         logger.info("scene %s dropped: %s", name, reason)
     return Aggregation(tuple(sites), dropped)
+
+
+def _merge_target(
+    still: SceneTrack, moving: list[SceneTrack], config: SiteConfig, dropped: dict[str, str]
+) -> str | None:
+    """The moving clip of its location a stationary clip joins, or None with the reason put into `dropped`."""
+    candidates = [m for m in moving if m.location == still.location]
+    if not candidates:
+        where = f" at its location ({still.location})" if still.location else ""
+        dropped[still.name] = f"stationary and no moving day clip{where} to merge with"
+        return None
+    distances = [track_distance_m(still.positions, m.positions) for m in candidates]
+    best = int(np.argmin(distances))
+    if distances[best] > config.stationary_merge_max_m:
+        dropped[still.name] = (
+            f"stationary and the nearest moving clip ({candidates[best].name}) is {distances[best]:.0f} m away "
+            f"(> {config.stationary_merge_max_m:g} m)"
+        )
+        return None
+    logger.info(
+        "scene %s: stationary, merged into %s (%.1f m)", still.name, candidates[best].name, distances[best]
+    )
+    return candidates[best].name

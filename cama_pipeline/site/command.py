@@ -19,7 +19,8 @@ def sites_command(
     ] = 60.0,
     overwrite: OverwriteOpt = False,
 ) -> None:
-    """Group overlapping scenes into sites, drop night scenes, merge stationary clips (after wigo, keyframes)."""
+    """Group overlapping scenes of one location into sites, drop night scenes, merge stationary clips (after wigo,
+    keyframes)."""
     try:
         config = SiteConfig(overlap_radius_m=overlap_radius_m, night_brightness=night_brightness)
         result = run(config, dataset, workspace, overwrite=overwrite)
@@ -29,7 +30,8 @@ def sites_command(
         state = " (up to date)" if site.skipped else ""
         merged = ", ".join(f"{s} -> {m}" for s, m in site.report["merged"].items()) or "none"
         console.print(
-            f"[green]{site.name}[/green]{state}: {', '.join(site.report['scenes'])}; merged: {merged}"
+            f"[green]{site.name}[/green]{state} ({site.report['location']}): {', '.join(site.report['scenes'])}; "
+            f"merged: {merged}"
         )
         console.print(f"  manifest: {site.path}")
     for dropped in result.report["dropped"]:

@@ -6,10 +6,11 @@ poses global_from_ego.
 
     sites/index.json           schema "cama.sites/1": the aggregation's decisions
         {"schema", "fingerprint", "config": {...},
-         "sites": [{"site_id", "scenes": [scene], "merged": {stationary scene: moving scene}}],
+         "sites": [{"site_id", "location": log.location shared by its scenes, "scenes": [scene],
+                    "merged": {stationary scene: moving scene}}],
          "dropped": [{"scene", "reason"}]}
     sites/<site_id>/manifest.json   schema "cama.site/1": everything a site's reconstruction reads
-        {"schema", "site_id", "scenes": [{"scene", "scene_token", "kind": "moving" | "stationary",
+        {"schema", "site_id", "location", "scenes": [{"scene", "scene_token", "kind": "moving" | "stationary",
                                           "merged_into": scene or null,
                                           "frames": [frame as in `cama_pipeline.keyframes.io`]}],
          "poses": {sample_data token: {"scene", "channel", "timestamp_us", "translation", "rotation"}}}

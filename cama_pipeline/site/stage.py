@@ -1,5 +1,5 @@
-"""The sites stage: drop night scenes, merge stationary clips, group overlapping scenes into sites, and
-write `sites/index.json` plus one `sites/<site_id>/manifest.json` per site into the workspace."""
+"""The sites stage: drop night scenes, merge stationary clips, group overlapping scenes of one location into
+sites, and write `sites/index.json` plus one `sites/<site_id>/manifest.json` per site into the workspace."""
 
 import logging
 import time
@@ -13,7 +13,7 @@ from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.fingerprints import fingerprint, is_up_to_date
 from cama_pipeline.keyframes.io import KeyframesFile, read_keyframes
 from cama_pipeline.results import ItemResult, StageResult
-from cama_pipeline.site.aggregate import Aggregation, SceneTrack, aggregate
+from cama_pipeline.site.aggregate import Aggregation, SceneTrack, Site, aggregate
 from cama_pipeline.site.config import SiteConfig
 from cama_pipeline.site.io import write_site_manifest, write_sites_index
 from cama_pipeline.site.night import night_reason
@@ -23,9 +23,7 @@ from cama_pipeline.workspace import Workspace
 logger = logging.getLogger(__name__)
 
 
-def _manifest(
-    site_scenes: list[tuple[WigoFile, KeyframesFile]], merged: dict[str, str], site_id: str
-) -> dict[str, Any]:
+def _manifest(site_scenes: list[tuple[WigoFile, KeyframesFile]], site: Site) -> dict[str, Any]:
     """One site's manifest: its scenes with frames and keyframes, and every image's fused pose."""
     scenes, poses = [], {}
     for wigo, kf in site_scenes:
@@ -34,7 +32,7 @@ def _manifest(
                 "scene": wigo.scene,
                 "scene_token": wigo.scene_token,
                 "kind": "stationary" if kf.stationary else "moving",
-                "merged_into": merged.get(wigo.scene),
+                "merged_into": site.merged.get(wigo.scene),
                 "frames": [f.to_json() for f in kf.frames],
             }
         )
@@ -46,7 +44,7 @@ def _manifest(
                 "translation": [float(v) for v in p.translation],
                 "rotation": [float(v) for v in p.rotation],
             }
-    return {"site_id": site_id, "scenes": scenes, "poses": poses}
+    return {"site_id": site.site_id, "location": site.location, "scenes": scenes, "poses": poses}
 
 
 def _read_scene_outputs(dataset: Dataset, workspace: Workspace) -> dict[str, tuple[WigoFile, KeyframesFile]]:
@@ -66,7 +64,8 @@ def _index(aggregation: Aggregation, digest: str, config: SiteConfig) -> dict[st
         "fingerprint": digest,
         "config": config.to_json(),
         "sites": [
-            {"site_id": s.site_id, "scenes": list(s.scenes), "merged": s.merged} for s in aggregation.sites
+            {"site_id": s.site_id, "location": s.location, "scenes": list(s.scenes), "merged": s.merged}
+            for s in aggregation.sites
         ],
         "dropped": [{"scene": name, "reason": reason} for name, reason in aggregation.dropped.items()],
     }
@@ -92,7 +91,13 @@ def run(
         code_version("cama_pipeline.site"),
         config.to_json(),
         [
-            (s.name, s.description, outputs[s.name][0].fingerprint, outputs[s.name][1].fingerprint)
+            (
+                s.name,
+                s.description,
+                s.location,
+                outputs[s.name][0].fingerprint,
+                outputs[s.name][1].fingerprint,
+            )
             for s in dataset.scenes
         ],
     )
@@ -101,7 +106,9 @@ def run(
     for scene in dataset.scenes:
         wigo, kf = outputs[scene.name]
         positions = np.array([p.translation for p in wigo.poses]).reshape(-1, 3)
-        tracks.append(SceneTrack(scene.name, positions, kf.stationary, night_reason(scene, config)))
+        tracks.append(
+            SceneTrack(scene.name, positions, kf.stationary, night_reason(scene, config), scene.location)
+        )
     result = aggregate(tracks, config)
     index = _index(result, digest, config)
     manifests = {site.site_id: ws.site_manifest(site.site_id) for site in result.sites}
@@ -113,7 +120,7 @@ def run(
     else:
         for site in result.sites:
             chosen = [outputs[name] for name in site.scenes]
-            write_site_manifest(manifests[site.site_id], _manifest(chosen, site.merged, site.site_id))
+            write_site_manifest(manifests[site.site_id], _manifest(chosen, site))
         write_sites_index(index_path, index)
     items = tuple(
         ItemResult(entry["site_id"], manifests[entry["site_id"]], entry, skipped) for entry in index["sites"]

@@ -57,3 +57,22 @@ def test_config_validation_names_the_field() -> None:
         SiteConfig(overlap_radius_m=-1.0)
     with pytest.raises(ValueError, match="brightness_images"):
         SiteConfig(brightness_images=0)
+
+
+def test_scenes_of_different_locations_never_share_a_site() -> None:
+    tracks = [
+        SceneTrack("boston-a", line(0, 60, 0), False, location="boston"),
+        SceneTrack("singapore-a", line(0, 60, 1), False, location="singapore"),  # same coordinates
+        SceneTrack("boston-b", line(50, 110, 2), False, location="boston"),
+        SceneTrack("singapore-wait", line(30, 30.2, 1, 3), True, location="singapore"),
+        SceneTrack("paris-wait", line(30, 30.2, 1, 3), True, location="paris"),
+    ]
+    result = aggregate(tracks, SiteConfig(overlap_radius_m=30.0))
+    assert [(s.site_id, s.location, s.scenes) for s in result.sites] == [
+        ("site-001", "boston", ("boston-a", "boston-b")),
+        ("site-002", "singapore", ("singapore-a", "singapore-wait")),
+    ]
+    assert result.sites[1].merged == {"singapore-wait": "singapore-a"}
+    assert result.dropped == {
+        "paris-wait": "stationary and no moving day clip at its location (paris) to merge with"
+    }
