@@ -1,5 +1,6 @@
 """`cama run` end to end on a tiny site generated as real nuScenes is (`cama synth --no-masks`: no masks in the data
-set, no GNSS file): with masks imported from elsewhere, the run skips the segmenter and every stage reads them."""
+set, no GNSS file): with masks imported from elsewhere, the run skips the segmenter and every stage reads them.
+The site is `mask_free_site` (tests/pipeline/conftest.py)."""
 
 from pathlib import Path
 
@@ -7,20 +8,11 @@ import pytest
 from typer.testing import CliRunner
 
 from cama_pipeline.data.masks import has_masks
-from cama_pipeline.synthetic.config import preset
 from cama_pipeline.synthetic.generate import SynthResult
-from cama_pipeline.synthetic.generate import run as synthesize
 from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module")
-def mask_free_site(tmp_path_factory: pytest.TempPathFactory) -> SynthResult:
-    """The tiny preset as `cama synth --no-masks` writes it."""
-    out = tmp_path_factory.mktemp("synth-mask-free") / "tiny"
-    return synthesize(preset("tiny"), out, masks=False, gnss=False, workers=2, show_progress=False)
 
 
 def test_a_mask_free_tiny_site_runs_end_to_end_on_imported_masks(
