@@ -22,6 +22,7 @@ same layout or same location (`ensure_unseen`, which the benchmark calls before 
 import hashlib
 import json
 import logging
+import pickle
 import shutil
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -196,7 +197,7 @@ def load_checkpoint(folder: Path | None = None) -> Checkpoint:
     try:
         state = torch.load(weights, map_location="cpu", weights_only=True)
         net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
-    except (OSError, RuntimeError, EOFError) as err:
+    except (OSError, RuntimeError, EOFError, pickle.UnpicklingError) as err:
         raise CheckpointError(f"{weights}: cannot load the weights ({err})") from None
     return Checkpoint(net.eval(), meta, folder)
 

@@ -86,9 +86,8 @@ class TrainConfig:
     """Random rescale of each training image around the input scale, for robustness to image size."""
     max_class_weight: float = 6.0
     """Cross-entropy class weights are inverse square-root frequencies, capped at this."""
-    held_out_share: float = 0.0
-    """Part of the training images kept aside (by site) to report metrics on; 0: metrics on `--held-out`
-    sites only."""
+    images_per_epoch: int | None = None
+    """Crops per epoch (a time budget on a big training set); None: one per training image."""
     seed: int = 0
     threads: int = 2
     """torch CPU threads (the machine is shared)."""
@@ -105,8 +104,8 @@ class TrainConfig:
         low, high = self.scale_range
         if not 0 < low <= high:
             raise ValueError(f"TrainConfig.scale_range must be 0 < low <= high, got {self.scale_range!r}")
-        if not 0 <= self.held_out_share < 1:
-            raise ValueError(f"TrainConfig.held_out_share must be in [0, 1), got {self.held_out_share!r}")
+        if self.images_per_epoch is not None:
+            _positive_int("TrainConfig", "images_per_epoch", self.images_per_epoch)
 
     def to_json(self) -> dict[str, Any]:
         out = dataclasses.asdict(self)

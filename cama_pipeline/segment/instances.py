@@ -26,12 +26,24 @@ INSTANCE_CLASSES: tuple[Semantic, ...] = (Semantic.CURB, Semantic.LANE_MARKING, 
 _CHAINED = (Semantic.CURB, Semantic.LANE_MARKING)
 REFERENCE_WIDTH_PX = 512
 """The pixel sizes below are for images this wide and scale with the image width."""
-MIN_PIXELS = 12
-"""Components smaller than this (at the reference width) are noise, not instances."""
+MIN_PIXELS = 8
+"""Instances smaller than this (at the reference width) are noise (after joining: a far dashed line is many
+specks)."""
+MIN_PIXELS_FLOOR = 3
+"""... and smaller than this at any width (SRE leaves out instances this small anyway)."""
+LOOSE_TURN_DEG = 35.0
+"""How far the direction of a speck (a piece too small for its outline to tell) may turn from its partner's."""
+_COS_LOOSE = float(np.cos(np.radians(LOOSE_TURN_DEG)))
+SPECK_GAP_PX = 40.0
+"""A speck joins only a piece within this distance (at the reference width) ..."""
+SPECK_OFFSET_SHARE = 1.0 / 3.0
+"""... and within this share of the usual offset of its line. Merging two map elements into one instance costs
+SRE more than leaving a speck out (a merged instance matches one element with the other's pixels as error)."""
 JOIN_FACTOR = 2.5
 """Crosswalk stripes, and the two lines of a double line, closer than this many times their own width join."""
-JOIN_RANGE_PX = (2.0, 24.0)
-"""... that distance clamped to this range (at the reference width)."""
+JOIN_RANGE_PX = {Semantic.CROSSWALK: (2.0, 64.0), Semantic.LANE_MARKING: (2.0, 24.0)}
+"""... that distance clamped to this range (at the reference width): a near crosswalk's gaps are wide, while a
+double line's are narrow and other lines must stay apart."""
 MAX_OFFSET_PX = 6.0
 """Two pieces continue each other only if each one's end lies within this (plus a share of the gap, below) of
 the other's line."""
@@ -50,6 +62,8 @@ class _End:
     piece: int
     point: np.ndarray
     direction: np.ndarray
+    reliable: bool
+    """From an outline long enough to tell the direction (else from a few pixels: loose, or none for one)."""
 
 
 def lane_instances(semantic: np.ndarray) -> np.ndarray:
@@ -62,13 +76,13 @@ def lane_instances(semantic: np.ndarray) -> np.ndarray:
         mask = (semantic == int(cls)).astype(np.uint8)
         if not mask.any():
             continue
-        labels = _components(mask, max(2, round(MIN_PIXELS * scale * scale)))
+        labels = _components(mask, 2)  # far dashes are specks, yet together one line
         if cls in (Semantic.CROSSWALK, Semantic.LANE_MARKING):
-            low, high = JOIN_RANGE_PX
+            low, high = JOIN_RANGE_PX[cls]
             labels = _join_near(labels, JOIN_FACTOR, max(1.0, low * scale), max(1.0, high * scale))
         if cls in _CHAINED:
-            labels = _chain(labels, scale, semantic.shape[1])
-        _write(out, labels, int(cls))
+            labels = _chain(labels, semantic, scale)
+        _write(out, labels, int(cls), max(MIN_PIXELS_FLOOR, round(MIN_PIXELS * scale * scale)))
     return out
 
 
@@ -84,13 +98,31 @@ def _components(mask: np.ndarray, min_pixels: int) -> np.ndarray:
     return relabel[labels]
 
 
+def _reach(labels: np.ndarray, piece: int, factor: float, min_px: float, max_px: float) -> set[int]:
+    """The other pieces within `factor` times this piece's thickness (area / length, clamped to [`min_px`,
+    `max_px`]) of it."""
+    ys, xs = np.nonzero(labels == piece)
+    centred = np.column_stack([xs, ys]).astype(float)
+    centred -= centred.mean(axis=0)
+    length = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][0])) + 1.0
+    radius = int(round(min(max(factor * len(xs) / length, min_px), max_px)))
+    height, width = labels.shape
+    x0, x1 = max(xs.min() - radius, 0), min(xs.max() + radius + 1, width)
+    y0, y1 = max(ys.min() - radius, 0), min(ys.max() + radius + 1, height)
+    window = labels[y0:y1, x0:x1]
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    touched = np.unique(window[cv2.dilate((window == piece).astype(np.uint8), kernel) > 0])
+    return {int(t) for t in touched if t > 0 and t != piece}
+
+
 def _join_near(labels: np.ndarray, factor: float, min_px: float, max_px: float) -> np.ndarray:
-    """Components that come within `factor` times their own thickness (area / length; clamped to
-    [`min_px`, `max_px`]) of another share its label: a crosswalk's stripes and a double line's two lines,
-    whose gaps are about one stripe or line width, while separate lines lie many widths apart."""
+    """Pieces that each lie within the other's reach (`_reach`) share a label: a crosswalk's stripes and a double
+    line's two lines, whose gaps are about one stripe or line width, while separate lines lie many widths apart
+    (and a big near stripe does not reach over to a small far crossing that does not reach back)."""
     count = int(labels.max())
     if count < 2:
         return labels
+    reach = {piece: _reach(labels, piece, factor, min_px, max_px) for piece in range(1, count + 1)}
     parent = list(range(count + 1))
 
     def root(i: int) -> int:
@@ -99,20 +131,10 @@ def _join_near(labels: np.ndarray, factor: float, min_px: float, max_px: float) 
             i = parent[i]
         return i
 
-    height, width = labels.shape
-    for piece in range(1, count + 1):
-        ys, xs = np.nonzero(labels == piece)
-        centred = np.column_stack([xs, ys]).astype(float)
-        centred -= centred.mean(axis=0)
-        length = np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][0]) + 1.0
-        radius = int(round(min(max(factor * len(xs) / length, min_px), max_px)))
-        x0, x1 = max(xs.min() - radius, 0), min(xs.max() + radius + 1, width)
-        y0, y1 = max(ys.min() - radius, 0), min(ys.max() + radius + 1, height)
-        own = (labels[y0:y1, x0:x1] == piece).astype(np.uint8)
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-        touched = np.unique(labels[y0:y1, x0:x1][cv2.dilate(own, kernel) > 0])
-        for other in touched[(touched > 0) & (touched != piece)]:
-            parent[root(int(other))] = root(piece)
+    for piece, near in reach.items():
+        for other in near:
+            if piece in reach[other]:
+                parent[root(other)] = root(piece)
     mapping = np.array([root(i) for i in range(count + 1)], np.int32)
     return mapping[labels]
 
@@ -138,9 +160,19 @@ def _edge_axis(contour: np.ndarray) -> np.ndarray | None:
     return np.array([np.cos(angle), np.sin(angle)])
 
 
+def _speck_ends(piece: int, pts: np.ndarray) -> list[_End]:
+    """The ends of a piece too small for its outline to give a direction: its pixels' extremes along their
+    principal axis (no direction for a single pixel)."""
+    if len(pts) < 2:
+        return [_End(piece, pts[0], np.zeros(2), False)] * 2
+    axis = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)[2][0]
+    t = (pts - pts.mean(axis=0)) @ axis
+    return [_End(piece, pts[t.argmin()], -axis, False), _End(piece, pts[t.argmax()], axis, False)]
+
+
 def _ends(labels: np.ndarray) -> list[_End]:
     """Both ends of every piece: the extremes of its outline along its edge axis (`_edge_axis`), each end's
-    direction that of the outline's quarter nearest it (a solid line may curve)."""
+    direction that of the outline's quarter nearest it (a solid line may curve); specks: `_speck_ends`."""
     ends: list[_End] = []
     for piece in np.unique(labels[labels > 0]):
         ys, xs = np.nonzero(labels == piece)
@@ -149,10 +181,11 @@ def _ends(labels: np.ndarray) -> list[_End]:
         contours, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         outline = max(contours, key=len).reshape(-1, 2).astype(float) + (x0, y0)
         axis = _edge_axis(outline)
-        if axis is None:
-            continue
-        t = (outline - outline.mean(axis=0)) @ axis
+        t = (outline - outline.mean(axis=0)) @ axis if axis is not None else np.zeros(1)
         span = float(t.max() - t.min())
+        if axis is None or span < 6.0:
+            ends.extend(_speck_ends(int(piece), np.column_stack([xs, ys]).astype(float)))
+            continue
         for sign in (-1.0, 1.0):
             outward = sign * t - float((sign * t).max())  # 0 at this end, negative inwards
             tip = outline[outward >= -max(1.0, 0.1 * span)].mean(axis=0)
@@ -160,40 +193,70 @@ def _ends(labels: np.ndarray) -> list[_End]:
             local = _edge_axis(outline[quarter]) if span > 60 else None
             direction = axis if local is None else local
             direction = direction if float(direction @ (sign * axis)) >= 0 else -direction
-            ends.append(_End(int(piece), tip, direction))
+            ends.append(_End(int(piece), tip, direction, True))
     return ends
 
 
-def _link_cost(a: _End, b: _End, max_gap: float, max_offset: float, cos_turn: float) -> float:
-    """How well end `b` continues end `a` (smaller is better); inf when it does not."""
+def _link_cost(
+    a: _End, b: _End, max_gap: float, max_offset: float, cos_turn: float, speck_gap: float
+) -> float:
+    """How well end `b` continues end `a` (smaller is better); inf when it does not. Offsets across the line
+    are measured from the ends whose direction is reliable; between two specks, from the gap itself."""
     gap = b.point - a.point
     distance = float(np.linalg.norm(gap))
     if a.piece == b.piece or distance > max_gap:
         return float("inf")
-    if float(-a.direction @ b.direction) < cos_turn:  # ends of one line point at each other
+    both = a.reliable and b.reliable
+    if not both:  # a speck: near, and closer to the line (far specks of neighbouring lines crowd together)
+        if distance > speck_gap:
+            return float("inf")
+        max_offset = max_offset * SPECK_OFFSET_SHARE
+    turn = float(-a.direction @ b.direction)  # ends of one line point at each other
+    if (both and turn < cos_turn) or (a.direction.any() and b.direction.any() and turn < _COS_LOOSE):
         return float("inf")
     allowed = max_offset + OFFSET_PER_GAP * distance
-    if distance > 1e-6:
-        if float(gap @ a.direction) < -allowed or float(-gap @ b.direction) < -allowed:
+    guides = [(e, s) for e, s in ((a, 1.0), (b, -1.0)) if e.reliable]
+    if not guides and distance > 1e-6:  # two specks: each one's axis must run along the gap
+        unit = gap / distance
+        if any(e.direction.any() and abs(float(unit @ e.direction)) < _COS_LOOSE for e in (a, b)):
+            return float("inf")
+        return 2.0 * distance
+    offsets = []
+    for end, sign in guides:
+        if float(sign * gap @ end.direction) < -allowed:
             return float("inf")  # the other piece lies behind this end, not ahead of it
-    off_a = abs(float(gap[0] * a.direction[1] - gap[1] * a.direction[0]))
-    off_b = abs(float(gap[0] * b.direction[1] - gap[1] * b.direction[0]))
-    if max(off_a, off_b) > allowed:
+        offsets.append(abs(float(gap[0] * end.direction[1] - gap[1] * end.direction[0])))
+    if max(offsets, default=0.0) > allowed:
         return float("inf")
-    return distance + 4.0 * (off_a + off_b)
+    return distance + 4.0 * sum(offsets) * (2 if len(offsets) == 1 else 1)
 
 
-def _chain(labels: np.ndarray, scale: float, width_px: int) -> np.ndarray:
+def _crosses_crosswalk(semantic: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the straight gap from `a` to `b` runs over crosswalk paint: lines end before a crossing and
+    those beyond it are other map elements."""
+    steps = max(2, int(np.ceil(np.linalg.norm(b - a))))
+    t = np.linspace(0.0, 1.0, steps)[:, None]
+    points = np.round(a + t * (b - a)).astype(int)
+    return bool((semantic[points[:, 1], points[:, 0]] == int(Semantic.CROSSWALK)).any())
+
+
+def _chain(labels: np.ndarray, semantic: np.ndarray, scale: float) -> np.ndarray:
     """Pieces joined into lines: each end links to its best continuing end when that one's best is it too."""
     count = int(labels.max())
     if count < 2:
         return labels
     ends = _ends(labels)
-    max_gap = MAX_GAP_SHARE * width_px
+    max_gap = MAX_GAP_SHARE * semantic.shape[1]
     cos_turn = float(np.cos(np.radians(MAX_TURN_DEG)))
     cost = np.array(
-        [[_link_cost(a, b, max_gap, MAX_OFFSET_PX * scale, cos_turn) for b in ends] for a in ends]
+        [
+            [_link_cost(a, b, max_gap, MAX_OFFSET_PX * scale, cos_turn, SPECK_GAP_PX * scale) for b in ends]
+            for a in ends
+        ]
     ).reshape(len(ends), len(ends))
+    for i, j in zip(*np.nonzero(np.isfinite(cost)), strict=True):
+        if i < j and _crosses_crosswalk(semantic, ends[i].point, ends[j].point):
+            cost[i, j] = cost[j, i] = np.inf
     best = np.where(np.isfinite(cost).any(axis=1), cost.argmin(axis=1), -1)
     parent = list(range(count + 1))
 
@@ -210,11 +273,12 @@ def _chain(labels: np.ndarray, scale: float, width_px: int) -> np.ndarray:
     return mapping[labels]
 
 
-def _write(out: np.ndarray, labels: np.ndarray, cls: int) -> None:
-    """Write one class's labels into `out` as `cls * 1000 + index`, indices 1.. by decreasing size (a class
-    holds at most 999 instances; the smallest beyond that are dropped)."""
+def _write(out: np.ndarray, labels: np.ndarray, cls: int, min_pixels: int) -> None:
+    """Write one class's labels of at least `min_pixels` into `out` as `cls * 1000 + index`, indices 1.. by
+    decreasing size (a class holds at most 999 instances; the smallest beyond that are dropped)."""
     ids, sizes = np.unique(labels[labels > 0], return_counts=True)
-    ranked = ids[np.argsort(-sizes, kind="stable")][: INSTANCE_ID_BASE - 1]
+    ranked = ids[np.argsort(-sizes, kind="stable")]
+    ranked = ranked[sizes[np.argsort(-sizes, kind="stable")] >= min_pixels][: INSTANCE_ID_BASE - 1]
     lookup = np.zeros(int(labels.max()) + 1, np.uint16)
     lookup[ranked] = cls * INSTANCE_ID_BASE + np.arange(1, len(ranked) + 1)
     values = lookup[labels]

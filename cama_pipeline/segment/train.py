@@ -11,6 +11,7 @@ generator's own variety. Loss: class-weighted cross-entropy (inverse square-root
 Dice term for thin classes; AdamW with a one-cycle schedule.
 """
 
+import json
 import logging
 import time
 from collections.abc import Sequence
@@ -24,7 +25,16 @@ import torch
 import torch.nn.functional as F
 
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.segment.checkpoint import SeenSiteError, SiteIdentity, save_checkpoint, site_identity
+from cama_pipeline.segment.checkpoint import (
+    Checkpoint,
+    CheckpointError,
+    SeenSiteError,
+    SiteIdentity,
+    ensure_unseen,
+    load_checkpoint,
+    save_checkpoint,
+    site_identity,
+)
 from cama_pipeline.segment.config import (
     MEASUREMENT_PRESET_SEED,
     MEASUREMENT_SEEDS,
@@ -165,9 +175,10 @@ def loss_fn(logits: torch.Tensor, target: torch.Tensor, weights: torch.Tensor) -
     return ce + 0.5 * dice.mean()
 
 
-def _batches(count: int, batch_size: int, rng: np.random.Generator) -> list[np.ndarray]:
-    order = rng.permutation(count)
-    return [order[i : i + batch_size] for i in range(0, count - batch_size + 1, batch_size)]
+def _batches(count: int, batch_size: int, rng: np.random.Generator, steps: int) -> list[np.ndarray]:
+    """`steps` batches of image indices, each image once per pass in a random order (passes repeat as needed)."""
+    order = np.concatenate([rng.permutation(count) for _ in range(-(-steps * batch_size // count))])
+    return [order[i * batch_size : (i + 1) * batch_size] for i in range(steps)]
 
 
 def fit(
@@ -176,7 +187,7 @@ def fit(
     """Train `net` in place; the mean loss of each epoch."""
     rng = np.random.default_rng(config.seed)
     weights = class_weights(data.masks, config.max_class_weight).to(device)
-    steps_per_epoch = max(1, len(data.images) // config.batch_size)
+    steps_per_epoch = max(1, (config.images_per_epoch or len(data.images)) // config.batch_size)
     optimiser = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.OneCycleLR(
         optimiser, max_lr=config.learning_rate, total_steps=config.epochs * steps_per_epoch, pct_start=0.15
@@ -188,7 +199,7 @@ def fit(
         bar = progress.add_task("steps", total=config.epochs * steps_per_epoch)
         for epoch in range(config.epochs):
             total = 0.0
-            batches = _batches(len(data.images), config.batch_size, rng)[:steps_per_epoch]
+            batches = _batches(len(data.images), config.batch_size, rng, steps_per_epoch)
             for batch in batches:
                 pairs = [augment(data.images[i], data.masks[i], config, rng) for i in batch]
                 x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2).to(device)
@@ -228,6 +239,41 @@ def cpu_seconds_per_image(
     return round(float(np.median(times)), 4)
 
 
+def _start(network: NetworkConfig | None, init: Path | None) -> tuple[SegmentationNet, Checkpoint | None]:
+    """A new network of `network`'s config, or the one of checkpoint `init` to go on training."""
+    if init is None:
+        return SegmentationNet(network or NetworkConfig()), None
+    parent = load_checkpoint(init)
+    if network is not None and network != parent.net.config:
+        raise CheckpointError(f"{init}: its network config {parent.net.config} is not the one asked for")
+    return parent.net, parent
+
+
+def _lineage(meta: dict[str, Any], parent: Checkpoint | None) -> dict[str, Any]:
+    """`meta` of a run that went on from `parent`: the sites, epochs and seconds of both, and the parent named."""
+    if parent is None:
+        return meta
+    seen = {json.dumps(s, sort_keys=True) for s in meta["training_sites"]}
+    earlier = [
+        s.to_json() for s in parent.training_sites if json.dumps(s.to_json(), sort_keys=True) not in seen
+    ]
+    return {
+        **meta,
+        "training_sites": earlier + meta["training_sites"],
+        "epochs_total": int(parent.meta.get("epochs_total", parent.meta.get("epochs", 0))) + meta["epochs"],
+        "seconds_total": round(
+            float(parent.meta.get("seconds_total", parent.meta.get("seconds", 0.0))) + meta["seconds"], 1
+        ),
+        "parent": {
+            "label": parent.label,
+            "path": str(parent.path),
+            "weights_sha256": parent.meta["weights_sha256"],
+            "train": parent.meta.get("train"),
+            "metrics": parent.meta.get("metrics"),
+        },
+    }
+
+
 def train(
     config: TrainConfig,
     sites: Sequence[Path],
@@ -235,11 +281,13 @@ def train(
     *,
     held_out: Sequence[Path] = (),
     network: NetworkConfig | None = None,
+    init: Path | None = None,
     device: torch.device | None = None,
     label: str | None = None,
     show_progress: bool = True,
 ) -> Path:
-    """Train on `sites` (checked by `check_training_sites`), score on `held_out`, save the checkpoint `out`."""
+    """Train on `sites` (checked by `check_training_sites`; with `init`, going on from that checkpoint, whose
+    sites then count as seen too), score on `held_out`, save the checkpoint `out`."""
     started = time.perf_counter()
     device = device or torch.device("cpu")
     torch.set_num_threads(config.threads)
@@ -247,7 +295,10 @@ def train(
     train_sites = find_sites(sites)
     held_sites = find_sites(held_out) if held_out else []
     identities = check_training_sites(train_sites, held_sites)
-    net = SegmentationNet(network or NetworkConfig())
+    net, parent = _start(network, init)
+    for site in held_sites:
+        if parent is not None:
+            ensure_unseen(parent, site)
     data = load_training_set(train_sites, net.config.input_width_px)
     logger.info("training on %d images of %d sites", len(data.images), len(train_sites))
     losses = fit(net.to(device), data, config, device, show_progress=show_progress)
@@ -265,4 +316,4 @@ def train(
         "held_out_sites": [site_identity(site).to_json() for site in held_sites],
         "metrics": metrics,
     }
-    return save_checkpoint(Path(out), net.cpu(), meta)
+    return save_checkpoint(Path(out), net.cpu(), _lineage(meta, parent))
