@@ -79,6 +79,12 @@ def train_segmenter_command(
     label: Annotated[
         str | None, typer.Option(help="Name recorded in the checkpoint (default: folder).")
     ] = None,
+    init: Annotated[
+        Path | None,
+        typer.Option(
+            help="Go on training this checkpoint (its training sites count as seen by the new one)."
+        ),
+    ] = None,
 ) -> None:
     """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
     checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
@@ -87,7 +93,13 @@ def train_segmenter_command(
             epochs=epochs, batch_size=batch_size, learning_rate=learning_rate, threads=threads, seed=seed
         )
         folder = train(
-            config, sites, out, held_out=held_out or [], device=resolve_device(device), label=label
+            config,
+            sites,
+            out,
+            held_out=held_out or [],
+            init=init,
+            device=resolve_device(device),
+            label=label,
         )
         meta = read_meta(folder)
     except INPUT_ERRORS as err:

@@ -1,0 +1,163 @@
+"""The segmentation network, its checkpoints and training: shapes, a round trip, refusals to train on a
+measurement site and to be scored on a site it saw."""
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from cama_pipeline.console import EXIT_BAD_INPUT
+from cama_pipeline.segment.checkpoint import (
+    META,
+    WEIGHTS,
+    CheckpointError,
+    SeenSiteError,
+    ensure_unseen,
+    load_checkpoint,
+    site_identity,
+)
+from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
+from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
+from cama_pipeline.segment.predict import score_site
+from cama_pipeline.segment.train import check_training_sites, train
+from cama_studio.cli import app
+from tests.conftest import GeneratedSite
+from tests.segment.segmenter_fixture import FEW_STEPS, SMALL_NETWORK, relabelled_copy, train_small
+
+
+@pytest.fixture(scope="module")
+def training_site(tiny_site: GeneratedSite, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return relabelled_copy(tiny_site.result.out_dir, tmp_path_factory.mktemp("train") / "site")
+
+
+@pytest.fixture(scope="module")
+def checkpoint(training_site: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return train_small(training_site, tmp_path_factory.mktemp("ckpt") / "segmenter")
+
+
+def test_network_gives_logits_at_the_input_size_and_masks_at_the_image_size() -> None:
+    net = SegmentationNet(NetworkConfig()).eval()
+    assert parameter_count(net) < 1_000_000  # under 2 MB in float16
+    with torch.no_grad():
+        assert net(torch.rand(2, 3, 64, 96)).shape == (2, NUM_CLASSES, 64, 96)
+    images = [
+        np.zeros((144, 256, 3), np.uint8),
+        np.zeros((90, 160, 3), np.uint8),
+        np.zeros((144, 256, 3), np.uint8),
+    ]
+    masks = net.predict(images)
+    assert [m.shape for m in masks] == [(144, 256), (90, 160), (144, 256)]
+    assert all(m.dtype == np.uint8 and m.max() < NUM_CLASSES for m in masks)
+    with pytest.raises(ValueError, match="uint8 RGB"):
+        net.predict([np.zeros((10, 10), np.uint8)])
+
+
+@pytest.mark.parametrize(
+    ("make", "field"),
+    [
+        (lambda: NetworkConfig(widths=(8, 8)), "widths"),
+        (lambda: NetworkConfig(input_width_px=500), "input_width_px"),
+        (lambda: TrainConfig(epochs=0), "epochs"),
+        (lambda: TrainConfig(crop_width_px=100), "crop_height_px and crop_width_px"),
+        (lambda: SegmentConfig(device="tpu"), "device"),  # type: ignore[arg-type]
+        (lambda: SegmentConfig(batch_size=0), "batch_size"),
+    ],
+)
+def test_configs_name_the_bad_field(make: object, field: str) -> None:
+    with pytest.raises(ValueError, match=field):
+        make()  # type: ignore[operator]
+
+
+def test_checkpoint_round_trip_records_what_it_saw(checkpoint: Path, training_site: Path) -> None:
+    loaded = load_checkpoint(checkpoint)
+    meta = json.loads((checkpoint / META).read_text(encoding="utf-8"))
+    assert meta["weights_sha256"] == hashlib.sha256((checkpoint / WEIGHTS).read_bytes()).hexdigest()
+    assert loaded.digest == meta["weights_sha256"][:16]
+    assert meta["network"] == SMALL_NETWORK.to_json() and meta["train"] == FEW_STEPS.to_json()
+    assert [s["seed"] for s in meta["training_sites"]] == [4242]
+    assert meta["training_sites"][0]["location"] == "test-copy-4242"
+    assert meta["metrics"]["cpu_seconds_per_512x288"] > 0 and len(meta["metrics"]["loss"]) == 1
+    image = np.random.default_rng(1).integers(0, 256, (144, 256, 3), dtype=np.uint8)
+    again = load_checkpoint(checkpoint)
+    assert np.array_equal(loaded.net.predict([image])[0], again.net.predict([image])[0])
+    state = torch.load(checkpoint / WEIGHTS, weights_only=True)
+    assert all(v.dtype == torch.float16 for v in state.values() if v.is_floating_point())
+
+
+def test_a_checkpoint_refuses_to_be_scored_on_a_site_it_saw(
+    checkpoint: Path, training_site: Path, tiny_site: GeneratedSite, tmp_path: Path
+) -> None:
+    loaded = load_checkpoint(checkpoint)
+    with pytest.raises(SeenSiteError, match=str(training_site)):
+        ensure_unseen(loaded, training_site)
+    with pytest.raises(SeenSiteError, match="seed 4242"):
+        score_site(loaded, training_site, "cpu")
+    same_place = relabelled_copy(tiny_site.result.out_dir, tmp_path / "other-seed", seed=77)
+    manifest = json.loads((same_place / "manifest.json").read_text(encoding="utf-8"))
+    manifest["config"]["location"] = "test-copy-4242"  # another seed and layout, but the same location
+    manifest["config"]["layout"]["lane_width_m"] += 0.5
+    (same_place / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    with pytest.raises(SeenSiteError, match="location"):
+        ensure_unseen(loaded, same_place)
+    assert ensure_unseen(loaded, tiny_site.result.out_dir).seed == tiny_site.config.seed
+
+
+def test_training_refuses_measurement_sites_and_held_out_places(
+    tiny_site: GeneratedSite, training_site: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(SeenSiteError, match="measurement site"):
+        check_training_sites([tiny_site.result.out_dir], [])  # the tiny preset at its default seed
+    with pytest.raises(SeenSiteError, match="measurement site"):
+        check_training_sites([relabelled_copy(tiny_site.result.out_dir, tmp_path / "m", seed=9000)], [])
+    with pytest.raises(SeenSiteError, match="held-out"):
+        check_training_sites([training_site], [training_site])
+    assert [i.seed for i in check_training_sites([training_site], [tiny_site.result.out_dir])] == [4242]
+    with pytest.raises(SeenSiteError):
+        train(FEW_STEPS, [tiny_site.result.out_dir], tmp_path / "never", network=SMALL_NETWORK)
+    assert not (tmp_path / "never").exists()
+
+
+def test_train_segmenter_command_names_the_measurement_site(tiny_site: GeneratedSite, tmp_path: Path) -> None:
+    site = tiny_site.result.out_dir
+    result = CliRunner().invoke(app, ["train-segmenter", "--sites", str(site), "--out", str(tmp_path / "c")])
+    assert result.exit_code == EXIT_BAD_INPUT, result.output
+    assert "measurement site" in result.output and str(site) in result.output
+
+
+def test_bad_checkpoints_name_their_file(checkpoint: Path, tmp_path: Path) -> None:
+    with pytest.raises(CheckpointError, match=str(tmp_path / "none" / META)):
+        load_checkpoint(tmp_path / "none")
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / META).write_text("{ not json", encoding="utf-8")
+    with pytest.raises(CheckpointError, match="not valid JSON"):
+        load_checkpoint(broken)
+    (broken / META).write_text((checkpoint / META).read_text(encoding="utf-8"), encoding="utf-8")
+    (broken / WEIGHTS).write_bytes(b"not weights")
+    with pytest.raises(CheckpointError, match=str(broken / WEIGHTS)):
+        load_checkpoint(broken)
+    with pytest.raises(FileNotFoundError, match="manifest.json"):
+        site_identity(tmp_path)
+    (tmp_path / "manifest.json").write_text('{"preset": "tiny"}', encoding="utf-8")
+    with pytest.raises(ValueError, match="not a generator manifest"):
+        site_identity(tmp_path)
+
+
+def test_going_on_from_a_checkpoint_keeps_what_it_saw(
+    checkpoint: Path, training_site: Path, tiny_site: GeneratedSite, tmp_path: Path
+) -> None:
+    second_site = relabelled_copy(tiny_site.result.out_dir, tmp_path / "second", seed=5151)
+    manifest = json.loads((second_site / "manifest.json").read_text(encoding="utf-8"))
+    manifest["config"]["layout"]["lane_width_m"] += 0.5  # a layout of its own
+    (second_site / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    folder = train(FEW_STEPS, [second_site], tmp_path / "next", init=checkpoint, show_progress=False)
+    meta = json.loads((folder / META).read_text(encoding="utf-8"))
+    assert [s["seed"] for s in meta["training_sites"]] == [4242, 5151]
+    parent = load_checkpoint(checkpoint)
+    assert meta["epochs_total"] == 2 and meta["parent"]["weights_sha256"] == parent.meta["weights_sha256"]
+    with pytest.raises(SeenSiteError, match="seed 4242"):  # the parent's site stays seen
+        ensure_unseen(load_checkpoint(folder), training_site)
