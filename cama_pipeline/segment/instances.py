@@ -98,10 +98,28 @@ def _components(mask: np.ndarray, min_pixels: int) -> np.ndarray:
     return relabel[labels]
 
 
-def _reach(labels: np.ndarray, piece: int, factor: float, min_px: float, max_px: float) -> set[int]:
-    """The other pieces within `factor` times this piece's thickness (area / length, clamped to [`min_px`,
-    `max_px`]) of it."""
-    ys, xs = np.nonzero(labels == piece)
+def _pixels(labels: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """(rows, columns) of each piece's pixels, found in one pass over the labels."""
+    ys, xs = np.nonzero(labels)
+    ids = labels[ys, xs]
+    order = np.argsort(ids, kind="stable")
+    ids, ys, xs = ids[order], ys[order], xs[order]
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    stops = np.r_[starts[1:], len(ids)]
+    return {int(ids[a]): (ys[a:b], xs[a:b]) for a, b in zip(starts, stops, strict=True)}
+
+
+def _reach(
+    labels: np.ndarray,
+    piece: int,
+    pixels: tuple[np.ndarray, np.ndarray],
+    factor: float,
+    limits: tuple[float, float],
+) -> set[int]:
+    """The other pieces within `factor` times this piece's thickness (area / length, clamped to `limits`) of
+    it (`pixels`: its rows and columns)."""
+    min_px, max_px = limits
+    ys, xs = pixels
     centred = np.column_stack([xs, ys]).astype(float)
     centred -= centred.mean(axis=0)
     length = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][0])) + 1.0
@@ -122,7 +140,10 @@ def _join_near(labels: np.ndarray, factor: float, min_px: float, max_px: float) 
     count = int(labels.max())
     if count < 2:
         return labels
-    reach = {piece: _reach(labels, piece, factor, min_px, max_px) for piece in range(1, count + 1)}
+    reach = {
+        piece: _reach(labels, piece, pixels, factor, (min_px, max_px))
+        for piece, pixels in _pixels(labels).items()
+    }
     parent = list(range(count + 1))
 
     def root(i: int) -> int:
@@ -174,8 +195,7 @@ def _ends(labels: np.ndarray) -> list[_End]:
     """Both ends of every piece: the extremes of its outline along its edge axis (`_edge_axis`), each end's
     direction that of the outline's quarter nearest it (a solid line may curve); specks: `_speck_ends`."""
     ends: list[_End] = []
-    for piece in np.unique(labels[labels > 0]):
-        ys, xs = np.nonzero(labels == piece)
+    for piece, (ys, xs) in _pixels(labels).items():
         x0, y0 = int(xs.min()), int(ys.min())
         crop = (labels[y0 : ys.max() + 1, x0 : xs.max() + 1] == piece).astype(np.uint8)
         contours, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
@@ -248,12 +268,15 @@ def _chain(labels: np.ndarray, semantic: np.ndarray, scale: float) -> np.ndarray
     ends = _ends(labels)
     max_gap = MAX_GAP_SHARE * semantic.shape[1]
     cos_turn = float(np.cos(np.radians(MAX_TURN_DEG)))
-    cost = np.array(
-        [
-            [_link_cost(a, b, max_gap, MAX_OFFSET_PX * scale, cos_turn, SPECK_GAP_PX * scale) for b in ends]
-            for a in ends
-        ]
-    ).reshape(len(ends), len(ends))
+    points = np.array([end.point for end in ends])
+    reliable = np.array([end.reliable for end in ends])
+    gaps = np.linalg.norm(points[:, None] - points[None], axis=2)
+    reach = np.where(reliable[:, None] & reliable[None], max_gap, SPECK_GAP_PX * scale)
+    cost = np.full((len(ends), len(ends)), np.inf)
+    for i, j in zip(*np.nonzero(gaps <= reach), strict=True):  # only pairs near enough to be linked
+        cost[i, j] = _link_cost(
+            ends[i], ends[j], max_gap, MAX_OFFSET_PX * scale, cos_turn, SPECK_GAP_PX * scale
+        )
     for i, j in zip(*np.nonzero(np.isfinite(cost)), strict=True):
         if i < j and _crosses_crosswalk(semantic, ends[i].point, ends[j].point):
             cost[i, j] = cost[j, i] = np.inf
