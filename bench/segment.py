@@ -136,7 +136,7 @@ def segmentation_figures(checkpoint: Checkpoint, site: Path, device: torch.devic
     report = iou_report(total, len(images))
     return {
         "site": identity.to_json(),
-        "checkpoint": str(checkpoint.folder),
+        "checkpoint": {"path": str(checkpoint.path), "label": checkpoint.label, "digest": checkpoint.digest},
         **report,
         "targets": {
             name: {"target": t, "met": (report["per_class_iou"].get(name) or 0.0) >= t}
