@@ -28,6 +28,7 @@ STAGE_PACKAGES = {
     "keyframes": "cama_pipeline.keyframes",
     "sites": "cama_pipeline.site",
     "pairs": "cama_pipeline.pairs",
+    "segment": "cama_pipeline.segment",
     "features": "cama_pipeline.features",
     "sfm": "cama_pipeline.sfm",
     "surface": "cama_pipeline.surface",
