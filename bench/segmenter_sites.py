@@ -1,0 +1,60 @@
+"""The sites the shipped segmenter was trained and held out on, so its training can be repeated from the repo.
+
+Randomised tiny sites (`cama_pipeline.synthetic.randomise`) rendered at 512x288 with key frames only (sweeps at the
+sample rate) and 2.5 s moving clips: many layouts and looks for little rendering time. The shipped checkpoint
+(`cama_pipeline/segment/shipped/checkpoint.json` lists every site it saw) trained on seeds 100-111 and held out
+seed 9001 (a measurement seed, which `cama train-segmenter` refuses to train on):
+
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 100-111
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/held-out --seeds 9001
+    .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/segmenter/held-out/r9001 \
+        --out data/segmenter/checkpoint --epochs 22
+
+Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
+"""
+
+import argparse
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from cama_pipeline.synthetic.config import SynthConfig
+from cama_pipeline.synthetic.generate import run
+from cama_pipeline.synthetic.randomise import randomised_config
+
+
+def training_site_config(seed: int) -> SynthConfig:
+    """Randomised tiny site `seed` at 512x288, key frames only, 2.5 s moving clips."""
+    cfg = randomised_config(seed, base="tiny")
+    return replace(
+        cfg,
+        camera=replace(cfg.camera, width_px=512, height_px=288),
+        clips=replace(cfg.clips, sweep_hz=cfg.clips.sample_hz, moving_duration_s=2.5),
+    )
+
+
+def parse_seeds(text: str) -> list[int]:
+    """`100-111` or `100,105,9001` (or both, comma separated) as a list of seeds."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        first, _, last = part.strip().partition("-")
+        seeds += list(range(int(first), int(last or first) + 1))
+    return seeds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True, help="folder for the sites (r<seed> each)")
+    parser.add_argument("--seeds", type=parse_seeds, required=True, help="e.g. 100-111 or 9001")
+    parser.add_argument("--workers", type=int, default=1)
+    args = parser.parse_args()
+    for seed in args.seeds:
+        started = time.perf_counter()
+        result = run(
+            training_site_config(seed), args.out / f"r{seed}", workers=args.workers, show_progress=False
+        )
+        print(f"seed {seed}: {result.images} images in {time.perf_counter() - started:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    main()
