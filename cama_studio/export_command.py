@@ -1,8 +1,8 @@
-"""`cama export` / `cama import`: annotation sets to and from the CAMA release layout and MapTR vectors JSON.
+"""`cama export` / `cama import`: the command line over `cama_pipeline.export` (CAMA's release layout, MapTR
+vectors, a nuScenes-CAMAv2 root, Lanelet2) and the importers of CAMA labels and MapTR vectors.
 
 Export writes refined ego poses by default (`cama_pipeline.refined_poses`: SfM poses, WIGO corrected between
-SfM keyframes), so it composes stage outputs and lives here, above the stages; the logged poses only with
-`--poses coarse`.
+SfM keyframes); the logged poses only with `--poses coarse`.
 
 The JSON Schema files in `annotations/schemas/` are generated from the file models: `python -m
 cama_studio.export_command` rewrites them (a test checks the committed files equal the generated ones).
@@ -10,7 +10,6 @@ cama_studio.export_command` rewrites them (a test checks the committed files equ
 
 import json
 import logging
-from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -19,16 +18,15 @@ import typer
 from pydantic import BaseModel
 
 from annotations import cama_format
-from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, export_cama, import_cama
-from annotations.maptr_format import MaptrFile, export_maptr, import_maptr
-from annotations.poses import PoseLookup, coarse_pose
+from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, import_cama
+from annotations.maptr_format import MaptrFile, import_maptr
 from annotations.schema import AnnotationSet, Georeference
+from cama_pipeline.cli_options import MasksOpt
 from cama_pipeline.console import bad_input
-from cama_pipeline.data import Dataset, DatasetError, load_dataset
+from cama_pipeline.data import DatasetError
+from cama_pipeline.data.masks import parse_mask_choice
+from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, PoseChoice, export
 from cama_pipeline.io import WorkspaceError, atomic_write_bytes
-from cama_pipeline.refined_poses import refined_pose_lookup, refined_poses
-from cama_pipeline.site.io import read_site_ids
-from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -37,57 +35,6 @@ SCHEMA_MODELS: dict[str, type[BaseModel]] = {
     "cama_map_labels.schema.json": CamaMapLabels,
     "maptr_vectors.schema.json": MaptrFile,
 }
-
-
-class ExportFormat(StrEnum):
-    """Which file format."""
-
-    cama = "cama"
-    maptr = "maptr"
-
-
-class PoseChoice(StrEnum):
-    """Which ego poses the export writes."""
-
-    refined = "refined"
-    coarse = "coarse"
-
-
-def export_site_id(workspace: Workspace, annotation_site_id: str, site_id: str | None) -> str:
-    """The site whose reconstruction gives the poses: `site_id`, else the annotation set's site when the
-    workspace has it, else the workspace's only site; ValueError / FileNotFoundError saying what to pass."""
-    if site_id is not None:
-        return site_id
-    index = workspace.sites_index()
-    if not index.is_file():
-        raise FileNotFoundError(f"{index}: missing; run `cama sites` .. `cama sfm`, or pass --poses coarse")
-    sites = read_site_ids(index)
-    if annotation_site_id in sites:
-        return annotation_site_id
-    if len(sites) == 1:
-        return sites[0]
-    raise ValueError(
-        f"{index}: sites {sites}; pass --site-id (the annotation set's is {annotation_site_id!r})"
-    )
-
-
-def pose_lookup(
-    choice: PoseChoice, data: Dataset, workspace: Workspace, annotation_site_id: str, site_id: str | None
-) -> tuple[PoseLookup, list[str] | None]:
-    """The export's pose lookup and, for refined poses, the site's scenes (the odometry's default scenes)."""
-    if choice is PoseChoice.coarse:
-        return coarse_pose, None
-    site = export_site_id(workspace, annotation_site_id, site_id)
-    try:
-        poses = refined_poses(data, workspace, site)
-    except FileNotFoundError as error:
-        raise FileNotFoundError(
-            f"refined poses need the SfM outputs: {error}; run `cama sfm` first, or pass --poses coarse"
-        ) from error
-    scenes = sorted(
-        {scene.name for scene in data.scenes if any(im.token in poses for im in scene.all_images())}
-    )
-    return refined_pose_lookup(poses), scenes
 
 
 def schema_text(model: type[BaseModel]) -> str:
@@ -114,20 +61,33 @@ def _load_elevation(path: Path | None) -> np.ndarray | None:
         raise ValueError(f"{path}: cannot read elevation raster: {error}") from error
 
 
+def _origin(text: str | None) -> tuple[float, float] | None:
+    """`LAT,LON` in degrees; ValueError naming the option when malformed."""
+    if text is None:
+        return None
+    try:
+        lat, lon = (float(part) for part in text.split(","))
+    except ValueError:
+        raise ValueError(f"--origin {text!r}: expected LAT,LON in degrees, e.g. 1.2990,103.7880") from None
+    return lat, lon
+
+
 def export_command(
     annotations_json: Annotated[Path, typer.Argument(help="Annotation set JSON (AnnotationSet).")],
-    out: Annotated[Path, typer.Argument(help="cama: output folder; maptr: output JSON file.")],
-    format: Annotated[ExportFormat, typer.Option("--format", help="cama or maptr.")] = ExportFormat.cama,
+    out: Annotated[
+        Path,
+        typer.Argument(help="cama, nuscenes-cama: output folder; maptr: JSON file; lanelet2: .osm file."),
+    ],
+    format: Annotated[ExportFormat, typer.Option("--format", help="The export format.")] = ExportFormat.cama,
     dataset: Annotated[
-        Path | None, typer.Option(help="Data set root (nuScenes layout): needed for maptr and cama odometry.")
+        Path | None,
+        typer.Option(help="Data set root (nuScenes layout): needed by cama, maptr and nuscenes-cama."),
     ] = None,
     elevation: Annotated[Path | None, typer.Option(help="Elevation raster .npy (H, W) for cama.")] = None,
-    name: Annotated[
-        str | None, typer.Option(help="cama: scene or site folder name (default: site id).")
-    ] = None,
+    name: Annotated[str | None, typer.Option(help="cama: the site's name (default: site id).")] = None,
     scene: Annotated[
         list[str] | None,
-        typer.Option(help="cama odometry: only this scene (repeatable; default: the site's, refined poses)."),
+        typer.Option(help="Only this scene (repeatable; default: the site's scenes)."),
     ] = None,
     poses: Annotated[
         PoseChoice,
@@ -142,29 +102,45 @@ def export_command(
         str | None,
         typer.Option(help="Site whose SfM gives the poses (default: the annotation set's, or the only one)."),
     ] = None,
+    mode: Annotated[
+        CamaMode,
+        typer.Option(help="cama: clip (a 300 m map per scene) or site (a 600 m site map, cut per scene)."),
+    ] = CamaMode.clip,
+    with_clip_data: Annotated[
+        bool, typer.Option(help="cama: also write images, lane masks (CAMA's ids) and attribute.json.")
+    ] = False,
+    masks: MasksOpt = "auto",
+    origin: Annotated[
+        str | None, typer.Option(help="lanelet2: geographic origin LAT,LON of the site's global frame.")
+    ] = None,
+    overwrite: Annotated[bool, typer.Option(help="Replace an existing export at OUT.")] = False,
 ) -> None:
-    """Export an annotation set to the CAMA release layout or to MapTR vectors JSON (refined poses by default)."""
+    """Export an annotation set (refined poses by default); the export appears at OUT only when complete."""
     try:
         annotation_set = AnnotationSet.read_json(annotations_json)
-        data = load_dataset(dataset) if dataset is not None else None
-        lookup: PoseLookup | None = None
-        if data is not None and dataset is not None:
-            space = Workspace.resolve(workspace, dataset)
-            lookup, site_scenes = pose_lookup(poses, data, space, annotation_set.site_id, site_id)
-            scene = scene or site_scenes
-        if format is ExportFormat.maptr:
-            if data is None or lookup is None:
-                raise ValueError("--format maptr needs --dataset ROOT (sample tokens and ego poses)")
-            written = export_maptr(annotation_set, data, out, poses=lookup)
-        else:
-            raster = _load_elevation(elevation)
-            written = export_cama(
-                annotation_set, out, name=name, elevation=raster, dataset=data, poses=lookup, scenes=scene
-            )
-    except (ValueError, FileNotFoundError, DatasetError, WorkspaceError) as error:
+        request = ExportRequest(
+            annotations=annotation_set,
+            site_name=name,
+            out=out,
+            format=format,
+            dataset_root=dataset,
+            workspace=workspace,
+            site_id=site_id,
+            poses=poses,
+            elevation=_load_elevation(elevation),
+            scenes=tuple(scene) if scene else None,
+            cama_mode=mode,
+            with_clip_data=with_clip_data,
+            masks=parse_mask_choice(masks),
+            origin_lat_lon=_origin(origin),
+            overwrite=overwrite,
+        )
+        result = export(request)
+    except (ValueError, FileNotFoundError, FileExistsError, DatasetError, WorkspaceError) as error:
         raise bad_input(error) from error
     typer.echo(
-        f"exported {len(annotation_set.elements)} elements ({format.value}, {poses.value} poses) to {written}"
+        f"exported {result.elements} elements ({format.value}, {poses.value} poses, {result.files} files) "
+        f"to {result.path}"
     )
 
 

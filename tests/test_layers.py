@@ -49,6 +49,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("stage refined poses", ("cama_pipeline.refined_poses",)),
     ("stage surface", ("cama_pipeline.surface",)),
     ("stage evaluate", ("cama_pipeline.evaluate",)),
+    # exports: an annotation set with the reconstruction's poses and data, in every format that leaves the system
+    ("stage export", ("cama_pipeline.export",)),
     ("models", ("models",)),
     # the backend: foundations (config, db models, schemas, clock, tiles, quality) < the job runner < crud <
     # job kinds and auth < API routes < the app and its server

@@ -1,0 +1,108 @@
+"""What an export is asked to write (`ExportRequest`) and what it wrote (`ExportResult`)."""
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+
+import numpy as np
+
+from annotations.schema import AnnotationSet
+from cama_pipeline.data.masks import MaskChoice
+
+
+class ExportFormat(StrEnum):
+    """The formats that leave the system."""
+
+    cama = "cama"
+    """CAMA's public release layout (`all_clips/<scene>/maps`, `odometry`, optional clip data)."""
+    maptr = "maptr"
+    """One JSON file of per-sample vectors in each sample's ego frame (MapTR's training targets)."""
+    nuscenes_cama = "nuscenes-cama"
+    """A nuScenes root whose version folder holds the refined ego poses and the per-sample map vectors."""
+    lanelet2 = "lanelet2"
+    """An OSM file with Lanelet2's tagging (boundaries and crosswalks; no lanelets)."""
+
+
+FORMATS_NEEDING_DATASET: frozenset[ExportFormat] = frozenset(
+    {ExportFormat.cama, ExportFormat.maptr, ExportFormat.nuscenes_cama}
+)
+"""Formats that carry poses or per-sample data, so they need the data set (and, for refined poses, the
+workspace's SfM outputs)."""
+
+
+class PoseChoice(StrEnum):
+    """Which ego poses an export writes."""
+
+    refined = "refined"
+    """SfM poses, and WIGO corrected by the SfM keyframes between them (`cama_pipeline.refined_poses`)."""
+    coarse = "coarse"
+    """The data set's logged ego poses: only when asked for."""
+
+
+class CamaMode(StrEnum):
+    """CAMA's two map modes."""
+
+    clip = "clip"
+    """One 300 m map per scene (`scmv` odometry)."""
+    site = "site"
+    """One 600 m map per site, cut per scene (`mcmv` odometry, `site2clip/`)."""
+
+
+@dataclass(frozen=True)
+class ExportRequest:
+    """One export: the annotation set, where to write it, in which format, and what it takes from the
+    reconstruction. Validated on construction (ValueError naming the field)."""
+
+    annotations: AnnotationSet
+    """The elements to export (site coordinates, with the site's georeference)."""
+    out: Path
+    """cama, nuscenes-cama: the output folder; maptr: the JSON file; lanelet2: the .osm file."""
+    format: ExportFormat = ExportFormat.cama
+    dataset_root: Path | None = None
+    """The data set (nuScenes layout) the site was reconstructed from; cama, maptr and nuscenes-cama need it."""
+    workspace: Path | None = None
+    """The workspace with the SfM outputs (default: the data set's, beside it)."""
+    site_id: str | None = None
+    """The site whose reconstruction gives the poses (default: the annotation set's, or the workspace's only one)."""
+    poses: PoseChoice = PoseChoice.refined
+    elevation: np.ndarray | None = field(default=None, compare=False, repr=False)
+    """The site's (H, W) elevation raster in the annotation set's georeference (cama's map height)."""
+    scenes: tuple[str, ...] | None = None
+    """Only these scenes (default: the site's scenes with refined poses; every scene with coarse poses)."""
+    cama_mode: CamaMode = CamaMode.clip
+    site_name: str | None = None
+    """cama: the site's name in `site2clip/` (default: the reconstruction's site id, else the annotation set's)."""
+    with_clip_data: bool = False
+    """cama: also write each scene's images, lane masks (CAMA's ids) and attribute.json."""
+    masks: MaskChoice = "auto"
+    """Where clip data's lane instance masks come from (`cama_pipeline.data.masks`)."""
+    origin_lat_lon: tuple[float, float] | None = None
+    """lanelet2: the geographic origin that the site's global frame is projected from."""
+    overwrite: bool = False
+    """Replace an existing export at `out` (else it is an error)."""
+
+    def __post_init__(self) -> None:
+        if self.format in FORMATS_NEEDING_DATASET and self.dataset_root is None:
+            raise ValueError(f"--format {self.format.value} needs --dataset ROOT (its poses and samples)")
+        if self.with_clip_data and self.format is not ExportFormat.cama:
+            raise ValueError("--with-clip-data: only for --format cama")
+        if self.format is ExportFormat.lanelet2 and self.origin_lat_lon is None:
+            raise ValueError("--format lanelet2 needs --origin LAT,LON (the geographic origin of the map)")
+        if self.scenes is not None and not self.scenes:
+            raise ValueError("scenes: an empty list; leave it out for the site's scenes")
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What an export wrote."""
+
+    path: Path
+    """The export's final path (folder or file)."""
+    format: ExportFormat
+    poses: PoseChoice
+    elements: int
+    """Elements of the annotation set exported."""
+    files: int
+    """Files written under `path` (1 for a single-file format)."""
+    summary: dict[str, object] = field(default_factory=dict)
+    """The format writer's own counts (scenes, pose sources, tags), for the command's line and the job."""

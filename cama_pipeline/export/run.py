@@ -1,0 +1,95 @@
+"""`export`: resolve what the request's format needs, write it staged, rename it into place."""
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from annotations.cama_format import export_cama
+from annotations.maptr_format import export_maptr
+from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.export.poses import ExportPoses, export_poses
+from cama_pipeline.export.request import ExportFormat, ExportRequest, ExportResult
+from cama_pipeline.export.staging import staged_output
+from cama_pipeline.workspace import Workspace
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ExportInputs:
+    """What a format writer gets: the request and, for formats that need them, the data set and the poses."""
+
+    request: ExportRequest
+    dataset: Dataset | None
+    poses: ExportPoses | None
+    workspace: Workspace | None
+
+    def need_dataset(self) -> tuple[Dataset, ExportPoses]:
+        """The data set and poses (the request's validation guarantees them for the formats that call this)."""
+        if self.dataset is None or self.poses is None:
+            raise ValueError(f"--format {self.request.format.value} needs --dataset ROOT")
+        return self.dataset, self.poses
+
+
+Writer = Callable[[ExportInputs, Path], dict[str, object]]
+"""A format writer: fills the staging path (a folder or a file) and returns its counts for the summary."""
+
+
+def _write_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
+    data, poses = inputs.need_dataset()
+    request = inputs.request
+    scenes = list(request.scenes or poses.scenes)
+    export_cama(
+        request.annotations,
+        staging,
+        name=request.site_name or poses.site_id or request.annotations.site_id,
+        elevation=request.elevation,
+        dataset=data,
+        poses=poses.lookup,
+        scenes=scenes,
+    )
+    return {"scenes": scenes}
+
+
+def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:
+    data, poses = inputs.need_dataset()
+    export_maptr(inputs.request.annotations, data, staging, poses=poses.lookup)
+    return {}
+
+
+WRITERS: dict[ExportFormat, Writer] = {
+    ExportFormat.cama: _write_cama,
+    ExportFormat.maptr: _write_maptr,
+}
+"""One writer per format."""
+
+
+def export_inputs(request: ExportRequest) -> ExportInputs:
+    """Load the data set and the poses the request's format needs (errors name the missing input)."""
+    if request.dataset_root is None:
+        return ExportInputs(request, None, None, None)
+    dataset_root = Path(request.dataset_root)
+    workspace = Workspace.resolve(request.workspace, dataset_root)
+    data = load_dataset(dataset_root)
+    poses = export_poses(request.poses, data, workspace, request.annotations.site_id, request.site_id)
+    if request.scenes is not None:
+        unknown = sorted(set(request.scenes) - set(poses.scenes))
+        if unknown:
+            raise ValueError(f"--scene {unknown}: not among the exported scenes {list(poses.scenes)}")
+    return ExportInputs(request, data, poses, workspace)
+
+
+def export(request: ExportRequest) -> ExportResult:
+    """Write the export of `request` at `request.out` atomically; ValueError / FileNotFoundError /
+    FileExistsError naming what is wrong, with nothing left behind."""
+    writer = WRITERS.get(request.format)
+    if writer is None:
+        raise ValueError(f"--format {request.format.value}: not available in this build")
+    inputs = export_inputs(request)
+    with staged_output(request.out, overwrite=request.overwrite) as staging:
+        summary = writer(inputs, staging)
+    out = Path(request.out).absolute()
+    files = sum(1 for path in out.rglob("*") if path.is_file()) if out.is_dir() else 1
+    logger.info("exported %d elements (%s) to %s", len(request.annotations.elements), request.format, out)
+    return ExportResult(out, request.format, request.poses, len(request.annotations.elements), files, summary)
