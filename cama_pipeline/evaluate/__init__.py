@@ -22,10 +22,13 @@ from cama_pipeline.evaluate.projection import (
     project_polyline,
 )
 from cama_pipeline.evaluate.sre import SreConfig, extract_instances, match_image
-from cama_pipeline.evaluate.sre_dataset import evaluate_sre
+from cama_pipeline.evaluate.sre_cama_config import SRE_PROTOCOLS, CamaProtocolConfig, SreProtocol
+from cama_pipeline.evaluate.sre_dataset import evaluate_sre, sre_for_dataset
 from cama_pipeline.evaluate.sre_report import ImageSre, SreReport, SreSummary
 
 __all__ = [
+    "SRE_PROTOCOLS",
+    "CamaProtocolConfig",
     "ChamferApConfig",
     "ChamferApResult",
     "ElevationErrors",
@@ -37,6 +40,7 @@ __all__ = [
     "ProjectedPiece",
     "ProjectionConfig",
     "SreConfig",
+    "SreProtocol",
     "SreReport",
     "SreSummary",
     "VectorElement",
@@ -50,4 +54,5 @@ __all__ = [
     "match_image",
     "pose_errors",
     "project_polyline",
+    "sre_for_dataset",
 ]

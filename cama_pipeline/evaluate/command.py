@@ -14,12 +14,28 @@ from cama_pipeline.data import DatasetError, load_dataset, mask_roots
 from cama_pipeline.evaluate.inputs import EvaluationInputError, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.projection import ProjectionConfig
 from cama_pipeline.evaluate.sre import SreConfig
+from cama_pipeline.evaluate.sre_cama_config import SreProtocol
 from cama_pipeline.evaluate.sre_dataset import evaluate_sre
 from cama_pipeline.evaluate.sre_report import SreReport, SreSummary
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import Semantic
 
 logger = logging.getLogger(__name__)
+
+
+class ProtocolChoice(StrEnum):
+    """Which metric rules score the map."""
+
+    strict = "strict"
+    cama = "cama"
+
+
+PROTOCOL_LINES: dict[SreProtocol, str] = {
+    "strict": "protocol: strict (the project's own: every camera with lanes counts, every skeleton pixel measured)",
+    "cama": "protocol: cama (CAMA's published metric code: cameras without a match left out, spline normals,"
+    " frame 0 skipped, 960x540)",
+}
+"""The printed line naming the protocol of a report."""
 
 
 class PoseSource(StrEnum):
@@ -41,10 +57,22 @@ def eval_command(
     true_poses: Annotated[
         Path | None, typer.Option(help="Ground-truth poses.json (for --poses true).")
     ] = None,
-    boundaries: Annotated[bool, typer.Option(help="Also match boundaries against curb instances.")] = False,
+    protocol: Annotated[
+        ProtocolChoice,
+        typer.Option(
+            help="strict (the project's own rules) or cama (the rules of CAMA's published metric code)."
+        ),
+    ] = ProtocolChoice.strict,
+    boundaries: Annotated[
+        bool, typer.Option(help="Also match boundaries against curb instances (strict protocol only).")
+    ] = False,
     scene: Annotated[list[str] | None, typer.Option(help="Evaluate only this scene (repeatable).")] = None,
-    gate_px: Annotated[float, typer.Option(help="Matching gate in pixels at 960 px width.")] = 30.0,
-    range_m: Annotated[float, typer.Option(help="Crop the map to this distance from each camera.")] = 50.0,
+    gate_px: Annotated[
+        float, typer.Option(help="Matching gate in pixels at 960 px width (strict protocol).")
+    ] = 30.0,
+    range_m: Annotated[
+        float, typer.Option(help="Crop the map to this distance from each camera (strict protocol).")
+    ] = 50.0,
     masks: MasksOpt = "auto",
     workspace: WorkspaceOpt = None,
 ) -> None:
@@ -54,8 +82,13 @@ def eval_command(
         pairs = [("divider", int(Semantic.LANE_MARKING))] + (
             [("boundary", int(Semantic.CURB))] if boundaries else []
         )
+        if protocol is ProtocolChoice.cama and boundaries:
+            raise EvaluationInputError("--boundaries: the cama protocol scores lane markings only")
         config = SreConfig(
-            class_pairs=tuple(pairs), gate_px=gate_px, projection=ProjectionConfig(range_m=range_m)
+            protocol=protocol.value,
+            class_pairs=tuple(pairs),
+            gate_px=gate_px,
+            projection=ProjectionConfig(range_m=range_m),
         )
         if poses is PoseSource.true and true_poses is None:
             raise EvaluationInputError("--poses true needs --true-poses PATH (the ground-truth poses.json)")
@@ -66,7 +99,9 @@ def eval_command(
     except (EvaluationInputError, DatasetError, FileNotFoundError, ValueError) as err:
         raise bad_input(err) from err
     atomic_write_json(out, report.to_json(), indent=1)
-    console.print(report_table(report, f"SRE of {vector_map.name} ({poses.value} poses)"))
+    title = f"SRE of {vector_map.name} ({poses.value} poses, {protocol.value} protocol)"
+    console.print(report_table(report, title))
+    console.print(PROTOCOL_LINES[report.config.protocol])
     console.print(f"report written to {out}")
 
 

@@ -15,6 +15,7 @@ from scipy.optimize import linear_sum_assignment
 from annotations.schema import ELEMENT_CLASSES
 from cama_pipeline.evaluate.projection import ProjectedPiece, ProjectionConfig
 from cama_pipeline.evaluate.skeleton import skeletonize
+from cama_pipeline.evaluate.sre_cama_config import SRE_PROTOCOLS, CamaProtocolConfig, SreProtocol
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
 
 logger = logging.getLogger(__name__)
@@ -27,6 +28,9 @@ _CHUNK = 2_000_000
 class SreConfig:
     """Settings of the SRE / precision / recall evaluation."""
 
+    protocol: SreProtocol = "strict"
+    """`strict` (the project's own rules, the fields below) or `cama` (CAMA's published metric code, the rules
+    and constants in `cama`; only lane markings, so `class_pairs` must be the default)."""
     class_pairs: tuple[tuple[str, int], ...] = (("divider", int(Semantic.LANE_MARKING)),)
     """(map class, instance-mask semantic id) pairs matched against each other; add
     ("boundary", Semantic.CURB) to evaluate road boundaries against curb instances."""
@@ -42,9 +46,20 @@ class SreConfig:
     """Leave out skeleton pixels whose nearest projected point is an end cut by the range crop: markings
     farther than the crop range are not map error."""
     projection: ProjectionConfig = field(default_factory=ProjectionConfig)
-    """How map polylines are cropped and projected."""
+    """How map polylines are cropped and projected (strict protocol)."""
+    cama: CamaProtocolConfig = field(default_factory=CamaProtocolConfig)
+    """Constants of the `cama` protocol."""
 
     def __post_init__(self) -> None:
+        if self.protocol not in SRE_PROTOCOLS:
+            raise ValueError(
+                f"SreConfig.protocol: unknown {self.protocol!r}, expected one of {SRE_PROTOCOLS}"
+            )
+        lane_markings = (("divider", int(Semantic.LANE_MARKING)),)
+        if self.protocol == "cama" and tuple((m, int(c)) for m, c in self.class_pairs) != lane_markings:
+            raise ValueError(
+                "SreConfig: the cama protocol scores lane markings only (class_pairs = dividers)"
+            )
         if not self.class_pairs:
             raise ValueError("SreConfig.class_pairs must name at least one (map class, mask class) pair")
         for map_class, mask_class in self.class_pairs:

@@ -2,7 +2,8 @@
 
 An image's SRE is the mean error of its matched pairs, its precision matched / projected, its recall
 matched / image instances; each is left out of the means where undefined (no match, nothing projected, no
-instance). F1 is computed from the mean precision and recall, as the CAMA code does.
+instance). Under the `cama` protocol an image without a matched pair is left out of all three, as CAMA's code
+leaves out such a camera. F1 is computed from the mean precision and recall, as the CAMA code does.
 """
 
 import math
@@ -27,6 +28,14 @@ class ImageSre:
     width_px: int
     match: ImageMatch
     reference_width_px: int = 960
+    require_match: bool = False
+    """True: without a matched pair the image does not count at all (precision and recall undefined too), the
+    `cama` protocol's rule; False: precision and recall count whenever something was projected / seen."""
+
+    @property
+    def counted(self) -> bool:
+        """Whether precision and recall may count: always, or only with a match when `require_match`."""
+        return bool(self.match.pairs) or not self.require_match
 
     @property
     def sre_px(self) -> float | None:
@@ -43,13 +52,15 @@ class ImageSre:
     @property
     def precision(self) -> float | None:
         """Matched / projected instances."""
-        return len(self.match.pairs) / self.match.projected if self.match.projected else None
+        if not self.counted or not self.match.projected:
+            return None
+        return len(self.match.pairs) / self.match.projected
 
     @property
     def recall(self) -> float | None:
         """Matched / image instances."""
         n = self.match.image_instances
-        return len(self.match.pairs) / n if n else None
+        return len(self.match.pairs) / n if n and self.counted else None
 
 
 @dataclass(frozen=True)
@@ -64,6 +75,8 @@ class SreSummary:
     recall: float | None
     f1: float | None
     images: int
+    scored_images: int
+    """Images with at least one matched pair (the only ones the `cama` protocol counts)."""
     projected: int
     image_instances: int
     matched: int
@@ -94,6 +107,7 @@ def summarise(images: Sequence[ImageSre]) -> SreSummary:
         recall=recall,
         f1=f1,
         images=len(images),
+        scored_images=sum(bool(im.match.pairs) for im in images),
         projected=sum(im.match.projected for im in images),
         image_instances=sum(im.match.image_instances for im in images),
         matched=sum(len(im.match.pairs) for im in images),
@@ -126,14 +140,24 @@ class SreReport:
     def to_json(self, *, with_images: bool = True) -> dict[str, Any]:
         """A JSON-ready dict (NaN-free: undefined figures are null)."""
         out: dict[str, Any] = {
+            "protocol": self.config.protocol,
             "overall": asdict(self.overall),
             "per_scene": {k: asdict(v) for k, v in self.per_scene.items()},
             "per_camera": {k: asdict(v) for k, v in self.per_camera.items()},
-            "config": asdict(self.config),
+            "config": config_json(self.config),
         }
         if with_images:
             out["images"] = [_image_json(im) for im in self.images]
         return out
+
+
+def config_json(config: SreConfig) -> dict[str, Any]:
+    """The settings that applied: the strict fields, or the protocol constants of `cama`."""
+    out = asdict(config)
+    if config.protocol == "cama":
+        return {k: out[k] for k in ("protocol", "class_pairs", "reference_width_px", "cama")}
+    del out["cama"]
+    return out
 
 
 def _image_json(image: ImageSre) -> dict[str, Any]:
