@@ -17,7 +17,6 @@ from annotations.cama_format import (
     import_cama,
 )
 from annotations.poses import coarse_pose
-from annotations.transforms import pixel_from_site_points
 from cama_pipeline.data import load_dataset
 from cama_studio.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
 from tests.annotations.annotation_helpers import SQUARE, element_kwargs, plane_z
@@ -197,8 +196,16 @@ RELEASE_LABELS = [
 
 
 def _release_plane(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """The known plane at release pixels, in our axes: x = u * 0.1 - W/2, y = H/2 - v * 0.1."""
-    return plane_z(cols * 0.1 - RELEASE_COLS * 0.1 / 2, RELEASE_ROWS * 0.1 / 2 - rows * 0.1)
+    """The known plane at release pixels [v = row, u = col], in the release's world frame: x = v * 0.1 - H/2,
+    y = u * 0.1 - W/2."""
+    return plane_z(rows * 0.1 - RELEASE_ROWS * 0.1 / 2, cols * 0.1 - RELEASE_COLS * 0.1 / 2)
+
+
+def _release_xy(uv: object, resolution_m: float = 0.1) -> np.ndarray:
+    """Release pixels [u, v] in the release's world frame (metres)."""
+    pixels = np.asarray(uv, dtype=float)
+    half_h, half_w = RELEASE_ROWS * resolution_m / 2, RELEASE_COLS * resolution_m / 2
+    return np.column_stack([pixels[:, 1] * resolution_m - half_h, pixels[:, 0] * resolution_m - half_w])
 
 
 def _write_release(folder: Path, *, npy_name: str | None = "scene_height.npy") -> Path:
@@ -214,11 +221,12 @@ def _write_release(folder: Path, *, npy_name: str | None = "scene_height.npy") -
 
 
 def test_import_plain_release(tmp_path: Path) -> None:
-    """Pixel [u=50, v=40]: x_cama = 40*0.1 - 10 = -6, y_cama = 50*0.1 - 15 = -10 -> ours (x, y) = (-10, 6)."""
+    """The labels land in the release's world frame (its odometry's): pixel [u=50, v=40] is x = 40*0.1 - 10 = -6,
+    y = 50*0.1 - 15 = -10; the georeference is that of the raster seen in our axes (transposed, rows flipped)."""
     back = import_cama(_write_release(tmp_path / "scene-0001"))
     assert back.site_id == "scene-0001"
     assert back.georeference == Georeference(
-        site_origin_xy=(0.0, 0.0), origin_xy=(-15.0, 10.0), resolution=0.1, width=300, height=200
+        site_origin_xy=(0.0, 0.0), origin_xy=(-10.0, 14.9), resolution=0.1, width=200, height=300
     )
     assert [(e.id, e.cls) for e in back.elements] == [
         ("1", "divider"),
@@ -226,31 +234,31 @@ def test_import_plain_release(tmp_path: Path) -> None:
         ("3", "ped_crossing"),
     ]
     divider = back.by_id("1")
-    np.testing.assert_allclose(divider.points_2d[0], (-10.0, 6.0), atol=1e-9)
-    np.testing.assert_allclose(divider.points_2d[2], (200 * 0.1 - 15, 10 - 60 * 0.1), atol=1e-9)
+    np.testing.assert_allclose(divider.points_2d[0], (-6.0, -10.0), atol=1e-9)
+    np.testing.assert_allclose(divider.points_2d[2], (60 * 0.1 - 10, 200 * 0.1 - 15), atol=1e-9)
     for element, instance in zip(back.elements, RELEASE_LABELS, strict=False):
         data = np.asarray(instance["data"], dtype=float)
-        np.testing.assert_allclose(pixel_from_site_points(element.xy(), back.georeference)[: len(data)], data)
+        np.testing.assert_allclose(element.xy()[: len(data)], _release_xy(data), atol=1e-9)
         xyz = element.xyz()
         assert xyz is not None
         np.testing.assert_allclose(xyz[:, 2], plane_z(xyz[:, 0], xyz[:, 1]), atol=1e-5)
     assert divider.points_3d is not None
-    assert divider.points_3d[0][2] == pytest.approx(float(plane_z(-10.0, 6.0)), abs=1e-5)
+    assert divider.points_3d[0][2] == pytest.approx(float(plane_z(-6.0, -10.0)), abs=1e-5)
 
 
 def test_release_crosswalk_is_closed(tmp_path: Path) -> None:
     """An open Crosswalk_Line (first != last) is closed by appending its first point."""
     crossing = import_cama(_write_release(tmp_path / "s")).by_id("3")
     assert len(crossing.points_2d) == 5 and crossing.points_2d[0] == crossing.points_2d[-1]
-    np.testing.assert_allclose(crossing.points_2d[0], (100 * 0.1 - 15, 10 - 100 * 0.1), atol=1e-9)
+    np.testing.assert_allclose(crossing.points_2d[0], (100 * 0.1 - 10, 100 * 0.1 - 15), atol=1e-9)
 
 
 def test_release_stop_line_and_resolution(tmp_path: Path) -> None:
-    """Stop_Line only on request; the resolution scales the frame (0.2 m: pixel [50, 40] -> (-20, 12))."""
+    """Stop_Line only on request; the resolution scales the frame (0.2 m: pixel [50, 40] -> (-12, -20))."""
     folder = _write_release(tmp_path / "s")
     back = import_cama(folder, stop_line_as_divider=True, resolution_m=0.2, site_id="site-x")
     assert back.site_id == "site-x" and back.by_id("4").cls == "divider"
-    np.testing.assert_allclose(back.by_id("1").points_2d[0], (50 * 0.2 - 30.0, 20.0 - 40 * 0.2), atol=1e-9)
+    np.testing.assert_allclose(back.by_id("1").points_2d[0], _release_xy([[50, 40]], 0.2)[0], atol=1e-9)
     with pytest.raises(ValueError, match="resolution_m"):
         import_cama(folder, resolution_m=0.0)
 
@@ -262,7 +270,7 @@ def test_release_prefers_elevation_npy(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"several \.npy files \['other.npy', 'scene_height.npy'\]"):
         import_cama(folder)
     (folder / "maps/scene_height.npy").rename(folder / "maps/elevation.npy")
-    assert import_cama(folder).georeference.shape == (RELEASE_ROWS, RELEASE_COLS)
+    assert import_cama(folder).georeference.shape == (RELEASE_COLS, RELEASE_ROWS)  # seen in our axes
 
 
 def test_release_without_raster_is_a_clear_error(tmp_path: Path) -> None:
@@ -283,5 +291,5 @@ def test_release_import_command(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     np.testing.assert_allclose(
-        AnnotationSet.read_json(tmp_path / "a.json").by_id("1").points_2d[0], (-20.0, 12.0)
+        AnnotationSet.read_json(tmp_path / "a.json").by_id("1").points_2d[0], (-12.0, -20.0)
     )
