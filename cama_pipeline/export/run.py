@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from annotations.cama_format import export_cama
+from annotations.lanelet2_format import export_lanelet2
 from annotations.maptr_format import export_maptr
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.export.poses import ExportPoses, export_poses
@@ -58,9 +59,18 @@ def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     return {}
 
 
+def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:
+    origin = inputs.request.origin_lat_lon
+    if origin is None:  # the request refuses lanelet2 without an origin; this keeps the type checker honest
+        raise ValueError("--format lanelet2 needs --origin LAT,LON")
+    result = export_lanelet2(inputs.request.annotations, staging, origin_lat_lon=origin)
+    return {"tags": result.counts, "nodes": result.nodes, "unlifted": len(result.unlifted)}
+
+
 WRITERS: dict[ExportFormat, Writer] = {
     ExportFormat.cama: _write_cama,
     ExportFormat.maptr: _write_maptr,
+    ExportFormat.lanelet2: _write_lanelet2,
 }
 """One writer per format."""
 
