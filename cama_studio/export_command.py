@@ -134,6 +134,7 @@ def export_command(
             masks=parse_mask_choice(masks),
             origin_lat_lon=_origin(origin),
             overwrite=overwrite,
+            show_progress=True,
         )
         result = export(request)
     except (ValueError, FileNotFoundError, FileExistsError, DatasetError, WorkspaceError) as error:

@@ -80,6 +80,8 @@ class ExportRequest:
     """lanelet2: the geographic origin that the site's global frame is projected from."""
     overwrite: bool = False
     """Replace an existing export at `out` (else it is an error)."""
+    show_progress: bool = False
+    """A progress bar (progress lines when output is not a terminal) for the writers that take long."""
 
     def __post_init__(self) -> None:
         if self.format in FORMATS_NEEDING_DATASET and self.dataset_root is None:

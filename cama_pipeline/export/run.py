@@ -5,7 +5,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from annotations.cama_format import export_cama
+from annotations.cama_release import export_cama_release
 from annotations.lanelet2_format import export_lanelet2
 from annotations.maptr_format import export_maptr
 from cama_pipeline.data import Dataset, load_dataset
@@ -40,17 +40,22 @@ Writer = Callable[[ExportInputs, Path], dict[str, object]]
 def _write_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     data, poses = inputs.need_dataset()
     request = inputs.request
-    scenes = list(request.scenes or poses.scenes)
-    export_cama(
+    result = export_cama_release(
         request.annotations,
         staging,
-        name=request.site_name or poses.site_id or request.annotations.site_id,
-        elevation=request.elevation,
         dataset=data,
         poses=poses.lookup,
-        scenes=scenes,
+        scenes=list(request.scenes or poses.scenes),
+        site_name=request.site_name or poses.site_id or request.annotations.site_id,
+        mode=request.cama_mode.value,
+        elevation=request.elevation,
+        show_progress=request.show_progress,
     )
-    return {"scenes": scenes}
+    return {
+        "mode": result.mode,
+        "scenes": {scene.scene: scene.instances for scene in result.scenes},
+        "elevation": result.elevation_source,
+    }
 
 
 def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:

@@ -26,15 +26,18 @@ def _write_set(tmp_path: Path, georef: Georeference) -> Path:
 
 
 def test_cama_export_import(tmp_path: Path, georef: Georeference, plane_elevation: np.ndarray) -> None:
-    """Export to the CAMA layout with a raster, import back: same ids, 3D points lifted."""
+    """Export to the CAMA release layout with a raster (logged poses: the fixture has no reconstruction),
+    import the scene folder back: same ids, 3D points lifted."""
     source = _write_set(tmp_path, georef)
+    dataset = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=3, with_can=False, with_lidar=False)
     np.save(tmp_path / "elevation.npy", plane_elevation)
-    result = runner.invoke(
-        app, ["export", str(source), str(tmp_path / "out"), "--elevation", str(tmp_path / "elevation.npy")]
-    )
+    args = ["export", str(source), str(tmp_path / "out"), "--elevation", str(tmp_path / "elevation.npy")]
+    result = runner.invoke(app, [*args, "--dataset", str(dataset.root), "--poses", "coarse"])
     assert result.exit_code == 0, result.output
+    scenes = sorted(p.name for p in (tmp_path / "out/all_clips").iterdir())
+    assert scenes == ["scene-0001"]
     result = runner.invoke(
-        app, ["import", str(tmp_path / "out/site-a"), "--out", str(tmp_path / "back.json")]
+        app, ["import", str(tmp_path / "out/all_clips/scene-0001"), "--out", str(tmp_path / "back.json")]
     )
     assert result.exit_code == 0, result.output
     back = AnnotationSet.read_json(tmp_path / "back.json")

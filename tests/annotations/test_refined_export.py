@@ -11,6 +11,7 @@ import typer
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement
+from annotations.cama_odometry import CAMERA_NAME_FROM_CHANNEL
 from annotations.maptr_format import read_maptr
 from cama_pipeline.data import CameraImage, Dataset, load_dataset
 from cama_pipeline.refined_poses import refined_poses
@@ -47,8 +48,29 @@ def _set(tmp_path: Path, georef: Georeference) -> Path:
 
 
 def _rows(folder: Path, channel: str) -> np.ndarray:
-    lines = (folder / f"odometry/camera_{channel}.txt").read_text().splitlines()[1:]
-    return np.array([line.split() for line in lines], dtype=float)
+    """A scene folder's clip-mode odometry rows of a channel, translations back in global metres."""
+    text = (folder / f"odometry/scmv_{CAMERA_NAME_FROM_CHANNEL[channel]}.txt").read_text()
+    assert not text.startswith("#")
+    rows = np.array([line.split() for line in text.splitlines()], dtype=float)
+    sidecar = json.loads((folder / "maps/georeference.json").read_text())
+    rows[:, 1:4] += np.asarray(sidecar["world_origin_global"])
+    return rows
+
+
+def _export_args(
+    tmp_path: Path, georef: Georeference, dataset_root: Path, elevation: np.ndarray
+) -> list[str]:
+    """`cama export` of the one-divider set with a raster (the release's elevation map needs one)."""
+    np.save(tmp_path / "elevation.npy", elevation)
+    return [
+        "export",
+        str(_set(tmp_path, georef)),
+        str(tmp_path / "out"),
+        "--dataset",
+        str(dataset_root),
+        "--elevation",
+        str(tmp_path / "elevation.npy"),
+    ]
 
 
 def _camera_translation(image: CameraImage, shift: np.ndarray) -> np.ndarray:
@@ -73,16 +95,16 @@ def test_refined_poses_sources_and_values(dataset_root: Path) -> None:
     assert not sweep.is_key_frame and expected_shift(dataset, sweep)[2] == pytest.approx(1.0)
 
 
-def test_cama_export_refined_by_default(tmp_path: Path, georef: Georeference, dataset_root: Path) -> None:
+def test_cama_export_refined_by_default(
+    tmp_path: Path, georef: Georeference, dataset_root: Path, plane_elevation: np.ndarray
+) -> None:
     """Odometry rows of SfM-posed images equal the SfM poses (times the extrinsics); sources in the sidecar;
     the export imports back."""
     dataset = load_dataset(dataset_root)
     write_reconstruction(dataset, Workspace.for_dataset(dataset_root))
-    result = runner.invoke(
-        app, ["export", str(_set(tmp_path, georef)), str(tmp_path / "out"), "--dataset", str(dataset_root)]
-    )
+    result = runner.invoke(app, _export_args(tmp_path, georef, dataset_root, plane_elevation))
     assert result.exit_code == 0, result.output
-    folder = tmp_path / "out" / SITE_ID
+    folder = tmp_path / "out" / "all_clips" / dataset.scenes[0].name
     rows = _rows(folder, "CAM_FRONT")
     images = dataset.scenes[0].images["CAM_FRONT"]
     for row, image in zip(rows, images, strict=True):
@@ -92,7 +114,7 @@ def test_cama_export_refined_by_default(tmp_path: Path, georef: Georeference, da
     for i, image in enumerate(sfm_images(dataset)):
         row = rows[images.index(image)]
         np.testing.assert_allclose(row[1:4], _camera_translation(image, sfm_shift(i)), atol=1e-6)
-    sources = json.loads((folder / "odometry/pose_sources.json").read_text())["camera_CAM_FRONT.txt"]
+    sources = json.loads((folder / "odometry/pose_sources.json").read_text())["scmv_camera_front.txt"]
     assert sources["rows"] == ["sfm" if im.is_key_frame else "wigo+sfm" for im in images]
     assert sources["counts"] == {"sfm": 3, "wigo+sfm": 3}
     back = tmp_path / "back.json"
@@ -100,18 +122,20 @@ def test_cama_export_refined_by_default(tmp_path: Path, georef: Georeference, da
     assert [e.id for e in AnnotationSet.read_json(back).elements] == ["el-1"]
 
 
-def test_coarse_only_when_asked(tmp_path: Path, georef: Georeference, dataset_root: Path) -> None:
+def test_coarse_only_when_asked(
+    tmp_path: Path, georef: Georeference, dataset_root: Path, plane_elevation: np.ndarray
+) -> None:
     """`--poses coarse` writes the logged poses (no reconstruction needed), sources `coarse`."""
     dataset = load_dataset(dataset_root)
-    args = ["export", str(_set(tmp_path, georef)), str(tmp_path / "out"), "--dataset", str(dataset_root)]
+    args = _export_args(tmp_path, georef, dataset_root, plane_elevation)
     result = runner.invoke(app, [*args, "--poses", "coarse"])
     assert result.exit_code == 0, result.output
-    folder = tmp_path / "out" / SITE_ID
+    folder = tmp_path / "out" / "all_clips" / dataset.scenes[0].name
     images = dataset.scenes[0].images["CAM_FRONT"]
     for row, image in zip(_rows(folder, "CAM_FRONT"), images, strict=True):
         np.testing.assert_allclose(row[1:4], _camera_translation(image, np.zeros(3)), atol=1e-6)
     sources = json.loads((folder / "odometry/pose_sources.json").read_text())
-    assert sources["camera_CAM_FRONT.txt"]["counts"] == {"coarse": len(images)}
+    assert sources["scmv_camera_front.txt"]["counts"] == {"coarse": len(images)}
 
 
 def test_refined_without_sfm_is_exit_2(tmp_path: Path, georef: Georeference, dataset_root: Path) -> None:
