@@ -80,17 +80,22 @@ def _resample(elevation: np.ndarray, georef: RasterGeoreference, frame: ReleaseF
     steps = np.arange(frame.cells) * frame.resolution_m - frame.side_m / 2
     cols = (frame.origin_xy[0] + steps - georef.origin_xy[0]) / georef.resolution  # per v
     rows = (georef.origin_xy[1] - (frame.origin_xy[1] + steps)) / georef.resolution  # per u
-    out = np.empty((frame.cells, frame.cells), dtype=np.float32)
-    for start in range(0, frame.cells, _CHUNK):
-        block = _sample(elevation, rows, cols[start : start + _CHUNK])  # (u, v)
-        out[start : start + _CHUNK] = block.T
+    out = np.full((frame.cells, frame.cells), np.nan, dtype=np.float32)
+    v_near = np.flatnonzero((cols > -1) & (cols < georef.width))  # map rows that can touch our raster
+    u_near = np.flatnonzero((rows > -1) & (rows < georef.height))
+    if not (v_near.size and u_near.size):
+        return out
+    u0, u1 = int(u_near[0]), int(u_near[-1]) + 1
+    for start in range(int(v_near[0]), int(v_near[-1]) + 1, _CHUNK):
+        stop = min(start + _CHUNK, int(v_near[-1]) + 1)
+        out[start:stop, u0:u1] = _sample(elevation, rows[u0:u1], cols[start:stop]).T  # sampled as (u, v)
     return out
 
 
 def _sample(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Our raster at fractional (rows x cols): bilinear where its four cells are observed, else the nearest."""
     r0, c0 = np.floor(rows), np.floor(cols)
-    fr, fc = (rows - r0)[:, None], (cols - c0)[None, :]
+    fr, fc = (rows - r0).astype(np.float32)[:, None], (cols - c0).astype(np.float32)[None, :]
     r0i, c0i = r0.astype(np.int64), c0.astype(np.int64)
     bilinear = (
         _gather(elevation, r0i, c0i) * (1 - fr) * (1 - fc)
@@ -103,9 +108,9 @@ def _sample(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.nda
 
 
 def _gather(elevation: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """elevation[rows x cols] as float64, NaN where a row or column is outside the raster."""
+    """elevation[rows x cols] as float32 (the map's type), NaN where a row or column is outside the raster."""
     height, width = elevation.shape
-    block = elevation[np.ix_(np.clip(rows, 0, height - 1), np.clip(cols, 0, width - 1))].astype(np.float64)
+    block = elevation[np.ix_(np.clip(rows, 0, height - 1), np.clip(cols, 0, width - 1))].astype(np.float32)
     block[(rows < 0) | (rows >= height), :] = np.nan
     block[:, (cols < 0) | (cols >= width)] = np.nan
     return block
