@@ -197,7 +197,18 @@ def _write_scene(
             camera.global_from_cam.translation[:2] for camera in cameras if camera.image.channel == channel
         ]
         trajectories.append(np.asarray(track) - np.asarray(origin))
-    region = observed_range(trajectories, job.radius_m, _site_square(job, frame))
+    square = _site_square(job, frame)
+    outside = sum(not square.covers(shapely.Point(xy)) for track in trajectories for xy in track)
+    if outside:
+        logger.warning(
+            "scene %s: %d camera positions lie outside the %g m map centred at global %s; the labels they saw "
+            "are cut at the map's edge",
+            scene,
+            outside,
+            frame.side_m,
+            frame.origin_global[:2],
+        )
+    region = observed_range(trajectories, job.radius_m, square)
     instances = _write_labels(job, folder / MAP_LABELS, cut_elements(job.annotations, region), frame)
     rows = write_odometry(cameras, folder / ODOMETRY_DIR, prefix=ODOMETRY_PREFIX[job.mode], frame=frame)
     _write_sidecar(job, folder / SCENE_SIDECAR, frame, scene=scene, filled_png=FILLED_PNG, source=source)

@@ -331,3 +331,25 @@ def test_clipped_piece_lies_within_the_radius(clip: CamaReleaseResult) -> None:
         for point in element.xy():
             distance = min(track.distance(LineString([point, point + 1e-9])) for track in tracks)
             assert distance <= RADIUS_M + 1e-3
+
+
+def test_plain_release_site_map_imports(tmp_path: Path) -> None:
+    """A release's site map without our sidecar lands in the release's world frame (its odometry's): [u, v] ->
+    x = v * 0.1 - rows * 0.1 / 2, y = u * 0.1 - cols * 0.1 / 2; the site id is the file's."""
+    site2clip = tmp_path / "site2clip"
+    site2clip.mkdir()
+    labels = [{"attrs": {"type": "Road_teeth"}, "data": [[10, 20], [110, 20]], "id": 5}]
+    (site2clip / "bs_site01_map_labels.json").write_text(json.dumps(labels))
+    np.save(site2clip / "bs_site01_vision_road_mlp_ft.npy", np.full((200, 300), 3.0, np.float32))
+    (tmp_path / "site2clip.json").write_text(json.dumps({"bs_site01": ["scene-0001"]}))
+    back = import_cama(tmp_path)
+    assert back.site_id == "bs_site01"
+    boundary = back.by_id("5")
+    np.testing.assert_allclose(
+        boundary.xy(), [[20 * 0.1 - 10, 10 * 0.1 - 15], [20 * 0.1 - 10, 110 * 0.1 - 15]]
+    )
+    xyz = boundary.xyz()
+    assert xyz is not None and np.allclose(xyz[:, 2], 3.0)
+    (site2clip / "bs_site01_vision_road_mlp_ft.npy").unlink()
+    with pytest.raises(FileNotFoundError, match="bs_site01_vision_road_mlp_ft.npy: the site map's elevation"):
+        import_cama(tmp_path)
