@@ -10,6 +10,7 @@ original elements: it gives one element per exported vector, at its resampled po
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
@@ -172,15 +173,20 @@ def build_maptr(
     poses: PoseLookup,
     box: Box = MAPTR_RANGE,
     n_points: int = POINTS_PER_VECTOR,
+    frame_pose: Callable[[Frame], tuple[EgoPose, PoseSource]] | None = None,
+    on_sample: Callable[[], None] | None = None,
 ) -> MaptrFile:
-    """The MapTR file model for every key frame of the data set, ego poses (and their sources) from `poses`."""
+    """The MapTR file model for every key frame of the data set, ego poses (and their sources) from `poses`.
+
+    `frame_pose`: another choice of a sample's reference ego pose (the nuScenes-CAMAv2 export takes LIDAR_TOP's
+    where there is one); None: `sample_pose`. `on_sample`: called after each sample (progress)."""
     flat = sum(1 for e in annotations.elements if e.points_3d is None)
     if flat:
         logger.warning("%d elements have no 3D points: exported at the ego pose's height", flat)
     samples = []
     for scene in dataset.scenes:
         for frame in scene.frames:
-            pose, source = sample_pose(frame, poses)
+            pose, source = sample_pose(frame, poses) if frame_pose is None else frame_pose(frame)
             vectors = sample_vectors(annotations, pose, box=box, n_points=n_points)
             samples.append(
                 MaptrSample(
@@ -192,6 +198,8 @@ def build_maptr(
                     vectors=vectors,
                 )
             )
+            if on_sample is not None:
+                on_sample()
     meta = MaptrMeta(
         site_id=annotations.site_id,
         perception_range=PerceptionRange(**box._asdict()),
