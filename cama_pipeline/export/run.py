@@ -5,10 +5,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from annotations.cama_clip_data import write_clip_data
 from annotations.cama_release import export_cama_release
 from annotations.lanelet2_format import export_lanelet2
 from annotations.maptr_format import export_maptr
 from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data.masks import mask_roots
 from cama_pipeline.export.poses import ExportPoses, export_poses
 from cama_pipeline.export.request import ExportFormat, ExportRequest, ExportResult
 from cama_pipeline.export.staging import staged_output
@@ -51,11 +53,35 @@ def _write_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
         elevation=request.elevation,
         show_progress=request.show_progress,
     )
-    return {
+    summary: dict[str, object] = {
         "mode": result.mode,
         "scenes": {scene.scene: scene.instances for scene in result.scenes},
         "elevation": result.elevation_source,
     }
+    if request.with_clip_data:
+        summary["clip_data"] = _write_clip_data(inputs, [(s.scene, s.folder) for s in result.scenes])
+    return summary
+
+
+def _write_clip_data(inputs: ExportInputs, scenes: list[tuple[str, Path]]) -> dict[str, object]:
+    """Each scene's images, lane masks (CAMA's ids) and attribute.json; the masks from the request's choice."""
+    data, _poses = inputs.need_dataset()
+    request = inputs.request
+    roots = mask_roots(request.masks, data.root, inputs.workspace)
+    frames = masks = 0
+    missing: list[str] = []
+    for scene, folder in scenes:
+        clip = write_clip_data(folder, data, scene, lane_masks=roots, show_progress=request.show_progress)
+        frames, masks = frames + clip.frames, masks + clip.masks_written
+        missing.extend(item.image for item in clip.missing_masks)
+    if missing:
+        logger.warning(
+            "clip data: %d synchronised images have no lane instance mask (CAMA's metric needs one per image), "
+            "e.g. %s; run `cama segment` or choose --masks",
+            len(missing),
+            missing[0],
+        )
+    return {"frames": frames, "masks": masks, "missing_masks": len(missing)}
 
 
 def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:

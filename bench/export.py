@@ -1,0 +1,240 @@
+"""Export benchmark: what a consumer of our CAMA release export measures when it reprojects the labels with the
+exported odometry, in both SRE protocols (`strict`, ours; `cama`, CAMA's published metric code).
+
+The export is read back as a consumer reads it (nothing from our side but the files): each scene's odometry
+(`all_clips/<scene>/odometry/scmv_camera_<cam>.txt`, camera to world; world = global - the sidecar's world origin)
+gives every image's ego pose, and each scene's labels (`maps/map_labels.json` with the elevation raster beside it,
+through `cama import`) give the map. Rows, all over the same images (the site's key-frame images SfM posed):
+
+  ref            the true 3D map through the true poses (the floor set by the masks alone)
+  a_truth        the true 3D map through the exported (refined) odometry; target: within 0.5 px of `ref`
+  a_truth_labels the true map as exported (labels + elevation raster, cut per scene) through the exported odometry
+  b_truth_coarse the true 3D map through the odometry of a `--poses coarse` export (the logged poses)
+  c_pipeline     the pipeline's proposals, lifted and exported, read back from the labels, through the exported
+                 odometry
+  c_sfm          the same proposals lifted (before export) through the SfM poses directly (what c should equal)
+
+Usage: .venv/bin/python bench/export.py --site data/synthetic/default [--workspace W] [--out bench/results/export.json]
+The site's workspace needs `cama run` up to proposals (the SfM poses, the surface rasters and the proposals).
+"""
+
+import argparse
+import json
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from annotations import AnnotationSet, MapElement
+from annotations.cama_import import import_cama
+from annotations.cama_odometry import CAMERA_NAME_FROM_CHANNEL, timestamp_ms
+from annotations.cama_sidecar import CamaReleaseGeoreference, read_sidecar
+from annotations.lift import lift_element
+from cama_pipeline.bev import read_bev
+from cama_pipeline.data import Dataset, Pose, Scene, load_dataset
+from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate.inputs import VectorElement
+from cama_pipeline.evaluate.sre_report import ImageSre, SreReport
+from cama_pipeline.export import ExportFormat, ExportRequest, PoseChoice, export
+from cama_pipeline.refined_poses import site_scenes
+from cama_pipeline.sfm.io import read_refined_poses
+from cama_pipeline.site.io import read_site_ids
+from cama_pipeline.workspace import Workspace
+
+RESULTS = Path(__file__).parent / "results"
+PROTOCOLS = ("strict", "cama")
+
+
+def reconstructed_site(workspace: Workspace) -> str:
+    """The workspace's site with SfM poses and proposals (the first, when several)."""
+    for site_id in read_site_ids(workspace.sites_index()):
+        if workspace.sfm_poses(site_id).is_file() and workspace.proposals(site_id).is_file():
+            return site_id
+    raise SystemExit(f"{workspace.root}: no site with SfM poses and proposals; run `cama run` first")
+
+
+def truth_set(site: Path, template: AnnotationSet) -> AnnotationSet:
+    """The generator's true 3D map as an annotation set in the proposals' georeference (site coordinates)."""
+    origin = np.asarray(template.georeference.site_origin_xy, dtype=float)
+    elements = []
+    for vector in load_vector_map(site / "ground_truth" / "vector_map.json"):
+        xyz = np.asarray(vector.points, dtype=float)
+        site_xyz = np.column_stack([xyz[:, :2] - origin, xyz[:, 2]])
+        if vector.closed and not np.array_equal(site_xyz[0], site_xyz[-1]):
+            site_xyz = np.vstack([site_xyz, site_xyz[:1]])
+        elements.append(
+            MapElement.model_validate(
+                {
+                    "id": vector.id,
+                    "cls": vector.cls,
+                    "points_2d": site_xyz[:, :2].tolist(),
+                    "points_3d": site_xyz.tolist(),
+                    "source": "human",
+                    "review_state": "approved",
+                }
+            )
+        )
+    return AnnotationSet(site_id=template.site_id, georeference=template.georeference, elements=elements)
+
+
+def lifted_set(annotations: AnnotationSet, elevation: np.ndarray) -> AnnotationSet:
+    """Every element lifted through the reconstructed elevation raster (as the editor's lift job does)."""
+    georef = annotations.georeference
+    lifted = [lift_element(element, elevation, georef, strict=False) for element in annotations.elements]
+    return annotations.model_copy(update={"elements": lifted})
+
+
+def global_vectors(annotations: AnnotationSet) -> list[VectorElement]:
+    """An annotation set's 3D elements as the evaluator's global vectors (2D-only elements left out)."""
+    origin = np.asarray(annotations.georeference.site_origin_xy, dtype=float)
+    out = []
+    for element in annotations.elements:
+        xyz = element.xyz()
+        if xyz is None or not np.isfinite(xyz).all():
+            continue
+        points = np.column_stack([xyz[:, :2] + origin, xyz[:, 2]])
+        out.append(VectorElement(element.id, element.cls, points, element.cls == "ped_crossing"))
+    return out
+
+
+def read_scene_odometry(scene_dir: Path, scene: Scene) -> dict[str, Pose]:
+    """Image token -> global_from_ego from one exported scene folder's clip-mode odometry, as a consumer would
+    read it: rows by (camera, millisecond time) matched to the scene's images."""
+    sidecar = read_sidecar(scene_dir / "maps" / "georeference.json")
+    if not isinstance(sidecar, CamaReleaseGeoreference):
+        raise SystemExit(f"{scene_dir}: not a release-layout scene folder (sidecar version 1)")
+    origin = np.asarray(sidecar.world_origin_global, dtype=float)
+    images = {(image.channel, timestamp_ms(image.timestamp_us)): image for image in scene.all_images()}
+    poses = {}
+    for channel, camera in CAMERA_NAME_FROM_CHANNEL.items():
+        path = scene_dir / "odometry" / f"scmv_{camera}.txt"
+        if not path.is_file():
+            continue
+        for line in path.read_text(encoding="utf-8").splitlines():
+            t, x, y, z, qx, qy, qz, qw = (float(value) for value in line.split())
+            image = images[(channel, round(t * 1000))]
+            global_from_cam = Pose(np.array([x, y, z]) + origin, np.array([qw, qx, qy, qz]))
+            poses[image.token] = global_from_cam @ image.calibration.ego_from_cam.inverse()
+    return poses
+
+
+def read_export(out: Path, dataset: Dataset) -> tuple[dict[str, Pose], dict[str, list[VectorElement]]]:
+    """Every exported scene's odometry poses (merged) and labels (per scene, global 3D through the exported
+    elevation raster)."""
+    scenes = {scene.name: scene for scene in dataset.scenes}
+    poses: dict[str, Pose] = {}
+    labels: dict[str, list[VectorElement]] = {}
+    for scene_dir in sorted((out / "all_clips").iterdir()):
+        poses.update(read_scene_odometry(scene_dir, scenes[scene_dir.name]))
+        labels[scene_dir.name] = global_vectors(import_cama(scene_dir))
+    return poses, labels
+
+
+def sre_row(
+    dataset: Dataset,
+    maps: Mapping[str, Sequence[VectorElement]],
+    poses: Mapping[str, Pose],
+    images: set[str],
+    protocol: str,
+) -> dict[str, Any]:
+    """SRE / P / R / F1 of per-scene maps over the chosen images, one report over every scene's images."""
+    config = SreConfig(protocol=protocol)  # type: ignore[arg-type]
+    results: list[ImageSre] = []
+    for scene, elements in maps.items():
+        report = evaluate_sre(dataset, elements, config, true_poses=poses, scenes=[scene], images=images)
+        results.extend(report.images)
+    return dict(vars(SreReport.from_images(results, config).overall))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--workspace", type=Path, default=None, help="default: the site's workspace")
+    parser.add_argument("--out", type=Path, default=RESULTS / "export.json")
+    args = parser.parse_args()
+    dataset_root = args.site / "nuscenes"
+    workspace = Workspace.resolve(args.workspace, dataset_root)
+    dataset = load_dataset(dataset_root)
+    site_id = reconstructed_site(workspace)
+    scenes = site_scenes(workspace, site_id)
+    proposals = AnnotationSet.read_json(workspace.proposals(site_id))
+    elevation = (
+        read_bev(workspace.surface_bev(site_id), ["elevation"]).require("elevation").astype(np.float64)
+    )
+    truth = truth_set(args.site, proposals)
+    pipeline = lifted_set(proposals, elevation)
+    sfm = read_refined_poses(workspace.sfm_poses(site_id))
+    images = {
+        image.token
+        for scene in dataset.scenes
+        if scene.name in scenes
+        for frame in scene.frames
+        for image in frame.images.values()
+        if image.token in sfm
+    }
+    timings: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(prefix="cama-export-bench-") as tmp:
+        exported = {}
+        for name, annotations, choice in (
+            ("truth_refined", truth, PoseChoice.refined),
+            ("truth_coarse", truth, PoseChoice.coarse),
+            ("pipeline_refined", pipeline, PoseChoice.refined),
+        ):
+            started = time.perf_counter()
+            request = ExportRequest(
+                annotations,
+                Path(tmp) / name,
+                format=ExportFormat.cama,
+                dataset_root=dataset_root,
+                workspace=workspace.root,
+                site_id=site_id,
+                poses=choice,
+                elevation=elevation,
+            )
+            exported[name] = read_export(export(request).path, dataset)
+            timings[name] = round(time.perf_counter() - started, 2)
+    true_map = {scene: global_vectors(truth) for scene in scenes}
+    sfm_poses = {
+        token: Pose(matrix[:3, 3], Rotation.from_matrix(matrix[:3, :3]).as_quat(scalar_first=True))
+        for token, matrix in sfm.items()
+    }
+    rows = {
+        "ref": (true_map, load_true_poses(args.site / "ground_truth" / "poses.json")),
+        "a_truth": (true_map, exported["truth_refined"][0]),
+        "a_truth_labels": (exported["truth_refined"][1], exported["truth_refined"][0]),
+        "b_truth_coarse": (true_map, exported["truth_coarse"][0]),
+        "c_pipeline": (exported["pipeline_refined"][1], exported["pipeline_refined"][0]),
+        "c_sfm": ({scene: global_vectors(pipeline) for scene in scenes}, sfm_poses),
+    }
+    figures: dict[str, Any] = {"site": str(args.site), "site_id": site_id, "scenes": scenes}
+    figures["images"] = len(images)
+    figures["export_seconds"] = timings
+    for protocol in PROTOCOLS:
+        figures[protocol] = {
+            name: sre_row(dataset, maps, poses, images, protocol) for name, (maps, poses) in rows.items()
+        }
+        ref = figures[protocol]["ref"]["sre_ref_px"]
+        got = figures[protocol]["a_truth"]["sre_ref_px"]
+        figures[protocol]["a_minus_ref_px"] = None if ref is None or got is None else got - ref
+    figures["command"] = "python bench/export.py " + " ".join(sys.argv[1:])
+    figures["machine"] = {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(figures, indent=1, default=float) + "\n")
+    for protocol in PROTOCOLS:
+        for name, row in figures[protocol].items():
+            if isinstance(row, dict):
+                print(
+                    f"{protocol:6s} {name:15s} SRE {row['sre_ref_px']} px  P {row['precision']}  "
+                    f"R {row['recall']}  F1 {row['f1']}"
+                )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
