@@ -141,22 +141,21 @@ def _evaluate_frame_cama(
     dense: DenseMap,
     config: SreConfig,
 ) -> list[ImageSre]:
-    """One frame under the cama protocol: every camera through the pose of the frame's front camera (CAMA's
-    chassis pose), or each through its own when `frame_pose_channel` is None; a frame without that camera is
-    skipped, as CAMA's code skips a frame it has no pose for."""
+    """One frame under the cama protocol: every camera through the ego pose of the frame's front camera (CAMA's
+    chassis pose), or each through its own when `frame_pose_channel` is None. A frame without a front camera
+    image, or whose front image the given poses lack, is skipped (logged), as CAMA's code skips a frame it has
+    no pose for."""
     channel = config.cama.frame_pose_channel
     if not images:
         return []
     if channel is None:
         own = [_pose_for(image, true_poses) for image in images]
         return evaluate_frame(scene, frame.token, images, own, dense, config)
-    if channel not in frame.images:
-        logger.warning(
-            "frame %s of %s has no %s image: skipped (no chassis pose)", frame.token, scene, channel
-        )
+    front = frame.images.get(channel)
+    if front is None or (true_poses is not None and front.token not in true_poses):
+        logger.warning("frame %s of %s: no %s pose, skipped as CAMA's code does", frame.token, scene, channel)
         return []
-    pose = _pose_for(frame.images[channel], true_poses)
-    return evaluate_frame(scene, frame.token, images, pose, dense, config)
+    return evaluate_frame(scene, frame.token, images, _pose_for(front, true_poses), dense, config)
 
 
 def _pose_for(image: CameraImage, true_poses: Mapping[str, Pose] | None) -> Pose:
