@@ -218,6 +218,26 @@ def test_lidar_takes_nearest_camera_correction(tmp_path: Path, georef: Georefere
         np.testing.assert_allclose(vectors.samples[i].ego_pose.translation, want.translation, atol=1e-9)
 
 
+def test_lidar_beyond_the_gap_keeps_its_logged_pose(tmp_path: Path, georef: Georeference) -> None:
+    """Only sample 0's images refined: sample 1's lidar (its nearest refined image, a sweep, 0.25 s away) is
+    corrected; sample 2's (0.75 s away, over the 0.5 s gap) keeps its logged record, source coarse."""
+    root, dataset = _fixture_dataset(tmp_path)
+    shift = Pose(np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0]))
+    first = {f"sd-{ch}-0-{k}" for ch in ("CAM_FRONT", "CAM_BACK") for k in (0, 1)}
+    poses = _lookup(lambda im: (shift @ im.global_from_ego, "wigo") if im.token in first else None)
+    source_lidar = _lidar_poses(root / dataset.version)
+    annotations = AnnotationSet(site_id="s", georeference=georef)
+    result = export_nuscenes_cama(annotations, root, dataset, tmp_path / "out", poses=poses)
+    lidar = _lidar_poses(result.version_dir)
+    sources = json.loads((result.version_dir / "pose_sources.json").read_text())["ego_poses"]
+    for i, moved in ((0, True), (1, True), (2, False)):
+        dz = lidar[i]["translation"][2] - source_lidar[i]["translation"][2]
+        assert dz == pytest.approx(1.0 if moved else 0.0, abs=1e-9)
+        assert sources[lidar[i]["token"]]["source"] == ("wigo" if moved else "coarse")
+    assert sources[lidar[2]["token"]]["logged"] and lidar[2] == source_lidar[2]
+    assert result.borrowed_records == 2 and result.counts["wigo"] == 4 + 2
+
+
 def test_coarse_lookup_keeps_ego_pose_bytes(tmp_path: Path, georef: Georeference) -> None:
     """A lookup with no refined pose (and so no correction for the lidar within the gap): ego_pose.json comes
     out byte for byte as the source's (indented here), every record `coarse` and logged; copies when asked."""
