@@ -9,6 +9,7 @@ from annotations.cama_clip_data import write_clip_data
 from annotations.cama_release import export_cama_release
 from annotations.lanelet2_format import export_lanelet2
 from annotations.maptr_format import export_maptr
+from annotations.nuscenes_cama_format import export_nuscenes_cama
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.data.masks import mask_roots
 from cama_pipeline.export.poses import ExportPoses, export_poses
@@ -98,10 +99,24 @@ def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     return {"tags": result.counts, "nodes": result.nodes, "unlifted": len(result.unlifted)}
 
 
+def _write_nuscenes_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
+    data, poses = inputs.need_dataset()
+    result = export_nuscenes_cama(
+        inputs.request.annotations,
+        data.root,
+        data,
+        staging,
+        poses=poses.lookup,
+        show_progress=inputs.request.show_progress,
+    )
+    return {"version": result.version, "pose_sources": result.counts, "samples": result.samples}
+
+
 WRITERS: dict[ExportFormat, Writer] = {
     ExportFormat.cama: _write_cama,
     ExportFormat.maptr: _write_maptr,
     ExportFormat.lanelet2: _write_lanelet2,
+    ExportFormat.nuscenes_cama: _write_nuscenes_cama,
 }
 """One writer per format."""
 

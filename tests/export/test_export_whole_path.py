@@ -116,3 +116,26 @@ def test_labels_import_back_in_site_coordinates(site_export, tmp_path: Path) -> 
     )
     assert result.exit_code == 0, result.output
     assert 0 < len(AnnotationSet.read_json(back).elements) <= count
+
+
+def test_nuscenes_cama_root_carries_the_sfm_poses(
+    site_export, tiny_site: GeneratedSite, tmp_path: Path
+) -> None:
+    """`--format nuscenes-cama`: a nuScenes root our loader reads, whose camera ego poses are the SfM poses for
+    the images SfM posed; the map vectors beside it."""
+    _out, site_id, workspace, dataset, _count = site_export
+    source = tmp_path / "set.json"
+    AnnotationSet.read_json(next(iter(workspace.root.glob("proposals/*.json")))).write_json(source)
+    out = tmp_path / "nuscenes-cama"
+    dataset_root = tiny_site.result.out_dir / "nuscenes"
+    args = ["export", str(source), str(out), "--format", "nuscenes-cama", "--dataset", str(dataset_root)]
+    result = runner.invoke(app, [*args, "--workspace", str(workspace.root)])
+    assert result.exit_code == 0, result.output
+    refined = load_dataset(out)
+    version = next(p for p in out.iterdir() if p.name.endswith("-cama"))
+    assert (version / "map_vectors.json").is_file() and (version / "pose_sources.json").is_file()
+    sfm = read_refined_poses(workspace.sfm_poses(site_id))
+    posed = [im for scene in refined.scenes for im in scene.all_images() if im.token in sfm]
+    assert posed
+    for image in posed:
+        np.testing.assert_allclose(image.global_from_ego.matrix(), sfm[image.token], atol=1e-6)
