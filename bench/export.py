@@ -3,16 +3,18 @@ exported odometry, in both SRE protocols (`strict`, ours; `cama`, CAMA's publish
 
 The export is read back as a consumer reads it (nothing from our side but the files): each scene's odometry
 (`all_clips/<scene>/odometry/scmv_camera_<cam>.txt`, camera to world; world = global - the sidecar's world origin)
-gives every image's ego pose, and each scene's labels (`maps/map_labels.json` with the elevation raster beside it,
-through `cama import`) give the map. Rows, all over the same images (the site's key-frame images SfM posed):
+gives every image's ego pose, and each scene's labels (`maps/map_labels.json`, z from `vision_road_mlp_ft.npy` at
+the point's cell, as CAMA's code reads them) give the map. Rows, all over the same images (the site's key-frame images SfM posed):
 
   ref            the true 3D map through the true poses (the floor set by the masks alone)
   a_truth        the true 3D map through the exported (refined) odometry; target: within 0.5 px of `ref`
+  a_truth_sfm    the true 3D map through the SfM poses directly (a_truth minus this is what the export loses)
   a_truth_labels the true map as exported (labels + elevation raster, cut per scene) through the exported odometry
   b_truth_coarse the true 3D map through the odometry of a `--poses coarse` export (the logged poses)
-  c_pipeline     the pipeline's proposals, lifted and exported, read back from the labels, through the exported
-                 odometry
-  c_sfm          the same proposals lifted (before export) through the SfM poses directly (what c should equal)
+  c_pipeline     the pipeline's proposals exported (z from the exported elevation raster), read back from the
+                 labels, through the exported odometry
+  c_sfm          the same proposals lifted through our raster (as bench/end_to_end.py does) and projected with
+                 the SfM poses directly: the figure before export
 
 Usage: .venv/bin/python bench/export.py --site data/synthetic/default [--workspace W] [--out bench/results/export.json]
 The site's workspace needs `cama run` up to proposals (the SfM poses, the surface rasters and the proposals).
@@ -29,16 +31,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from end_to_end import lifted_map  # bench/end_to_end.py: this script's folder is on sys.path
 from scipy.spatial.transform import Rotation
 
 from annotations import AnnotationSet, MapElement
-from annotations.cama_import import import_cama
+from annotations.cama_labels import CLASS_FROM_CAMA_TYPE
 from annotations.cama_odometry import CAMERA_NAME_FROM_CHANNEL, timestamp_ms
 from annotations.cama_sidecar import CamaReleaseGeoreference, read_sidecar
-from annotations.lift import lift_element
 from cama_pipeline.bev import read_bev
 from cama_pipeline.data import Dataset, Pose, Scene, load_dataset
-from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate import SreConfig, SreProtocol, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.sre_report import ImageSre, SreReport
 from cama_pipeline.export import ExportFormat, ExportRequest, PoseChoice, export
@@ -48,7 +50,7 @@ from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
 
 RESULTS = Path(__file__).parent / "results"
-PROTOCOLS = ("strict", "cama")
+PROTOCOLS: tuple[SreProtocol, ...] = ("strict", "cama")
 
 
 def reconstructed_site(workspace: Workspace) -> str:
@@ -81,13 +83,6 @@ def truth_set(site: Path, template: AnnotationSet) -> AnnotationSet:
             )
         )
     return AnnotationSet(site_id=template.site_id, georeference=template.georeference, elements=elements)
-
-
-def lifted_set(annotations: AnnotationSet, elevation: np.ndarray) -> AnnotationSet:
-    """Every element lifted through the reconstructed elevation raster (as the editor's lift job does)."""
-    georef = annotations.georeference
-    lifted = [lift_element(element, elevation, georef, strict=False) for element in annotations.elements]
-    return annotations.model_copy(update={"elements": lifted})
 
 
 def global_vectors(annotations: AnnotationSet) -> list[VectorElement]:
@@ -124,15 +119,38 @@ def read_scene_odometry(scene_dir: Path, scene: Scene) -> dict[str, Pose]:
     return poses
 
 
+def read_scene_labels(scene_dir: Path) -> list[VectorElement]:
+    """One exported scene's labels as CAMA's code reads them: x = v * r - S/2, y = u * r - S/2 in the world frame
+    (plus the sidecar's world origin for global metres), z = the elevation raster at the point's cell [v, u]."""
+    sidecar = read_sidecar(scene_dir / "maps" / "georeference.json")
+    if not isinstance(sidecar, CamaReleaseGeoreference):
+        raise SystemExit(f"{scene_dir}: not a release-layout scene folder (sidecar version 1)")
+    elevation = np.load(scene_dir / "maps" / "vision_road_mlp_ft.npy", mmap_mode="r")
+    labels = json.loads((scene_dir / "maps" / "map_labels.json").read_text(encoding="utf-8"))
+    half, r = sidecar.map_side_m / 2, sidecar.resolution_m
+    origin = np.asarray(sidecar.world_origin_global[:2], dtype=float)
+    out = []
+    for index, instance in enumerate(labels):
+        cls = CLASS_FROM_CAMA_TYPE.get(instance["attrs"]["type"])
+        if cls is None:
+            continue
+        uv = np.asarray(instance["data"], dtype=float)
+        rows = np.clip(np.rint(uv[:, 1]).astype(int), 0, elevation.shape[0] - 1)
+        cols = np.clip(np.rint(uv[:, 0]).astype(int), 0, elevation.shape[1] - 1)
+        xy = np.column_stack([uv[:, 1] * r - half, uv[:, 0] * r - half]) + origin
+        points = np.column_stack([xy, elevation[rows, cols]])
+        out.append(VectorElement(f"{instance['id']}-{index}", cls, points, cls == "ped_crossing"))
+    return out
+
+
 def read_export(out: Path, dataset: Dataset) -> tuple[dict[str, Pose], dict[str, list[VectorElement]]]:
-    """Every exported scene's odometry poses (merged) and labels (per scene, global 3D through the exported
-    elevation raster)."""
+    """Every exported scene's odometry poses (merged) and labels (per scene)."""
     scenes = {scene.name: scene for scene in dataset.scenes}
     poses: dict[str, Pose] = {}
     labels: dict[str, list[VectorElement]] = {}
     for scene_dir in sorted((out / "all_clips").iterdir()):
         poses.update(read_scene_odometry(scene_dir, scenes[scene_dir.name]))
-        labels[scene_dir.name] = global_vectors(import_cama(scene_dir))
+        labels[scene_dir.name] = read_scene_labels(scene_dir)
     return poses, labels
 
 
@@ -141,10 +159,10 @@ def sre_row(
     maps: Mapping[str, Sequence[VectorElement]],
     poses: Mapping[str, Pose],
     images: set[str],
-    protocol: str,
+    protocol: SreProtocol,
 ) -> dict[str, Any]:
     """SRE / P / R / F1 of per-scene maps over the chosen images, one report over every scene's images."""
-    config = SreConfig(protocol=protocol)  # type: ignore[arg-type]
+    config = SreConfig(protocol=protocol)
     results: list[ImageSre] = []
     for scene, elements in maps.items():
         report = evaluate_sre(dataset, elements, config, true_poses=poses, scenes=[scene], images=images)
@@ -168,7 +186,10 @@ def main() -> None:
         read_bev(workspace.surface_bev(site_id), ["elevation"]).require("elevation").astype(np.float64)
     )
     truth = truth_set(args.site, proposals)
-    pipeline = lifted_set(proposals, elevation)
+    origin = np.asarray(proposals.georeference.site_origin_xy, dtype=float)
+    pipeline_lifted = lifted_map(
+        [(e.cls, e.xy() + origin) for e in proposals.elements], workspace.surface_bev(site_id)
+    )
     sfm = read_refined_poses(workspace.sfm_poses(site_id))
     images = {
         image.token
@@ -184,7 +205,7 @@ def main() -> None:
         for name, annotations, choice in (
             ("truth_refined", truth, PoseChoice.refined),
             ("truth_coarse", truth, PoseChoice.coarse),
-            ("pipeline_refined", pipeline, PoseChoice.refined),
+            ("pipeline_refined", proposals, PoseChoice.refined),
         ):
             started = time.perf_counter()
             request = ExportRequest(
@@ -207,10 +228,11 @@ def main() -> None:
     rows = {
         "ref": (true_map, load_true_poses(args.site / "ground_truth" / "poses.json")),
         "a_truth": (true_map, exported["truth_refined"][0]),
+        "a_truth_sfm": (true_map, sfm_poses),
         "a_truth_labels": (exported["truth_refined"][1], exported["truth_refined"][0]),
         "b_truth_coarse": (true_map, exported["truth_coarse"][0]),
         "c_pipeline": (exported["pipeline_refined"][1], exported["pipeline_refined"][0]),
-        "c_sfm": ({scene: global_vectors(pipeline) for scene in scenes}, sfm_poses),
+        "c_sfm": ({scene: pipeline_lifted for scene in scenes}, sfm_poses),
     }
     figures: dict[str, Any] = {"site": str(args.site), "site_id": site_id, "scenes": scenes}
     figures["images"] = len(images)
