@@ -15,6 +15,7 @@ from app.backend.auth_cache import TokenCache
 from app.backend.config import Settings
 from app.backend.db import make_engine, make_sessionmaker, upgrade
 from app.backend.errors import install_error_handlers
+from app.backend.jobs.export import EXPORT_JOB_KINDS
 from app.backend.jobs.kinds import JOB_KINDS
 from app.backend.jobs.runner import JobRunner
 from app.backend.jobs.vma import unavailable_kinds, vma_job_kinds
@@ -75,7 +76,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.jobs = JobRunner(
         sessions=sessions,
         data_dir=settings.data_dir,
-        kinds={**JOB_KINDS, **vma_job_kinds(settings)},
+        kinds={**JOB_KINDS, **EXPORT_JOB_KINDS, **vma_job_kinds(settings)},
         unavailable=unavailable_kinds(settings),
     )
     app.state.jobs.recover_interrupted()

@@ -21,6 +21,17 @@ class JobCreate(BaseModel):
     params: dict[str, Any] = Field(default_factory=dict, description="Kind-specific parameters.")
 
 
+class JobKindPublic(BaseModel):
+    """A job kind a lead may submit: what it does, whether this server runs it, and its params' JSON Schema
+    (e.g. the export's formats, pose choices and the fields each needs)."""
+
+    kind: str
+    description: str
+    available: bool
+    reason: str | None = Field(default=None, description="Why this server cannot run it (when unavailable).")
+    params_schema: dict[str, Any] | None = Field(default=None, description="JSON Schema of `params`.")
+
+
 class JobPublic(BaseModel):
     """A job's state and progress; `download_url` is set once a succeeded job has a file to fetch."""
 

@@ -22,6 +22,7 @@ from tests.backend.backend_helpers import divider
 
 Headers = dict[str, dict[str, str]]
 POLL_TIMEOUT_S = 5.0
+ORIGIN = [1.299, 103.788]
 
 
 @pytest.fixture
@@ -81,11 +82,12 @@ def test_lift_job_lifts_live_elements_and_flags_unobserved_vertices(
     assert [item["id"] for item in listed.json()] == [job["id"]]
 
 
-def test_export_job_downloads_a_zip_with_the_cama_layout(
+def test_export_job_downloads_a_zip(
     client: TestClient, headers: Headers, elevation_site: int, make_element: Any
 ) -> None:
+    """A Lanelet2 export (no data set or poses needed; the formats that need them: test_api_export_*.py)."""
     made = make_element()
-    job = submit(client, headers, elevation_site, "export", format="cama")
+    job = submit(client, headers, elevation_site, "export", format="lanelet2", origin_lat_lon=ORIGIN)
     early = client.get(f"/api/jobs/{job['id']}/download", headers=headers["lead"])
     done = wait_done(client, headers, job["id"])
     assert early.status_code in (200, 404)
@@ -93,10 +95,9 @@ def test_export_job_downloads_a_zip_with_the_cama_layout(
     response = client.get(f"/api/jobs/{job['id']}/download", headers=headers["lead"])
     assert response.status_code == 200 and response.headers["content-type"] == "application/zip"
     with zipfile.ZipFile(io.BytesIO(response.content)) as bundle:
-        names = set(bundle.namelist())
-        labels = json.loads(bundle.read("maps/map_labels.json"))
-    assert {"maps/map_labels.json", "maps/georeference.json", "maps/elevation.npy"} <= names
-    assert [label["id"] for label in labels] == [str(made["id"])]
+        assert bundle.namelist() == ["map.osm"]
+        osm = bundle.read("map.osm").decode()
+    assert f'k="cama:id" v="{made["id"]}"' in osm
 
 
 class _SlowParams(BaseModel):
@@ -163,7 +164,7 @@ def test_delete_removes_a_finished_job_and_its_files(
     client: TestClient, headers: Headers, elevation_site: int, make_element: Any
 ) -> None:
     make_element()
-    job = submit(client, headers, elevation_site, "export", format="cama")
+    job = submit(client, headers, elevation_site, "export", format="lanelet2", origin_lat_lon=ORIGIN)
     assert wait_done(client, headers, job["id"])["state"] == "succeeded"
     workdir = client.app.state.jobs.workdir(job["id"])  # type: ignore[attr-defined]
     assert any(workdir.iterdir())

@@ -1,5 +1,6 @@
-"""Export jobs leave only their archive (issue 21.7): the unzipped folder and a half-written `export.zip.partial`
-are removed when the job ends, however it ends, and on the next start after a server was killed mid-export."""
+"""Export jobs leave only their archive (issue 21.7): the unzipped folder, the export's staging folder
+(`.export.partial-<id>`, issue 24.9) and a half-written `export.zip.partial` are removed when the job ends, however
+it ends, and on the next start after a server was killed mid-export."""
 
 import time
 from pathlib import Path
@@ -10,7 +11,7 @@ from fastapi.testclient import TestClient
 
 from app.backend.clock import utc_now
 from app.backend.config import Settings
-from app.backend.jobs import kinds
+from app.backend.jobs import export
 from app.backend.jobs.runner import JobContext
 from app.backend.main import create_app
 from app.backend.models_jobs import Job
@@ -18,11 +19,12 @@ from tests.backend.backend_helpers import divider
 
 Headers = dict[str, dict[str, str]]
 POLL_TIMEOUT_S = 10.0
+EXPORT_PARAMS = {"format": "lanelet2", "origin_lat_lon": [1.299, 103.788]}
 
 
 def run_export(client: TestClient, headers: Headers, site_id: int) -> tuple[dict[str, Any], Path]:
-    """Submit a CAMA export, wait for its end; the job and its work folder."""
-    body = {"kind": "export", "params": {"format": "cama"}}
+    """Submit a Lanelet2 export, wait for its end; the job and its work folder."""
+    body = {"kind": "export", "params": EXPORT_PARAMS}
     job = client.post(f"/api/sites/{site_id}/jobs", json=body, headers=headers["lead"]).json()
     deadline = time.monotonic() + POLL_TIMEOUT_S
     while (done := client.get(f"/api/jobs/{job['id']}", headers=headers["lead"]).json())["state"] in (
@@ -52,7 +54,7 @@ def test_a_failed_export_leaves_nothing_half_written(
         archive.with_name(archive.name + ".partial").write_bytes(b"PK half")
         raise OSError("disk full")
 
-    monkeypatch.setattr(kinds, "zip_folder", broken_zip)
+    monkeypatch.setattr(export, "zip_folder", broken_zip)
     done, workdir = run_export(client, headers, site_id)
     assert done["state"] == "failed" and "disk full" in done["message"]
     assert list(workdir.iterdir()) == []
@@ -65,7 +67,7 @@ def test_leftovers_of_a_killed_export_are_removed_on_start(
         job = Job(
             site_id=site_id,
             kind="export",
-            params={"format": "cama"},
+            params=EXPORT_PARAMS,
             state="running",
             progress=0.9,
             message="packing the archive",
@@ -80,6 +82,9 @@ def test_leftovers_of_a_killed_export_are_removed_on_start(
     workdir = client.app.state.jobs.workdir(job_id)  # type: ignore[attr-defined]
     (workdir / "export" / "maps").mkdir(parents=True)
     (workdir / "export" / "maps" / "map_labels.json").write_text("[]")
+    (workdir / ".export.partial-0123456789ab" / "all_clips").mkdir(parents=True)
+    (workdir / ".export.partial-0123456789ab" / "all_clips" / "odometry.txt").write_text("half")
+    (workdir / ".export.old-0123456789ab").mkdir()
     (workdir / "export.zip.partial").write_bytes(b"PK half")
     restarted = create_app(settings)  # what `cama serve` does after a SIGKILL
     try:

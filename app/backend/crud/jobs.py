@@ -5,7 +5,7 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
@@ -15,7 +15,7 @@ from app.backend.data_roots import ROOTS_CONTEXT
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.jobs.runner import JobRunner
 from app.backend.models_jobs import FINISHED_STATES, Job
-from app.backend.schemas_jobs import JobCreate, JobPublic
+from app.backend.schemas_jobs import JobCreate, JobKindPublic, JobPublic
 
 logger = logging.getLogger(__name__)
 
@@ -31,6 +31,25 @@ def job_public(job: Job) -> JobPublic:
 _COLUMNS = tuple(name for name in JobPublic.model_fields if name != "download_url")
 
 
+def job_kinds(runner: JobRunner) -> list[JobKindPublic]:
+    """Every kind this server knows, runnable ones with their params' JSON Schema, by name."""
+    views = [
+        JobKindPublic(
+            kind=name,
+            description=kind.description,
+            available=True,
+            params_schema=kind.params.model_json_schema(),
+        )
+        for name, kind in runner.kinds.items()
+    ]
+    views += [
+        JobKindPublic(kind=name, description=reason, available=False, reason=reason)
+        for name, reason in runner.unavailable.items()
+        if name not in runner.kinds
+    ]
+    return sorted(views, key=lambda view: view.kind)
+
+
 def create_job(
     *,
     session: Session,
@@ -40,8 +59,8 @@ def create_job(
     username: str,
     roots: Sequence[Path],
 ) -> Job:
-    """Validate the kind and its params (folders must lie inside the data `roots`), store the job as queued and
-    hand it to the runner."""
+    """Validate the kind and its params (folders must lie inside the data `roots`) and run the kind's check
+    against the site, store the job as queued and hand it to the runner."""
     get_site(session=session, site_id=site_id)
     if job_in.kind in runner.unavailable:
         raise InvalidInputError("kind", f"{job_in.kind!r} is {runner.unavailable[job_in.kind]}")
@@ -53,8 +72,22 @@ def create_job(
         checked = kind.params.model_validate(job_in.params, context={ROOTS_CONTEXT: tuple(roots)})
     except ValidationError as error:
         raise InvalidInputError("params", _problems(error)) from None
+    if kind.check is not None:
+        try:
+            kind.check(session, site_id, checked)
+        except InvalidInputError:
+            raise
+        except ValueError as error:
+            raise InvalidInputError(*_field_of(str(error), kind.params)) from None
     params = checked.model_dump(mode="json")
     return runner.enqueue(session, site_id=site_id, kind=job_in.kind, params=params, username=username)
+
+
+def _field_of(message: str, params: type[BaseModel]) -> tuple[str, str]:
+    """The field a check's message starts with (`<field>: ...`, a field of `params`) and the rest; `params`
+    and the whole message otherwise."""
+    field, separator, rest = message.partition(": ")
+    return (field, rest) if separator and field in params.model_fields else ("params", message)
 
 
 def _problems(error: ValidationError) -> str:

@@ -1,37 +1,26 @@
-"""The job kinds that need no model: `lift` (2D -> 3D through the elevation raster) and `export` (CAMA or MapTR).
+"""The job kinds that need no model: `lift` (2D -> 3D through the elevation raster), and what every site job
+reads (`site_annotations`, `read_elevation`).
 
-The VMA loop's kinds (`retrain`, `refresh_proposals`) live in `jobs/vma.py`.
+The export kind lives in `jobs/export.py`, the VMA loop's kinds (`retrain`, `refresh_proposals`) in `jobs/vma.py`.
 """
 
 import logging
-import os
-import shutil
-import zipfile
 from pathlib import Path
-from typing import Annotated, Literal, Self
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, Field, model_validator
+from pydantic import BaseModel, Field
 from sqlalchemy import select
 
-from annotations.cama_format import export_cama
 from annotations.lift import DEFAULT_MAX_SPACING_M, DEFAULT_SEARCH_RADIUS_M, lift_points
-from annotations.maptr_format import export_maptr
-from annotations.poses import coarse_pose
 from annotations.schema import AnnotationSet, Georeference, MapElement
-from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.models import Element, Site
 from app.backend.schemas import STRICT
 from cama_pipeline.bev import RasterGeoreference, read_layer
-from cama_pipeline.data import Dataset, load_dataset
 
 logger = logging.getLogger(__name__)
 
 LIFTED_FILE = "lifted.json"
-EXPORT_ZIP = "export.zip"
-EXPORT_FOLDER = "export"
-PARTIAL_SUFFIX = ".partial"
 _FLAG_REPORT_LIMIT = 10
 
 
@@ -43,24 +32,6 @@ class LiftParams(BaseModel):
     """Densify polylines to at most this spacing before lifting, metres."""
     search_radius_m: float = Field(default=DEFAULT_SEARCH_RADIUS_M, ge=0.0, le=100.0)
     """How far an unobserved cell may borrow the nearest observed elevation, metres."""
-
-
-class ExportParams(BaseModel):
-    """Parameters of an `export` job: the CAMA release layout, or MapTR vectors (needs the data set)."""
-
-    model_config = STRICT
-    format: Literal["cama", "maptr"] = "cama"
-    dataset_root: Annotated[str | None, AfterValidator(data_folder_validator)] = Field(
-        default=None, max_length=4096
-    )
-    """Data set folder (tables, poses) the MapTR samples are cut from; required for `maptr`. It must lie inside
-    the server's data roots; stored resolved."""
-
-    @model_validator(mode="after")
-    def _maptr_needs_dataset(self) -> Self:
-        if self.format == "maptr" and not self.dataset_root:
-            raise ValueError("dataset_root: required for format 'maptr'")
-        return self
 
 
 def _map_element(row: Element) -> MapElement:
@@ -148,66 +119,7 @@ def run_lift(context: JobContext, params: LiftParams) -> JobResult:
     return JobResult(out, message)
 
 
-def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:
-    """Zip every file under `folder` (names relative to it) into `archive`, written atomically."""
-    files = sorted(path for path in folder.rglob("*") if path.is_file())
-    partial = archive.with_name(archive.name + PARTIAL_SUFFIX)
-    with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as bundle:
-        for index, path in enumerate(files):
-            bundle.write(path, path.relative_to(folder).as_posix())
-            context.report(0.8 + 0.19 * (index + 1) / len(files))
-    os.replace(partial, archive)
-    return archive
-
-
-def _dataset(root: str) -> Dataset:
-    """The data set of a MapTR export; a ValueError that names no path or folder content when unusable (the
-    job's message is shown to API callers; the server log has the details)."""
-    try:
-        return load_dataset(Path(root))
-    except (OSError, ValueError) as error:  # DatasetError is a ValueError
-        logger.warning("export: data set %s unusable: %s", root, error)
-        raise ValueError(
-            "dataset_root: not a readable data set (tables and poses); see the server log"
-        ) from None
-
-
-def run_export(context: JobContext, params: ExportParams) -> JobResult:
-    """Export the live elements to `<job>/export/` and zip it into `<job>/export.zip`."""
-    annotations, raster_dir, name = site_annotations(context)
-    context.report(0.2, f"exporting {len(annotations.elements)} elements ({params.format})", force=True)
-    folder = context.workdir / EXPORT_FOLDER
-    shutil.rmtree(folder, ignore_errors=True)
-    if params.format == "cama":
-        try:
-            elevation: np.ndarray | None = read_elevation(raster_dir, annotations.georeference)
-        except (FileNotFoundError, ValueError) as error:
-            logger.warning("site %s: exporting without elevation: %s", name, error)
-            elevation = None
-        export_cama(annotations, context.workdir, name=folder.name, elevation=elevation)
-    else:
-        dataset = _dataset(params.dataset_root or "")
-        context.report(0.5, "building MapTR samples", force=True)
-        # the job has no workspace yet, so it writes the logged poses and says so (pose_source "coarse")
-        export_maptr(annotations, dataset, folder / "maptr.json", poses=coarse_pose)
-    context.report(0.8, "packing the archive", force=True)
-    archive = zip_folder(folder, context.workdir / EXPORT_ZIP, context)
-    return JobResult(archive, f"exported {len(annotations.elements)} elements of {name} ({params.format})")
-
-
-def clean_export(workdir: Path) -> None:
-    """Remove an export's unzipped folder and a half-written archive; the finished `export.zip` stays."""
-    shutil.rmtree(workdir / EXPORT_FOLDER, ignore_errors=True)
-    (workdir / (EXPORT_ZIP + PARTIAL_SUFFIX)).unlink(missing_ok=True)
-
-
 JOB_KINDS: dict[str, JobKind] = {
     "lift": JobKind(LiftParams, run_lift, "Lift every live element to 3D through the elevation raster."),
-    "export": JobKind(
-        ExportParams,
-        run_export,
-        "Export the live elements (cama, or maptr with a data set).",
-        cleanup=clean_export,
-    ),
 }
 """The kinds a new runner starts with (the runner copies it)."""

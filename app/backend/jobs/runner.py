@@ -45,7 +45,8 @@ class JobResult:
 
 @dataclass(frozen=True)
 class JobKind:
-    """A runnable job kind: its parameter model (validated on submission) and its function."""
+    """A runnable job kind: its parameter model (validated on submission), its function, and optionally its
+    cleanup and a check of the params against the site at submission."""
 
     params: type[BaseModel]
     run: Callable[["JobContext", Any], JobResult]
@@ -53,6 +54,10 @@ class JobKind:
     cleanup: Callable[[Path], None] | None = None
     """Removes a job's intermediate files from its work folder (never its result): called when a job of the
     kind ends, however it ends, and on start for every job of the kind (what a killed server left)."""
+    check: Callable[[Session, int, Any], None] | None = None
+    """Refuses at submission, before the job is stored, what its params cannot do on this site (e.g. a
+    refined-pose export of a site without a reconstruction): called with a session, the site id and the
+    validated params; a ValueError whose message starts with `<field>: ` is a 422 naming that field."""
 
 
 class JobContext:

@@ -9,7 +9,7 @@ from fastapi.responses import FileResponse
 from app.backend.api.deps import MAX_ID, CurrentUser, IdPath, LeadUser, SessionDep, SettingsDep
 from app.backend.crud import jobs
 from app.backend.jobs.runner import JobRunner
-from app.backend.schemas_jobs import JobCreate, JobPublic
+from app.backend.schemas_jobs import JobCreate, JobKindPublic, JobPublic
 
 logger = logging.getLogger(__name__)
 router = APIRouter(tags=["jobs"])
@@ -29,6 +29,13 @@ def _runner(request: Request) -> JobRunner:
     return runner
 
 
+@router.get("/job-kinds", response_model=list[JobKindPublic])
+def list_job_kinds(request: Request, _user: CurrentUser) -> list[JobKindPublic]:
+    """The job kinds this server knows: each runnable one with its params' JSON Schema (the export's formats
+    and options among them), and the ones it cannot run with the reason."""
+    return jobs.job_kinds(_runner(request))
+
+
 @router.post(
     "/sites/{site_id}/jobs",
     response_model=JobPublic,
@@ -43,8 +50,9 @@ def create_job(
     settings: SettingsDep,
     user: LeadUser,
 ) -> JobPublic:
-    """Leads: queue a `lift` or `export` job; poll `GET /api/jobs/{id}` for its progress. A MapTR export's
-    `dataset_root` must lie inside the server's data roots (CAMA_DATA_ROOTS)."""
+    """Leads: queue a job (see `GET /api/job-kinds`); poll `GET /api/jobs/{id}` for its progress. An export's
+    `dataset_root` must lie inside the server's data roots (CAMA_DATA_ROOTS); a refined-pose export of a site
+    without a reconstruction is refused here (422 naming `poses`)."""
     job = jobs.create_job(
         session=session,
         runner=_runner(request),

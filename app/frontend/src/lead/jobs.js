@@ -1,9 +1,19 @@
 // Jobs: launch an export, a retraining or a proposal refresh and watch their progress (polled while any job is
-// unfinished). A server without a VMA registry answers retraining with 422; that message is shown as it comes.
+// unfinished). A server without a VMA registry answers retraining with 422; that message is shown as it comes, as
+// is an export the server refuses (a field it needs, refined poses of a site without a reconstruction).
 import { h, replaceChildren, shortTime, toast } from "../dom.js";
 
 const POLL_MS = 1000;
 const DONE = new Set(["succeeded", "failed", "cancelled"]);
+/** The export formats (the backend's ExportFormat) and the options each takes. */
+export const EXPORT_FORMATS = [
+  { value: "cama", label: "CAMA release", dataset: true, cama: true },
+  { value: "maptr", label: "MapTR vectors", dataset: true },
+  { value: "nuscenes-cama", label: "nuScenes-CAMAv2", dataset: true },
+  { value: "lanelet2", label: "Lanelet2 OSM", origin: true },
+];
+
+const option = (value, label) => h("option", { value }, label);
 
 export class JobsCard {
   constructor(api, siteId) {
@@ -12,7 +22,7 @@ export class JobsCard {
     this.timer = 0;
     this.message = h("div.job-message#job-message", { role: "status" });
     this.list = h("div.job-list#job-list");
-    const format = h("select#export-format", {}, h("option", { value: "cama" }, "CAMA release"));
+    this.exportForm = this.exportOptions();
     this.element = h(
       "section.card.jobs#jobs",
       {},
@@ -20,14 +30,69 @@ export class JobsCard {
       h(
         "div.row",
         {},
-        format,
-        h("button.primary#launch-export", { onclick: () => this.launch("export", { format: format.value }) }, "Export"),
+        this.exportForm.format,
+        h("button.primary#launch-export", { onclick: () => this.launchExport() }, "Export"),
         h("button#launch-retrain", { onclick: () => this.launch("retrain", {}) }, "Retrain proposals"),
         h("button#launch-refresh", { onclick: () => this.launch("refresh_proposals", {}) }, "Refresh proposals"),
       ),
+      this.exportForm.row,
       this.message,
       this.list,
     );
+  }
+
+  /** The export's options; those the chosen format does not take are hidden. */
+  exportOptions() {
+    const form = {
+      format: h("select#export-format", { onchange: () => this.showExportOptions() }, ...EXPORT_FORMATS.map((f) => option(f.value, f.label))),
+      poses: h("select#export-poses", { title: "Ego poses the export writes" }, option("refined", "refined poses"), option("coarse", "coarse (logged) poses")),
+      mode: h("select#export-mode", { title: "CAMA map mode" }, option("clip", "clip maps (300 m)"), option("site", "site map (600 m)")),
+      clipData: h("input#export-clip-data", { type: "checkbox" }),
+      dataset: h("input#export-dataset", { placeholder: "data set folder on the server", size: 28 }),
+      origin: h("input#export-origin", { placeholder: "origin lat, lon", size: 18 }),
+    };
+    form.clipLabel = h("label.inline.small", { title: "Images, lane masks and attribute.json for CAMA's tools" }, form.clipData, "clip data");
+    form.row = h("div.row.export-options#export-options", {}, form.poses, form.mode, form.clipLabel, form.dataset, form.origin);
+    this.exportForm = form;
+    this.showExportOptions();
+    return form;
+  }
+
+  showExportOptions() {
+    const form = this.exportForm;
+    const chosen = EXPORT_FORMATS.find((f) => f.value === form.format.value) || EXPORT_FORMATS[0];
+    form.poses.hidden = !chosen.dataset;
+    form.dataset.hidden = !chosen.dataset;
+    form.mode.hidden = !chosen.cama;
+    form.clipLabel.hidden = !chosen.cama;
+    form.origin.hidden = !chosen.origin;
+  }
+
+  /** The export job's params from the visible options; null (with the message shown) when the origin is unreadable. */
+  exportParams() {
+    const form = this.exportForm;
+    const chosen = EXPORT_FORMATS.find((f) => f.value === form.format.value) || EXPORT_FORMATS[0];
+    const params = { format: chosen.value };
+    if (chosen.dataset) {
+      params.poses = form.poses.value;
+      if (form.dataset.value.trim()) params.dataset_root = form.dataset.value.trim();
+    }
+    if (chosen.cama) Object.assign(params, { mode: form.mode.value, with_clip_data: form.clipData.checked });
+    if (chosen.origin && form.origin.value.trim()) {
+      const parts = form.origin.value.split(",").map((part) => Number(part.trim()));
+      if (parts.length !== 2 || parts.some((value) => !Number.isFinite(value))) {
+        this.message.className = "job-message error";
+        this.message.textContent = "export: origin: expected lat, lon in degrees, e.g. 1.2990, 103.7880";
+        return null;
+      }
+      params.origin_lat_lon = parts;
+    }
+    return params;
+  }
+
+  launchExport() {
+    const params = this.exportParams();
+    if (params) this.launch("export", params);
   }
 
   async launch(kind, params) {

@@ -1,0 +1,290 @@
+"""The editor's `export` job: a site's live elements through `cama_pipeline.export.export` (every format it
+has, refined poses from the site's reconstruction by default), zipped into `export.zip`.
+
+Where the reconstruction comes from: a site registered on a surface stage's raster folder
+(`<workspace>/surface/<site_id>/bev`) has that workspace's SfM outputs; a site on any other raster folder, or one
+whose workspace has no SfM poses, has none. A refined-pose export of it is refused at submission
+(`check_export`, a 422 naming `poses`); a coarse one (the data set's logged poses) stays possible.
+
+What an API caller reads (submission errors, the job's message) never holds a server path: paths the export
+names are replaced by the request field they come from (`<dataset_root>`, `<workspace>`), and the server log
+keeps the whole message.
+"""
+
+import logging
+import os
+import shutil
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Annotated, Self
+
+import numpy as np
+from pydantic import AfterValidator, BaseModel, Field, model_validator
+from sqlalchemy.orm import Session
+
+from annotations.schema import Georeference
+from app.backend.data_roots import data_folder_validator
+from app.backend.jobs.kinds import read_elevation, site_annotations
+from app.backend.jobs.runner import JobContext, JobKind, JobResult
+from app.backend.models import Site
+from app.backend.schemas import STRICT
+from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
+from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
+from cama_pipeline.export.run import WRITERS
+from cama_pipeline.workspace import SiteLocation, Workspace
+
+logger = logging.getLogger(__name__)
+
+EXPORT_ZIP = "export.zip"
+EXPORT_FOLDER = "export"
+"""The export's final name inside the job's folder (a folder format is this folder; a file format's file lies
+in it), staged beside it as `.export.partial-<id>` by `cama_pipeline.export.staging`."""
+PARTIAL_SUFFIX = ".partial"
+SINGLE_FILE_NAMES: dict[ExportFormat, str] = {
+    ExportFormat.maptr: "maptr.json",
+    ExportFormat.lanelet2: "map.osm",
+}
+"""The file a single-file format writes, at the top of the archive."""
+_STAGING_LEFTOVERS = (f".{EXPORT_FOLDER}.partial-*", f".{EXPORT_FOLDER}.old-*")
+"""What `cama_pipeline.export.staging` leaves beside the export when the process dies mid-export."""
+_SUMMARY_LIMIT = 1000
+NO_WORKSPACE = "no-reconstruction"
+"""The workspace a site without a reconstruction exports with (never created, so it has no sites and no
+masks): a coarse export of it covers the data set's scenes instead of guessing a reconstruction from the data
+set's default workspace."""
+
+SceneName = Annotated[str, Field(min_length=1, max_length=256)]
+
+
+class ExportParams(BaseModel):
+    """Parameters of an `export` job (see `cama_pipeline.export.ExportRequest`)."""
+
+    model_config = STRICT
+    format: Annotated[ExportFormat, Field(strict=False)] = ExportFormat.cama
+    """cama (CAMA's release layout), maptr (per-sample vectors), nuscenes-cama (a nuScenes root with the refined
+    ego poses), lanelet2 (an OSM map)."""
+    poses: Annotated[PoseChoice, Field(strict=False)] = PoseChoice.refined
+    """refined (the site's reconstruction: SfM, WIGO corrected by SfM) or coarse (the data set's logged poses)."""
+    mode: Annotated[CamaMode, Field(strict=False)] = CamaMode.clip
+    """cama: clip (a 300 m map per scene) or site (a 600 m site map, cut per scene)."""
+    with_clip_data: bool = False
+    """cama: also write each scene's images, lane masks (CAMA's ids) and attribute.json."""
+    origin_lat_lon: list[float] | None = Field(default=None, min_length=2, max_length=2)
+    """lanelet2 (required there): the geographic origin [lat, lon] in degrees of the site's global frame."""
+    dataset_root: Annotated[str | None, AfterValidator(data_folder_validator)] = Field(
+        default=None, max_length=4096
+    )
+    """The data set (nuScenes layout) the site was reconstructed from; required for cama, maptr and
+    nuscenes-cama. It must lie inside the server's data roots; stored resolved."""
+    scenes: list[SceneName] | None = Field(default=None, min_length=1, max_length=10_000)
+    """Only these scenes (default: the site's scenes)."""
+
+    @model_validator(mode="after")
+    def _what_the_format_needs(self) -> Self:
+        if self.format in FORMATS_NEEDING_DATASET and not self.dataset_root:
+            raise ValueError(
+                f"dataset_root: required for format {self.format.value!r} (its poses and samples)"
+            )
+        if self.format is ExportFormat.lanelet2 and self.origin_lat_lon is None:
+            raise ValueError(
+                "origin_lat_lon: required for format 'lanelet2' ([lat, lon] of the map's origin)"
+            )
+        if self.origin_lat_lon is not None:
+            lat, lon = self.origin_lat_lon
+            if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+                raise ValueError(
+                    "origin_lat_lon: [lat, lon] in degrees, lat in [-90, 90], lon in [-180, 180]"
+                )
+        if self.with_clip_data and self.format is not ExportFormat.cama:
+            raise ValueError("with_clip_data: only for format 'cama'")
+        return self
+
+    @property
+    def needs_reconstruction(self) -> bool:
+        """Whether the export writes poses taken from the site's reconstruction."""
+        return self.poses is PoseChoice.refined and self.format in FORMATS_NEEDING_DATASET
+
+
+def locate_reconstruction(raster_dir: Path) -> SiteLocation | None:
+    """The workspace and reconstruction site of a site's raster folder, when it is a surface stage's output."""
+    try:
+        return Workspace.locate(raster_dir)
+    except ValueError:
+        return None
+
+
+def reconstruction(raster_dir: Path, name: str) -> SiteLocation:
+    """The site's reconstruction with its SfM poses; ValueError naming `poses` and why there is none (no path)."""
+    location = locate_reconstruction(raster_dir)
+    if location is None:
+        raise ValueError(
+            f"poses: site {name!r} has no reconstruction (its rasters are not a surface stage's output, "
+            "<workspace>/surface/<site>/bev), so it has no refined poses; export with poses 'coarse' (the data "
+            "set's logged poses) or register the site on its reconstruction's rasters"
+        )
+    if not location.workspace.sfm_poses(location.site_id).is_file():
+        raise ValueError(
+            f"poses: site {name!r} has no reconstruction: its workspace has no SfM poses for site "
+            f"{location.site_id!r} (run `cama sfm`), so it has no refined poses; export with poses 'coarse'"
+        )
+    return location
+
+
+def check_export(session: Session, site_id: int, params: ExportParams) -> None:
+    """Refuse at submission what cannot run: a format this build has no writer for, a refined-pose export of
+    a site without a reconstruction; ValueError starting with the field's name."""
+    if params.format not in WRITERS:
+        available = ", ".join(sorted(WRITERS))
+        raise ValueError(
+            f"format: {params.format.value!r} is not available in this build (available: {available})"
+        )
+    if params.needs_reconstruction:
+        site = session.get(Site, site_id)
+        if site is None:
+            raise ValueError(f"site {site_id}: not found")
+        reconstruction(Path(site.raster_dir), site.name)
+
+
+def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray | None:
+    """The site's elevation raster for a CAMA map, or None (logged) when the raster folder has no usable one."""
+    try:
+        return read_elevation(raster_dir, georef)
+    except (FileNotFoundError, ValueError) as error:
+        logger.warning("site %s: exporting without elevation: %s", name, error)
+        return None
+
+
+def export_request(context: JobContext, params: ExportParams) -> tuple[ExportRequest, str, dict[Path, str]]:
+    """The request of one job: the site's live elements, its reconstruction (refined poses: checked again,
+    it may have gone since submission), the out path in the job's folder; with the site's name and the server
+    paths to keep out of messages."""
+    annotations, raster_dir, name = site_annotations(context)
+    location = (
+        reconstruction(raster_dir, name) if params.needs_reconstruction else locate_reconstruction(raster_dir)
+    )
+    folder = context.workdir / EXPORT_FOLDER
+    file_name = SINGLE_FILE_NAMES.get(params.format)
+    dataset_root = Path(params.dataset_root) if params.dataset_root else None
+    request = ExportRequest(
+        annotations=annotations,
+        out=folder / file_name if file_name else folder,
+        format=params.format,
+        dataset_root=dataset_root,
+        workspace=location.workspace.root if location else context.workdir / NO_WORKSPACE,
+        site_id=location.site_id if location else None,
+        poses=params.poses,
+        elevation=_elevation(raster_dir, annotations.georeference, name)
+        if params.format is ExportFormat.cama
+        else None,
+        scenes=tuple(params.scenes) if params.scenes else None,
+        cama_mode=params.mode,
+        with_clip_data=params.with_clip_data,
+        origin_lat_lon=(params.origin_lat_lon[0], params.origin_lat_lon[1])
+        if params.origin_lat_lon
+        else None,
+    )
+    hidden = {context.workdir: "<job>", raster_dir: "<rasters>"}
+    if dataset_root is not None:
+        hidden[dataset_root] = "<dataset_root>"
+    if location is not None:
+        hidden[location.workspace.root] = "<workspace>"
+    return request, name, hidden
+
+
+def redact(text: str, hidden: Mapping[Path, str]) -> str:
+    """`text` with each server path in `hidden` (as given and resolved; the longest first, so a path inside
+    another is named by the inner one) replaced by its label."""
+    names: dict[str, str] = {}
+    for path, label in hidden.items():
+        for form in (str(path), str(path.absolute()), str(path.resolve())):
+            names.setdefault(form, label)
+    for form in sorted(names, key=len, reverse=True):
+        text = text.replace(form, names[form])
+    return text
+
+
+def _describe(value: object) -> str:
+    """A summary value for the job's message: a count for a collection, `key value` pairs for a mapping."""
+    if isinstance(value, Mapping):
+        return "(" + ", ".join(f"{key} {_describe(item)}" for key, item in value.items()) + ")"
+    if isinstance(value, list | tuple | set | frozenset):
+        return str(len(value))
+    return str(value)
+
+
+def summary_message(result: ExportResult, name: str) -> str:
+    """One line: what was exported, in which format, with which poses, and the writer's counts."""
+    parts = [result.format.value, f"{result.poses.value} poses", f"{result.files} files"]
+    parts += [f"{key} {_describe(value)}" for key, value in result.summary.items()]
+    message = f"exported {result.elements} elements of {name} ({', '.join(parts)})"
+    return message if len(message) <= _SUMMARY_LIMIT else message[: _SUMMARY_LIMIT - 3] + "..."
+
+
+class ExportFailed(Exception):
+    """An export that could not be written; the message names what is wrong without server paths."""
+
+
+def run_export(context: JobContext, params: ExportParams) -> JobResult:
+    """Export the live elements through `cama_pipeline.export.export` into `<job>/export` (staged, renamed
+    when complete) and zip it into `<job>/export.zip` (written atomically)."""
+    clean_export(context.workdir)
+    try:
+        request, name, hidden = export_request(context, params)
+    except ValueError as error:  # the reconstruction went away since submission
+        raise ExportFailed(str(error)) from None
+    count = len(request.annotations.elements)
+    context.report(
+        0.1, f"exporting {count} elements ({params.format.value}, {params.poses.value} poses)", force=True
+    )
+    try:
+        result = export(request)
+    except Exception as error:
+        logger.warning("export job %d of site %s failed: %s", context.job_id, name, error)
+        raise ExportFailed(redact(f"{type(error).__name__}: {error}", hidden)) from None
+    context.report(0.8, "packing the archive", force=True)
+    archive = zip_folder(context.workdir / EXPORT_FOLDER, context.workdir / EXPORT_ZIP, context)
+    return JobResult(archive, redact(summary_message(result, name), hidden))
+
+
+def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:
+    """Zip every file under `folder` (names relative to it) into `archive`, written atomically."""
+    files = sorted(path for path in folder.rglob("*") if path.is_file())
+    partial = archive.with_name(archive.name + PARTIAL_SUFFIX)
+    with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as bundle:
+        for index, path in enumerate(files):
+            bundle.write(path, path.relative_to(folder).as_posix())
+            context.report(0.8 + 0.19 * (index + 1) / len(files))
+    os.replace(partial, archive)
+    return archive
+
+
+def _remove(path: Path) -> None:
+    """Remove a folder or a file."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def clean_export(workdir: Path) -> None:
+    """Remove an export's unzipped folder, its staging leftovers and a half-written archive; the finished
+    `export.zip` stays."""
+    _remove(workdir / EXPORT_FOLDER)
+    for pattern in _STAGING_LEFTOVERS:
+        for leftover in workdir.glob(pattern):
+            _remove(leftover)
+    (workdir / (EXPORT_ZIP + PARTIAL_SUFFIX)).unlink(missing_ok=True)
+
+
+EXPORT_JOB_KINDS: dict[str, JobKind] = {
+    "export": JobKind(
+        ExportParams,
+        run_export,
+        "Export the live elements: cama, maptr, nuscenes-cama (with the data set) or lanelet2 (with an "
+        "origin); refined poses from the site's reconstruction, or coarse ones when asked for.",
+        cleanup=clean_export,
+        check=check_export,
+    ),
+}
+"""The export kind (the app composes it with `kinds.JOB_KINDS`)."""
