@@ -13,6 +13,8 @@ the point's cell, as CAMA's code reads them) give the map. Rows, all over the sa
   b_truth_coarse the true 3D map through the odometry of a `--poses coarse` export (the logged poses)
   c_pipeline     the pipeline's proposals exported (z from the exported elevation raster), read back from the
                  labels, through the exported odometry
+  c_uncut        as c_pipeline with the per-scene cut switched off (`--observed-radius-m 1000`): c_pipeline minus
+                 this is what cutting each scene's labels at its observed range costs
   c_sfm          the same proposals lifted through our raster (as bench/end_to_end.py does) and projected with
                  the SfM poses directly: the figure before export
 
@@ -35,6 +37,7 @@ from end_to_end import lifted_map  # bench/end_to_end.py: this script's folder i
 from scipy.spatial.transform import Rotation
 
 from annotations import AnnotationSet, MapElement
+from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.cama_labels import CLASS_FROM_CAMA_TYPE
 from annotations.cama_odometry import CAMERA_NAME_FROM_CHANNEL, timestamp_ms
 from annotations.cama_sidecar import CamaReleaseGeoreference, read_sidecar
@@ -50,6 +53,8 @@ from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
 
 RESULTS = Path(__file__).parent / "results"
+UNCUT_RADIUS_M = 1000.0
+"""An observed radius that keeps every element of a 600 m map: no per-scene cut."""
 PROTOCOLS: tuple[SreProtocol, ...] = ("strict", "cama")
 
 
@@ -202,10 +207,11 @@ def main() -> None:
     timings: dict[str, float] = {}
     with tempfile.TemporaryDirectory(prefix="cama-export-bench-") as tmp:
         exported = {}
-        for name, annotations, choice in (
-            ("truth_refined", truth, PoseChoice.refined),
-            ("truth_coarse", truth, PoseChoice.coarse),
-            ("pipeline_refined", proposals, PoseChoice.refined),
+        for name, annotations, choice, radius in (
+            ("truth_refined", truth, PoseChoice.refined, DEFAULT_OBSERVED_RADIUS_M),
+            ("truth_coarse", truth, PoseChoice.coarse, DEFAULT_OBSERVED_RADIUS_M),
+            ("pipeline_refined", proposals, PoseChoice.refined, DEFAULT_OBSERVED_RADIUS_M),
+            ("pipeline_uncut", proposals, PoseChoice.refined, UNCUT_RADIUS_M),
         ):
             started = time.perf_counter()
             request = ExportRequest(
@@ -217,6 +223,7 @@ def main() -> None:
                 site_id=site_id,
                 poses=choice,
                 elevation=elevation,
+                observed_radius_m=radius,
             )
             exported[name] = read_export(export(request).path, dataset)
             timings[name] = round(time.perf_counter() - started, 2)
@@ -232,6 +239,7 @@ def main() -> None:
         "a_truth_labels": (exported["truth_refined"][1], exported["truth_refined"][0]),
         "b_truth_coarse": (true_map, exported["truth_coarse"][0]),
         "c_pipeline": (exported["pipeline_refined"][1], exported["pipeline_refined"][0]),
+        "c_uncut": (exported["pipeline_uncut"][1], exported["pipeline_uncut"][0]),
         "c_sfm": ({scene: pipeline_lifted for scene in scenes}, sfm_poses),
     }
     figures: dict[str, Any] = {"site": str(args.site), "site_id": site_id, "scenes": scenes}

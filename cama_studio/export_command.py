@@ -18,6 +18,7 @@ import typer
 from pydantic import BaseModel
 
 from annotations import cama_format
+from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, import_cama
 from annotations.maptr_format import MaptrFile, import_maptr
 from annotations.schema import AnnotationSet, Georeference
@@ -109,6 +110,12 @@ def export_command(
     with_clip_data: Annotated[
         bool, typer.Option(help="cama: also write images, lane masks (CAMA's ids) and attribute.json.")
     ] = False,
+    observed_radius_m: Annotated[
+        float,
+        typer.Option(
+            help="cama: a scene's labels are the elements within this many metres of its cameras' paths."
+        ),
+    ] = DEFAULT_OBSERVED_RADIUS_M,
     masks: MasksOpt = "auto",
     origin: Annotated[
         str | None, typer.Option(help="lanelet2: geographic origin LAT,LON of the site's global frame.")
@@ -130,6 +137,7 @@ def export_command(
             elevation=_load_elevation(elevation),
             scenes=tuple(scene) if scene else None,
             cama_mode=mode,
+            observed_radius_m=observed_radius_m,
             with_clip_data=with_clip_data,
             masks=parse_mask_choice(masks),
             origin_lat_lon=_origin(origin),

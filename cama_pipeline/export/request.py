@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.schema import AnnotationSet
 from cama_pipeline.data.masks import MaskChoice
 
@@ -70,6 +71,9 @@ class ExportRequest:
     scenes: tuple[str, ...] | None = None
     """Only these scenes (default: the site's scenes with refined poses; every scene with coarse poses)."""
     cama_mode: CamaMode = CamaMode.clip
+    observed_radius_m: float = DEFAULT_OBSERVED_RADIUS_M
+    """cama: a scene's labels are the elements within this distance of its cameras' trajectories (the surface
+    stage's ray range by default), clipped there."""
     site_name: str | None = None
     """cama: the site's name in `site2clip/` (default: the reconstruction's site id, else the annotation set's)."""
     with_clip_data: bool = False
@@ -90,6 +94,8 @@ class ExportRequest:
             raise ValueError("--with-clip-data: only for --format cama")
         if self.format is ExportFormat.lanelet2 and self.origin_lat_lon is None:
             raise ValueError("--format lanelet2 needs --origin LAT,LON (the geographic origin of the map)")
+        if not (np.isfinite(self.observed_radius_m) and self.observed_radius_m > 0):
+            raise ValueError(f"--observed-radius-m: expected a value > 0, got {self.observed_radius_m}")
         if self.scenes is not None and not self.scenes:
             raise ValueError("scenes: an empty list; leave it out for the site's scenes")
 

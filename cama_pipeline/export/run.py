@@ -52,6 +52,7 @@ def _write_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
         site_name=request.site_name or poses.site_id or request.annotations.site_id,
         mode=request.cama_mode.value,
         elevation=request.elevation,
+        observed_radius_m=request.observed_radius_m,
         show_progress=request.show_progress,
     )
     summary: dict[str, object] = {
