@@ -49,6 +49,7 @@ def test_lanelet2_through_the_command(tmp_path: Path) -> None:
         (["--format", "maptr"], "--dataset"),
         (["--format", "nuscenes-cama"], "--dataset"),
         (["--format", "lanelet2", "--origin", "1,2", "--with-clip-data"], "--with-clip-data"),
+        (["--format", "lanelet2", "--origin", "1,2", "--observed-radius-m", "0"], "--observed-radius-m"),
     ],
 )
 def test_bad_requests_exit_2_and_write_nothing(tmp_path: Path, extra: list[str], message: str) -> None:
