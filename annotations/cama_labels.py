@@ -1,6 +1,7 @@
 """CAMA's `map_labels.json`: the type table, the instance model, and the JSON reading and validation helpers the
-CAMA (and MapTR) readers share. One place for what an instance looks like; the layouts around it are in
-`annotations.cama_format` (our older folder-per-site layout) and `annotations.cama_release` (the public one).
+CAMA (and MapTR) readers share. One place for what an instance looks like; the layout around it is written by
+`annotations.cama_release` (the public one) and read by `annotations.cama_import` (that one, a plain release, and
+our older folder-per-site layout).
 
 An instance: {"attrs": {"type"}, "data": [[u, v], ...], "id", "luid", "point_attrs", "shape_type": "polyline",
 "struct_type": "parsing", "track_id"}; `data` in map pixels. CAMA's own reader uses only `attrs.type` and `data`.

@@ -1,8 +1,9 @@
 """Our georeference sidecar beside CAMA labels (our extension; CAMA's tools ignore it): what `cama import` needs to
 put the labels back in site coordinates.
 
-Version 1 (the older folder-per-site layout, `annotations.cama_format.export_cama`): `maps/georeference.json`
-with the site id and the Georeference of the exported raster; label pixels are that raster's pixels.
+Version 1 (the older folder-per-site layout, no longer written; `cama import` still reads it, see
+`annotations.cama_import`): `maps/georeference.json` with the site id and the Georeference of the exported raster;
+label pixels are that raster's pixels.
 
 Version 2 (the public release layout, `annotations.cama_release`): per scene `all_clips/<scene>/maps/
 georeference.json`, and for the site map `site2clip/<site>_georeference.json`. Label pixels are the release map's

@@ -6,15 +6,19 @@ the night scene) y = 30; each from x = 0 to 40 in 10 m steps, one key frame a se
 The camera offsets are symmetric about ego (1, 0), so a scene's mean camera position is its mean ego position +
 (1, 0): scene-a's clip-mode origin is global (1021, 2000). The pose lookup is the logged pose moved up by
 `LOOKUP_SHIFT_Z`, source `sfm` for key frames and `wigo+sfm` for sweeps: odometry must carry it.
+`annotation_set()` places elements around scene-a and scene-b; `export_release` exports them.
 """
 
 from pathlib import Path
 
 import numpy as np
 
+from annotations.cama_release import CamaReleaseResult, export_cama_release
+from annotations.lift import lift_element
 from annotations.poses import SourcedPose
-from annotations.schema import Georeference
+from annotations.schema import AnnotationSet, Georeference, MapElement
 from cama_pipeline.data import CameraCalibration, CameraImage, Dataset, Frame, Pose, Scene
+from tests.annotations.annotation_helpers import element_kwargs
 
 SITE_ORIGIN = (1000.0, 2000.0)
 CHANNEL_OFFSETS = {
@@ -38,6 +42,11 @@ RASTER_ORIGIN_SITE = (-30.0, 100.0)
 RASTER_SHAPE = (240, 240)
 PLANE = (0.02, -0.01, 5.0)
 """Our raster's heights: z = a * x_site + b * y_site + c."""
+RADIUS_M = 10.0
+"""The exports' observed radius: scene-a (cameras at y in [-0.5, 0.5]) sees y in [-10.5, 10.5]."""
+SITE = "site-7"
+SCENES = ("scene-a", "scene-b")
+"""The exported scenes (scene-c, the night scene, is left out)."""
 
 
 def plane_z(x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
@@ -130,3 +139,41 @@ def shifted_lookup(image: CameraImage) -> SourcedPose:
 def lookup_camera_pose(image: CameraImage) -> Pose:
     """Camera to global of an image through `shifted_lookup`."""
     return shifted_lookup(image).global_from_ego @ image.calibration.ego_from_cam
+
+
+def _element(element_id: str, points: list[list[float]], cls: str = "divider") -> MapElement:
+    return MapElement.model_validate(element_kwargs(id=element_id, points_2d=points, **{"class": cls}))
+
+
+def annotation_set(*, site_id: str = "bev", lifted: bool = True) -> AnnotationSet:
+    """Hand-placed elements (site metres) around scene-a (y = 0) and scene-b (y = 60)."""
+    elements = [
+        _element("near-a", [[10.0, 2.0], [20.0, 2.0]]),
+        _element("near-b", [[5.0, 58.0], [35.0, 58.0]], "boundary"),
+        _element("cross", [[20.0, -19.0], [20.0, 30.0]]),
+        _element("zigzag", [[5.0, 5.0], [15.0, 5.0], [15.0, 25.0], [25.0, 25.0], [25.0, 5.0], [35.0, 5.0]]),
+        _element("cw", [[30.0, 5.0], [34.0, 5.0], [34.0, 15.0], [30.0, 15.0], [30.0, 5.0]], "ped_crossing"),
+        _element("far", [[70.0, 30.0], [80.0, 30.0]]),
+        _element("tip", [[20.0, 10.2], [20.0, 30.0]]),
+    ]
+    georef = raster_georeference()
+    if lifted:
+        elements = [lift_element(e, plane_raster(), georef) for e in elements]
+    return AnnotationSet(site_id=site_id, georeference=georef, elements=elements)
+
+
+def export_release(out: Path, mode: str = "clip", **kwargs: object) -> CamaReleaseResult:
+    """`export_cama_release` of `annotation_set()` over SCENES with the shifted lookup and the plane raster;
+    `kwargs` replace any argument (`annotations` too)."""
+    args: dict = {  # type: ignore[type-arg]
+        "dataset": release_dataset(),
+        "poses": shifted_lookup,
+        "scenes": SCENES,
+        "site_name": SITE,
+        "mode": mode,
+        "elevation": plane_raster(),
+        "observed_radius_m": RADIUS_M,
+        **kwargs,
+    }
+    annotations = args.pop("annotations", annotation_set())
+    return export_cama_release(annotations, out, **args)

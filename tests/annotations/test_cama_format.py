@@ -1,6 +1,9 @@
-"""CAMA release layout: lossless export -> import, the type table, pixel convention, bad files, schema files."""
+"""CAMA import and validation: the type table, older exports (sidecar version 1, one folder per site) read back,
+bad labels in a release folder named by file and field, the committed schema files, and a plain CAMA release."""
 
 import json
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -8,63 +11,77 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from annotations import AnnotationSet, Georeference, MapElement, lift_element
-from annotations.cama_format import (
-    CAMA_TYPE_FROM_CLASS,
-    MAP_LABELS,
-    class_from_cama_type,
-    export_cama,
-    import_cama,
-)
-from annotations.poses import coarse_pose
-from cama_pipeline.data import load_dataset
+from annotations import AnnotationSet, Georeference
+from annotations.cama_format import CAMA_TYPE_FROM_CLASS, MAP_LABELS, class_from_cama_type, import_cama
 from cama_studio.export_command import SCHEMA_DIR, SCHEMA_MODELS, import_command, schema_text
-from tests.annotations.annotation_helpers import SQUARE, element_kwargs, plane_z
-from tests.data.nuscenes_fixture import write_nuscenes_fixture
+from tests.annotations.annotation_helpers import plane_z
+from tests.annotations.release_helpers import export_release
+
+V1_LABELS = [
+    {"attrs": {"type": "lane_marking"}, "data": [[0, 0], [2, 2], [20, 4]], "id": "d1"},
+    {"attrs": {"type": "Road_teeth"}, "data": [[4, 10], [36, 11]], "id": "b1"},
+    {"attrs": {"type": "Crosswalk_Line"}, "data": [[6, 22], [14, 22], [14, 30], [6, 30]], "id": "c1"},
+]
+"""Pixels of the `georef` fixture's raster (0.5 m, pixel (0, 0) at site (0, 20)): u = column (+x), v = row (-y)."""
+V1_SITE_XY = {
+    "d1": [(0.0, 20.0), (1.0, 19.0), (10.0, 18.0)],
+    "b1": [(2.0, 15.0), (18.0, 14.5)],
+    "c1": [(3.0, 9.0), (7.0, 9.0), (7.0, 5.0), (3.0, 5.0), (3.0, 9.0)],  # an open ring comes back closed
+}
 
 
-def _set(georef: Georeference, elevation: np.ndarray) -> AnnotationSet:
-    """A divider, a boundary and a closed crosswalk, lifted through the raster."""
-    elements = [
-        MapElement.model_validate(element_kwargs(id="d1", points_2d=[[1.0, 1.0], [5.0, 2.5], [10.0, 3.0]])),
-        MapElement.model_validate(
-            element_kwargs(id="b1", **{"class": "boundary"}, points_2d=[[2.0, 15.0], [18.0, 15.5]])
-        ),
-        MapElement.model_validate(
-            element_kwargs(
-                id="c1", **{"class": "ped_crossing"}, points_2d=[[x + 3, y + 5] for x, y in SQUARE]
-            )
-        ),
-    ]
-    lifted = [lift_element(e, elevation, georef) for e in elements]
-    return AnnotationSet(site_id="site-a", georeference=georef, elements=lifted)
-
-
-@pytest.fixture()
-def raster(plane_elevation: np.ndarray) -> np.ndarray:
-    """The plane raster as exported (float32)."""
-    return plane_elevation.astype(np.float32)
-
-
-def test_export_import_is_lossless(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
-    """2D points, class, id and 3D points (z from the raster) come back within 1e-6 m."""
-    original = _set(georef, raster)
-    folder = export_cama(original, tmp_path, elevation=raster)
-    assert folder == tmp_path / "site-a"
-    assert {p.name for p in (folder / "maps").iterdir()} == {
-        "map_labels.json",
-        "elevation.npy",
-        "georeference.json",
+def _write_v1(folder: Path, elevation: np.ndarray | None) -> Path:
+    """An older export's folder as that writer left it: labels, the version 1 sidecar and, if given, the raster."""
+    (folder / "maps").mkdir(parents=True)
+    (folder / "maps/map_labels.json").write_text(json.dumps(V1_LABELS))
+    georeference = {
+        "site_origin_xy": [100.0, 200.0],
+        "origin_xy": [100.0, 220.0],
+        "resolution": 0.5,
+        "width": 40,
+        "height": 40,
+        "frame": "global",
+        "row_axis": "-y",
+        "col_axis": "+x",
     }
-    back = import_cama(folder)
+    sidecar = {
+        "format": "cama-studio-georeference",
+        "format_version": 1,
+        "site_id": "site-a",
+        "georeference": georeference,
+    }
+    (folder / "maps/georeference.json").write_text(json.dumps(sidecar, indent=2))
+    if elevation is not None:
+        np.save(folder / "maps/elevation.npy", elevation)
+    return folder
+
+
+def test_import_version_1_folder(tmp_path: Path, georef: Georeference, plane_elevation: np.ndarray) -> None:
+    """An older export comes back in site metres through its stored georeference, with its site id, the classes,
+    the crosswalk closed and z lifted from maps/elevation.npy."""
+    back = import_cama(_write_v1(tmp_path / "site-a", plane_elevation.astype(np.float32)))
     assert back.site_id == "site-a" and back.georeference == georef
-    assert [e.id for e in back.elements] == ["d1", "b1", "c1"]
-    for a, b in zip(original.elements, back.elements, strict=True):
-        assert a.cls == b.cls
-        np.testing.assert_allclose(b.xy(), a.xy(), atol=1e-6)
-        assert a.points_3d is not None and b.points_3d is not None
-        np.testing.assert_allclose(b.xyz(), a.xyz(), atol=1e-6)
-    assert back.by_id("c1").closed and back.by_id("c1").points_2d[0] == back.by_id("c1").points_2d[-1]
+    assert [(e.id, e.cls) for e in back.elements] == [
+        ("d1", "divider"),
+        ("b1", "boundary"),
+        ("c1", "ped_crossing"),
+    ]
+    for element in back.elements:
+        assert element.source == "human" and element.review_state == "proposed"
+        np.testing.assert_allclose(element.xy(), V1_SITE_XY[element.id], atol=1e-9)
+        xyz = element.xyz()
+        assert xyz is not None
+        np.testing.assert_allclose(xyz[:, 2], plane_z(xyz[:, 0], xyz[:, 1]), atol=1e-5)
+    assert back.by_id("c1").closed
+
+
+def test_version_1_raster_optional_and_checked(tmp_path: Path) -> None:
+    """Without maps/elevation.npy nothing is lifted; a raster of another shape than the georeference is refused,
+    naming the file and both shapes."""
+    assert all(e.points_3d is None for e in import_cama(_write_v1(tmp_path / "bare", None)).elements)
+    folder = _write_v1(tmp_path / "wrong", np.zeros((10, 12), np.float32))
+    with pytest.raises(ValueError, match=r"elevation.npy: shape \(10, 12\) != georeference .* \(40, 40\)"):
+        import_cama(folder)
 
 
 def test_type_table_both_ways() -> None:
@@ -82,27 +99,40 @@ def test_type_table_both_ways() -> None:
         class_from_cama_type("Foo")
 
 
-def test_pixel_convention(tmp_path: Path, georef: Georeference) -> None:
-    """u = column (+x), v = row (-y): site (1.0, 19.0) is pixel (2, 2) when pixel (0, 0) is at site (0, 20)."""
-    element = MapElement.model_validate(element_kwargs(points_2d=[[0.0, 20.0], [1.0, 19.0]]))
-    folder = export_cama(AnnotationSet(site_id="s", georeference=georef, elements=[element]), tmp_path)
-    labels = json.loads((folder / MAP_LABELS).read_text())
-    assert labels[0]["data"] == [[0.0, 0.0], [2.0, 2.0]]
-    assert labels[0]["attrs"] == {"type": "lane_marking"}
-    assert labels[0]["shape_type"] == "polyline" and labels[0]["struct_type"] == "parsing"
-    assert labels[0]["point_attrs"] == [[], []]
-    assert import_cama(folder).elements[0].points_3d is None  # no raster exported, nothing lifted
+@pytest.fixture(scope="module")
+def exported_scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """scene-a's folder of one clip-mode release export (`release_helpers`); tests edit a copy of it."""
+    result = export_release(tmp_path_factory.mktemp("release") / "out", scenes=("scene-a",))
+    return result.out / "all_clips/scene-a"
 
 
-def test_stop_line_skipped_unless_asked(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
-    """A Stop_Line instance is skipped by default and imported as a divider on request."""
-    folder = export_cama(_set(georef, raster), tmp_path, elevation=raster)
+def _copy_or_link(src: str, dst: str) -> None:
+    """JSON files are copied (the tests edit them); the rasters, which import only reads, are hard-linked."""
+    if src.endswith(".json"):
+        shutil.copy2(src, dst)
+    else:
+        os.link(src, dst)
+
+
+@pytest.fixture()
+def scene(exported_scene: Path, tmp_path: Path) -> Path:
+    """A copy of the exported scene folder this test may edit."""
+    return Path(shutil.copytree(exported_scene, tmp_path / "scene-a", copy_function=_copy_or_link))
+
+
+def _edit_labels(folder: Path, edit: object) -> None:
     labels = json.loads((folder / MAP_LABELS).read_text())
-    labels.append({**labels[0], "id": 99, "attrs": {"type": "Stop_Line"}})
+    edit(labels)  # type: ignore[operator]
     (folder / MAP_LABELS).write_text(json.dumps(labels))
-    assert len(import_cama(folder).elements) == 3
-    stop = import_cama(folder, stop_line_as_divider=True).by_id("99")
-    assert stop.cls == "divider"
+
+
+def test_stop_line_skipped_unless_asked(scene: Path) -> None:
+    """A Stop_Line instance is skipped by default and imported as a divider on request."""
+    count = len(import_cama(scene).elements)
+    assert count == len(json.loads((scene / MAP_LABELS).read_text())) > 0
+    _edit_labels(scene, lambda labels: labels.append({**labels[0], "id": 99, "attrs": {"type": "Stop_Line"}}))
+    assert len(import_cama(scene).elements) == count
+    assert import_cama(scene, stop_line_as_divider=True).by_id("99").cls == "divider"
 
 
 @pytest.mark.parametrize(
@@ -120,64 +150,31 @@ def test_stop_line_skipped_unless_asked(tmp_path: Path, georef: Georeference, ra
         (lambda labels: labels.__setitem__(slice(None), []) or labels.append("x"), "map_labels.json: [0]: "),
     ],
 )
-def test_bad_labels_name_file_and_field(
-    tmp_path: Path, georef: Georeference, raster: np.ndarray, edit: object, expected: str
-) -> None:
+def test_bad_labels_name_file_and_field(scene: Path, edit: object, expected: str) -> None:
     """Unknown type, NaN, a missing field or a non-object instance: ValueError naming file and field path."""
-    folder = export_cama(_set(georef, raster), tmp_path, elevation=raster)
-    labels = json.loads((folder / MAP_LABELS).read_text())
-    edit(labels)  # type: ignore[operator]
-    (folder / MAP_LABELS).write_text(json.dumps(labels))
+    _edit_labels(scene, edit)
     with pytest.raises(ValueError) as caught:
-        import_cama(folder)
+        import_cama(scene)
     assert expected in str(caught.value)
 
 
-def test_labels_not_a_list(tmp_path: Path, georef: Georeference, raster: np.ndarray) -> None:
+def test_labels_not_a_list(scene: Path) -> None:
     """A map_labels.json that is not a list is rejected at the root."""
-    folder = export_cama(_set(georef, raster), tmp_path)
-    (folder / MAP_LABELS).write_text(json.dumps({"instances": []}))
+    (scene / MAP_LABELS).write_text(json.dumps({"instances": []}))
     with pytest.raises(ValueError, match=r"map_labels.json: \(root\): Input should be a valid list"):
-        import_cama(folder)
+        import_cama(scene)
 
 
-def test_missing_georeference_named(tmp_path: Path) -> None:
-    """A folder without maps/georeference.json names the missing file."""
+def test_missing_georeference_named(scene: Path, tmp_path: Path) -> None:
+    """A folder without maps/georeference.json (or a raster) names the missing file; a sidecar without its
+    georeference names the file and the field."""
     with pytest.raises(FileNotFoundError, match="georeference.json"):
-        import_cama(tmp_path)
-
-
-def test_odometry_tum_rows(tmp_path: Path, georef: Georeference) -> None:
-    """With a data set, one TUM file per camera: `t x y z qx qy qz qw`, camera to global."""
-    fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
-    dataset = load_dataset(fixture.root)
-    folder = export_cama(
-        AnnotationSet(site_id="s", georeference=georef), tmp_path / "out", dataset=dataset, poses=coarse_pose
-    )
-    image = dataset.scenes[0].images["CAM_FRONT"][0]
-    rows = [line.split() for line in (folder / "odometry/camera_CAM_FRONT.txt").read_text().splitlines()[1:]]
-    assert len(rows) == len(dataset.scenes[0].images["CAM_FRONT"]) and all(len(r) == 8 for r in rows)
-    pose = image.global_from_ego @ image.calibration.ego_from_cam
-    first = np.array(rows[0], dtype=float)
-    assert first[0] == pytest.approx(image.timestamp_us / 1e6)
-    np.testing.assert_allclose(first[1:4], pose.translation, atol=1e-6)
-    np.testing.assert_allclose(first[[7, 4, 5, 6]], pose.rotation, atol=1e-8)
-    sources = json.loads((folder / "odometry/pose_sources.json").read_text())
-    assert sources["camera_CAM_FRONT.txt"] == {
-        "counts": {"coarse": len(rows)},
-        "rows": ["coarse"] * len(rows),
-    }
-
-
-def test_odometry_needs_a_pose_lookup(tmp_path: Path, georef: Georeference) -> None:
-    """With a data set but no pose lookup, nothing silently falls back to the logged poses."""
-    fixture = write_nuscenes_fixture(tmp_path / "nuscenes", n_samples=2, with_can=False, with_lidar=False)
-    with pytest.raises(ValueError, match="no pose lookup"):
-        export_cama(
-            AnnotationSet(site_id="s", georeference=georef),
-            tmp_path / "o",
-            dataset=load_dataset(fixture.root),
-        )
+        import_cama(tmp_path / "empty")
+    sidecar = json.loads((scene / "maps/georeference.json").read_text())
+    del sidecar["georeference"]
+    (scene / "maps/georeference.json").write_text(json.dumps(sidecar))
+    with pytest.raises(ValueError, match="georeference.json: georeference: Field required"):
+        import_cama(scene)
 
 
 @pytest.mark.parametrize("name", sorted(SCHEMA_MODELS))

@@ -2,6 +2,7 @@
 hand-placed element, odometry equal to the lookup's poses of that scene only, the observed-range cut, site mode's
 site2clip files, a round trip within one cell, and clear errors."""
 
+import inspect
 import json
 import re
 from pathlib import Path
@@ -11,76 +12,39 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString, Polygon
 
-from annotations import AnnotationSet, MapElement, lift_element
 from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.cama_import import import_cama
 from annotations.cama_odometry import CAMERA_NAME_FROM_CHANNEL
 from annotations.cama_release import CamaReleaseResult, export_cama_release
+from annotations.poses import SourcedPose
+from cama_pipeline.data import CameraImage
 from cama_pipeline.surface.config import SurfaceConfig
-from tests.annotations.annotation_helpers import element_kwargs
 from tests.annotations.release_helpers import (
+    RADIUS_M,
+    SCENES,
+    SITE,
     SITE_ORIGIN,
+    annotation_set,
+    export_release,
     lookup_camera_pose,
     plane_raster,
     plane_z,
-    raster_georeference,
     release_dataset,
-    shifted_lookup,
 )
 
-RADIUS_M = 10.0
-"""The exports' observed radius: scene-a (cameras at y in [-0.5, 0.5]) sees y in [-10.5, 10.5]."""
-SITE = "site-7"
-SCENES = ("scene-a", "scene-b")
 CAMS = sorted(CAMERA_NAME_FROM_CHANNEL.values())
-
-
-def _element(element_id: str, points: list[list[float]], cls: str = "divider") -> MapElement:
-    return MapElement.model_validate(element_kwargs(id=element_id, points_2d=points, **{"class": cls}))
-
-
-def annotation_set(*, site_id: str = "bev", lifted: bool = True) -> AnnotationSet:
-    """Hand-placed elements (site metres) around scene-a (y = 0) and scene-b (y = 60)."""
-    elements = [
-        _element("near-a", [[10.0, 2.0], [20.0, 2.0]]),
-        _element("near-b", [[5.0, 58.0], [35.0, 58.0]], "boundary"),
-        _element("cross", [[20.0, -19.0], [20.0, 30.0]]),
-        _element("zigzag", [[5.0, 5.0], [15.0, 5.0], [15.0, 25.0], [25.0, 25.0], [25.0, 5.0], [35.0, 5.0]]),
-        _element("cw", [[30.0, 5.0], [34.0, 5.0], [34.0, 15.0], [30.0, 15.0], [30.0, 5.0]], "ped_crossing"),
-        _element("far", [[70.0, 30.0], [80.0, 30.0]]),
-        _element("tip", [[20.0, 10.2], [20.0, 30.0]]),
-    ]
-    georef = raster_georeference()
-    if lifted:
-        elements = [lift_element(e, plane_raster(), georef) for e in elements]
-    return AnnotationSet(site_id=site_id, georeference=georef, elements=elements)
-
-
-def _export(out: Path, mode: str = "clip", **kwargs: object) -> CamaReleaseResult:
-    args: dict = {  # type: ignore[type-arg]
-        "dataset": release_dataset(),
-        "poses": shifted_lookup,
-        "scenes": SCENES,
-        "site_name": SITE,
-        "mode": mode,
-        "elevation": plane_raster(),
-        "observed_radius_m": RADIUS_M,
-        **kwargs,
-    }
-    annotations = args.pop("annotations", annotation_set())
-    return export_cama_release(annotations, out, **args)
 
 
 @pytest.fixture(scope="module")
 def clip(tmp_path_factory: pytest.TempPathFactory) -> CamaReleaseResult:
     """One clip-mode export of scene-a and scene-b (scene-c, the night scene, left out)."""
-    return _export(tmp_path_factory.mktemp("clip") / "out")
+    return export_release(tmp_path_factory.mktemp("clip") / "out")
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory: pytest.TempPathFactory) -> CamaReleaseResult:
     """One site-mode export of the same."""
-    return _export(tmp_path_factory.mktemp("site") / "out", "site")
+    return export_release(tmp_path_factory.mktemp("site") / "out", "site")
 
 
 def _files(root: Path) -> set[str]:
@@ -119,7 +83,7 @@ def test_clip_layout_files_and_shapes(clip: CamaReleaseResult) -> None:
         assert elevation.shape == (3000, 3000) and elevation.dtype == np.float32
         assert np.isfinite(elevation).all()
         filled = cv2.imread(str(out / f"all_clips/{scene}/maps/elevation_filled.png"), cv2.IMREAD_UNCHANGED)
-        assert filled.shape == (3000, 3000) and set(np.unique(filled)) <= {0, 255}
+        assert filled is not None and filled.shape == (3000, 3000) and set(np.unique(filled)) <= {0, 255}
         assert 0 < int((filled == 255).sum()) == clip.scenes[SCENES.index(scene)].filled_cells < filled.size
 
 
@@ -130,6 +94,8 @@ def test_uv_convention_on_a_hand_placed_element(clip: CamaReleaseResult) -> None
     assert _sidecar(folder / "maps/georeference.json")["world_origin_global"] == [1021.0, 2000.0, 0.0]
     near = _labels(folder / "maps/map_labels.json")["near-a"]
     assert near["attrs"] == {"type": "lane_marking"}
+    assert near["shape_type"] == "polyline" and near["struct_type"] == "parsing"
+    assert near["point_attrs"] == [[], []]
     np.testing.assert_allclose(near["data"], [[1520.0, 1390.0], [1520.0, 1490.0]], atol=1e-6)
     elevation = np.load(folder / "maps/vision_road_mlp_ft.npy")
     assert elevation[1390, 1520] == pytest.approx(float(plane_z(10.0, 2.0)), abs=1e-4)
@@ -160,9 +126,25 @@ def test_odometry_rows_are_the_lookup_poses_of_that_scene(clip: CamaReleaseResul
                 np.testing.assert_allclose(
                     np.array(fields, dtype=object)[[7, 4, 5, 6]].astype(float), pose.rotation, atol=1e-8
                 )
-            assert sources[f"scmv_{cam}.txt"]["rows"] == [
-                "sfm" if im.is_key_frame else "wigo+sfm" for im in images
-            ]
+            rows = ["sfm" if im.is_key_frame else "wigo+sfm" for im in images]
+            assert sources[f"scmv_{cam}.txt"] == {
+                "counts": {"sfm": rows.count("sfm"), "wigo+sfm": rows.count("wigo+sfm")},
+                "rows": rows,
+            }
+            assert sources[f"scmv_{cam}.txt"]["counts"] == {"sfm": 5, "wigo+sfm": 4}
+
+
+def test_odometry_needs_a_pose_lookup(tmp_path: Path) -> None:
+    """The pose lookup is a required argument (nothing falls back to the logged poses), and a lookup that has no
+    pose for an image stops the export before anything is written."""
+    assert inspect.signature(export_cama_release).parameters["poses"].default is inspect.Parameter.empty
+
+    def no_pose(image: CameraImage) -> SourcedPose:
+        raise KeyError(f"{image.token}: no refined pose")
+
+    with pytest.raises(KeyError, match="scene-a-CAM_FRONT-0-0: no refined pose"):
+        export_release(tmp_path / "out", poses=no_pose)
+    assert not (tmp_path / "out").exists()
 
 
 def test_observed_range_cut(clip: CamaReleaseResult) -> None:
@@ -180,8 +162,12 @@ def test_observed_range_cut(clip: CamaReleaseResult) -> None:
     assert labels_a["zigzag#2"]["element_id"] == "zigzag" and labels_a["near-a"]["element_id"] == "near-a"
     back = import_cama(clip.out / "all_clips/scene-a")
     np.testing.assert_allclose(back.by_id("cross").xy(), [[20.0, -10.5], [20.0, 10.5]], atol=1e-3)
-    np.testing.assert_allclose(back.by_id("zigzag#1").xy(), [[5, 5], [15, 5], [15, 10.5]], atol=1e-3)
-    np.testing.assert_allclose(back.by_id("zigzag#2").xy(), [[25, 10.5], [25, 5], [35, 5]], atol=1e-3)
+    np.testing.assert_allclose(
+        back.by_id("zigzag#1").xy(), [[5.0, 5.0], [15.0, 5.0], [15.0, 10.5]], atol=1e-3
+    )
+    np.testing.assert_allclose(
+        back.by_id("zigzag#2").xy(), [[25.0, 10.5], [25.0, 5.0], [35.0, 5.0]], atol=1e-3
+    )
     crosswalk = back.by_id("cw")
     assert crosswalk.closed
     assert Polygon(crosswalk.xy()).area == pytest.approx(4.0 * 5.5, abs=0.05)
@@ -258,11 +244,11 @@ def test_unobserved_cells_filled_from_nearest(tmp_path: Path) -> None:
     """Cells our raster did not observe (x > 40 m here) take the nearest observed value and are marked filled."""
     raster = plane_raster()
     raster[:, 141:] = np.nan  # columns beyond site x = -30 + 140 * 0.5 = 40
-    result = _export(tmp_path / "out", scenes=("scene-a",), elevation=raster)
+    result = export_release(tmp_path / "out", scenes=("scene-a",), elevation=raster)
     folder = result.out / "all_clips/scene-a/maps"
     elevation = np.load(folder / "vision_road_mlp_ft.npy")
     filled = cv2.imread(str(folder / "elevation_filled.png"), cv2.IMREAD_UNCHANGED)
-    assert np.isfinite(elevation).all()
+    assert filled is not None and np.isfinite(elevation).all()
     v_obs, u_obs = round((10 - 21 + 150) / 0.1), round((2 + 150) / 0.1)  # site (10, 2)
     v_fill, u_fill = round((60 - 21 + 150) / 0.1), u_obs  # site (60, 2)
     assert filled[v_obs, u_obs] == 0 and filled[v_fill, u_fill] == 255
@@ -273,14 +259,14 @@ def test_without_raster_the_mean_element_height(tmp_path: Path) -> None:
     """No raster: every map is the lifted elements' mean z, all cells marked filled; no lift either: refused."""
     elements = annotation_set()
     mean_z = float(np.mean(np.concatenate([e.xyz()[:, 2] for e in elements.elements])))  # type: ignore[index]
-    result = _export(tmp_path / "out", scenes=("scene-b",), elevation=None)
+    result = export_release(tmp_path / "out", scenes=("scene-b",), elevation=None)
     folder = result.out / "all_clips/scene-b/maps"
     elevation = np.load(folder / "vision_road_mlp_ft.npy")
     assert elevation.shape == (3000, 3000) and np.all(elevation == np.float32(mean_z))
     assert _sidecar(folder / "georeference.json")["elevation_source"] == "elements-mean"
     assert result.elevation_source == "elements-mean" and result.scenes[0].filled_cells == 3000 * 3000
     with pytest.raises(ValueError, match="elevation: no elevation raster given and no element is lifted"):
-        _export(tmp_path / "o2", elevation=None, annotations=annotation_set(lifted=False))
+        export_release(tmp_path / "o2", elevation=None, annotations=annotation_set(lifted=False))
 
 
 @pytest.mark.parametrize(
@@ -299,7 +285,7 @@ def test_without_raster_the_mean_element_height(tmp_path: Path) -> None:
 def test_bad_input_is_a_clear_error(tmp_path: Path, changes: dict, message: str) -> None:  # type: ignore[type-arg]
     """Each bad argument: a ValueError naming it."""
     with pytest.raises(ValueError, match=message):
-        _export(tmp_path / "out", **changes)
+        export_release(tmp_path / "out", **changes)
 
 
 def test_import_names_what_to_pass(clip: CamaReleaseResult, tmp_path: Path) -> None:
