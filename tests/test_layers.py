@@ -54,7 +54,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("models", ("models",)),
     # the backend: foundations (config, db models, schemas, clock, tiles, quality) < the job runner < crud <
     # job kinds and auth < API routes < the app and its server
-    ("app.backend", ("app", "app.backend")),
+    # (the camera panel's machinery, `app.backend.cameras`, is a foundation: routes and crud import it)
+    ("app.backend", ("app", "app.backend", "app.backend.cameras")),
     ("app.backend.jobs.runner", ("app.backend.jobs.runner",)),
     ("app.backend.crud", ("app.backend.crud",)),
     ("app.backend.jobs", ("app.backend.jobs", "app.backend.auth_cache", "app.backend.loop")),

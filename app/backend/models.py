@@ -59,7 +59,8 @@ class Token(Base):
 
 
 class Site(Base):
-    """An annotated area: its origin, raster georeference and where its BEV rasters lie."""
+    """An annotated area: its origin, raster georeference, where its BEV rasters lie and, when known, the data set
+    and reconstruction its camera images and poses come from."""
 
     __tablename__ = "sites"
 
@@ -70,6 +71,12 @@ class Site(Base):
     georeference: Mapped[dict[str, Any]] = mapped_column(JSON)
     raster_dir: Mapped[str] = mapped_column(Text)
     created_at: Mapped[datetime] = mapped_column(UtcDateTime())
+    dataset_root: Mapped[str | None] = mapped_column(Text, nullable=True)
+    """The nuScenes-layout data set of the site's camera images (resolved, inside the data roots), if known."""
+    workspace_dir: Mapped[str | None] = mapped_column(Text, nullable=True)
+    """The pipeline workspace of the site's reconstruction (resolved, inside the data roots), if known."""
+    recon_site_id: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    """The reconstruction's site id in `workspace_dir` (its SfM poses give the camera panel's poses)."""
 
 
 class Element(Base):

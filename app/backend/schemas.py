@@ -111,6 +111,16 @@ class SiteCreate(BaseModel):
     site_origin_xy: Point | None = None
     georeference: GeoreferenceIn | None = None
     raster_dir: str | None = None
+    dataset_root: str | None = Field(
+        default=None,
+        description="The nuScenes-layout data set of the camera images (default: `synthetic_dir/nuscenes`, or "
+        "`nuscenes` beside a workspace named `workspace`).",
+    )
+    workspace_dir: str | None = Field(
+        default=None,
+        description="The pipeline workspace whose SfM poses pose the camera images (default: the workspace of a "
+        "surface stage's raster_dir, or `synthetic_dir/workspace`).",
+    )
 
     @model_validator(mode="after")
     def _one_source(self) -> Self:

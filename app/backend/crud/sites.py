@@ -13,6 +13,7 @@ from sqlalchemy.orm import Session
 
 from annotations.schema import Georeference
 from app.backend.clock import utc_now
+from app.backend.crud.site_sources import camera_sources
 from app.backend.data_roots import data_folder
 from app.backend.errors import ConflictError, InvalidInputError, NotFoundError
 from app.backend.models import Element, Site
@@ -49,8 +50,10 @@ def _read_synthetic(folder: Path) -> tuple[Georeference, Path]:
 
 
 def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path]) -> Site:
-    """Register a site from folders inside the data `roots` (resolved); InvalidInputError naming the field for
-    a folder that is missing, unreadable or outside them, or a bad georeference."""
+    """Register a site from folders inside the data `roots` (resolved), with its camera sources
+    (`site_sources`); InvalidInputError naming the field for a folder that is missing, unreadable or outside
+    them, or a bad georeference."""
+    folder = None
     if site_in.synthetic_dir is not None:
         folder = data_folder(site_in.synthetic_dir, roots=roots, field="synthetic_dir")
         georeference, raster_dir = _read_synthetic(folder)
@@ -58,6 +61,7 @@ def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path])
         raster = site_in.georeference.raster()  # type: ignore[union-attr]  # checked by SiteCreate
         georeference = Georeference.of(raster, site_origin_xy=site_in.site_origin_xy)  # type: ignore[arg-type]
         raster_dir = data_folder(site_in.raster_dir or "", roots=roots, field="raster_dir")
+    sources = camera_sources(site_in, raster_dir=raster_dir, synthetic_dir=folder, roots=roots)
     origin_xy = georeference.site_origin_xy
     site = Site(
         name=site_in.name,
@@ -66,6 +70,9 @@ def create_site(*, session: Session, site_in: SiteCreate, roots: Sequence[Path])
         georeference=georeference.to_json(),
         raster_dir=str(raster_dir),
         created_at=utc_now(),
+        dataset_root=None if sources.dataset_root is None else str(sources.dataset_root),
+        workspace_dir=None if sources.workspace_dir is None else str(sources.workspace_dir),
+        recon_site_id=sources.recon_site_id,
     )
     session.add(site)
     try:
