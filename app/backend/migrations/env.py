@@ -6,6 +6,7 @@ from alembic import context
 
 from app.backend import (
     models_jobs,  # noqa: F401  (registers the jobs table)
+    models_reprojection,  # noqa: F401  (registers the reprojection figures' cache)
     models_review,  # noqa: F401  (registers the queue and issue tables)
 )
 from app.backend.db import make_engine
