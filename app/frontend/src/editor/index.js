@@ -1,5 +1,5 @@
-// The editor view: loads a site, builds the map and its panels, and wires tools, autosave, undo/redo,
-// findings and keyboard shortcuts together.
+// The editor view: loads a site, builds the map and its panels (the camera panel beside the map), and wires
+// tools, autosave, undo/redo, findings and keyboard shortcuts together.
 import { h, replaceChildren, toast } from "../dom.js";
 import { ConflictBanner } from "./conflicts.js";
 import { ElementStore } from "./elements.js";
@@ -16,6 +16,8 @@ import { Tools } from "./tools.js";
 import { CLASS_LABELS } from "./styles.js";
 import { editorShortcuts } from "./keymap.js";
 import { buildToolbar } from "./toolbar.js";
+import { CameraPanel } from "./camera-panel.js";
+import { ReprojectionFigures } from "./reprojection.js";
 
 /**
  * Load the site's description, rasters and elements (a site whose rasters cannot be tiled still opens).
@@ -79,7 +81,14 @@ export async function mountEditor(container, api, siteId, params) {
   const tools = new Tools(m.map, m.elementLayer, store, sync);
   const ops = new Operations(tools, store, sync);
   const findings = new Findings({ api, siteId, source: m.findingSource, view: m.view, store, tools, isLead });
-  const review = new ReviewPanel({ api, siteId, view: m.view, store, tools, ops, isLead, regionSource: m.regionSource });
+  const figures = new ReprojectionFigures(api, siteId);
+  const review = new ReviewPanel({ api, siteId, view: m.view, store, tools, ops, isLead, regionSource: m.regionSource, figures });
+  const onToggle = (open) => {
+    root.classList.toggle("cameras-open", open);
+    m.map.updateSize();
+  };
+  const cameras = new CameraPanel({ api, siteId, store, tools, sync, figures, onToggle });
+  root.insertBefore(cameras.element, statusBar.element);
   const conflicts = new ConflictBanner(sync, m.draftSource);
   const overlays = [
     { title: "Vector elements", layer: m.elementLayer },
@@ -88,20 +97,21 @@ export async function mountEditor(container, api, siteId, params) {
   const side = sidebar({ Review: review.element, Layers: layersPanel(m.rasters, overlays), Findings: findings.element });
   root.insertBefore(side.element, mapWrap);
   fitSite(m);
-  const shortcuts = new Shortcuts(editorShortcuts({ tools, ops, sync, review, findings, view: m.view, side, help: () => shortcuts.toggleHelp() }));
-  mapWrap.appendChild(buildToolbar({ tools, ops, sync, history, help: () => shortcuts.toggleHelp() }));
+  const shortcuts = new Shortcuts(editorShortcuts({ tools, ops, sync, review, findings, view: m.view, side, cameras, help: () => shortcuts.toggleHelp() }));
+  mapWrap.appendChild(buildToolbar({ tools, ops, sync, history, cameras, help: () => shortcuts.toggleHelp() }));
   mapWrap.appendChild(conflicts.element);
   const title = h("div.site-title", {}, h("strong", {}, data.site.name), h("span.muted", {}, ` #${siteId}`));
   mapWrap.appendChild(title);
 
   wireStatus({ m, store, sync, tools, ops, review, statusBar, findings });
   m.elementSource.on("removefeature", (event) => tools.select.getFeatures().remove(event.feature));
-  exposeTestHook({ m, siteId });
+  exposeTestHook({ m, siteId, cameras });
   findings.refresh();
   focusRequested(params, store, m.view, tools);
   return {
     destroy() {
       shortcuts.destroy();
+      cameras.closeEnlarged();
       statusBar.destroy();
       review.release();
       m.map.setTarget(undefined);
@@ -154,9 +164,10 @@ function focusRequested(params, store, view, tools) {
 
 /**
  * A small hook for the browser tests and the bench: map pixel of a site point, element count, when the elements
- * were first drawn and when all visible tiles were, and (while `recording`) each frame's render time in ms.
+ * were first drawn and when all visible tiles were, (while `recording`) each frame's render time in ms, and what
+ * the camera panel shows.
  */
-function exposeTestHook({ m, siteId }) {
+function exposeTestHook({ m, siteId, cameras }) {
   const hook = {
     siteId,
     firstRenderMs: null,
@@ -165,6 +176,7 @@ function exposeTestHook({ m, siteId }) {
     frameRenderMs: [],
     pixelOf: (x, y) => m.map.getPixelFromCoordinate([x, y]),
     elementCount: () => m.elementSource.getFeatures().length,
+    cameras: () => cameras.describe(),
     regionOutlines: () => m.regionSource.getFeatures().map((feature) => feature.getGeometry().getExtent()),
     centerOn: (x, y, resolution) => {
       m.view.setCenter([x, y]);

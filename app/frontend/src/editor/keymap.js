@@ -4,13 +4,15 @@
  * @param {{tools: import("./tools.js").Tools, ops: import("./operations.js").Operations,
  *   sync: import("./sync.js").Sync, review: import("./review-panel.js").ReviewPanel,
  *   findings: import("./findings.js").Findings, view: import("ol/View.js").default,
- *   side: {show: (name: string) => void}, help: () => void}} c
+ *   side: {show: (name: string) => void}, help: () => void,
+ *   cameras: import("./camera-panel.js").CameraPanel}} c
  * @returns {import("./shortcuts.js").Shortcut[]}
  */
 export function editorShortcuts(c) {
   const drawing = () => c.tools.mode !== "select";
   const escape = () => {
     if (document.getElementById("help-overlay")) c.help();
+    else if (c.cameras.closeEnlarged()) return;
     else if (drawing()) {
       c.tools.abortDrawing();
       c.tools.setMode("select");
@@ -49,6 +51,11 @@ export function editorShortcuts(c) {
     { keys: [","], label: "Previous element of the region to review", group: "Review", run: () => c.review.region.step(-1) },
     { keys: ["]"], label: "Next finding / issue", group: "Findings", run: () => (c.side.show("Findings"), c.findings.step(1)) },
     { keys: ["["], label: "Previous finding / issue", group: "Findings", run: () => (c.side.show("Findings"), c.findings.step(-1)) },
+    { keys: ["Shift+c"], label: "Camera panel: the images that see the selection", group: "Cameras", run: () => c.cameras.toggle() },
+    { keys: ["Shift+v"], label: "Images of the map point under the cursor", group: "Cameras", run: () => c.cameras.pointViews(c.ops.cursor) },
+    { keys: ["Shift+m"], label: "Lane-mask overlay in the images", group: "Cameras", run: () => c.cameras.toggleMask() },
+    { keys: ["}"], label: "Next images along the element", group: "Cameras", run: () => c.cameras.step(1) },
+    { keys: ["{"], label: "Previous images along the element", group: "Cameras", run: () => c.cameras.step(-1) },
     { keys: ["l"], label: "Show the layers panel", group: "View", run: () => c.side.show("Layers") },
     { keys: ["+", "="], label: "Zoom in", group: "View", run: () => c.view.animate({ zoom: (c.view.getZoom() || 0) + 1, duration: 150 }) },
     { keys: ["-"], label: "Zoom out", group: "View", run: () => c.view.animate({ zoom: (c.view.getZoom() || 0) - 1, duration: 150 }) },

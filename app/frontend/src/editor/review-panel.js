@@ -1,5 +1,6 @@
 // The review panel: what is selected (class, confidence, state, version, author), the review buttons, the
-// annotator queue's "next" item (leased, centred on the map) or next region, and the class/confidence key.
+// annotator queue's "next" item (leased, centred on the map) or next region, the class/confidence key, and each
+// selected element's reprojection figures (on a site with cameras).
 import { h, replaceChildren, toast } from "../dom.js";
 import { RegionWork } from "./region.js";
 import { CLASS_COLORS, CLASS_LABELS, HIGH_CONFIDENCE, LOW_CONFIDENCE, confidenceBucket } from "./styles.js";
@@ -12,7 +13,8 @@ export class ReviewPanel {
    * @param {{api: import("../api.js").Api, siteId: number, view: import("ol/View.js").default,
    *   store: import("./elements.js").ElementStore, tools: import("./tools.js").Tools,
    *   ops: import("./operations.js").Operations, isLead: boolean,
-   *   regionSource: import("ol/source/Vector.js").default}} context
+   *   regionSource: import("ol/source/Vector.js").default,
+   *   figures?: import("./reprojection.js").ReprojectionFigures}} context
    */
   constructor(context) {
     Object.assign(this, context);
@@ -75,6 +77,7 @@ export class ReviewPanel {
         h("div.sel-title", {}, h("span.class-dot", { style: `background: ${CLASS_COLORS[e.class]}` }), `${CLASS_LABELS[e.class]} #${e.id}`, h(`span.state.${e.state}`, {}, e.state)),
         h("div.sel-meta", {}, `confidence ${confidence} (${confidenceBucket(e.confidence)}) · ${e.points.length} vertices · v${e.version}`),
         h("div.sel-meta", {}, "last edit by ", h("span.author", {}, e.author || "?")),
+        this.figures ? this.figures.line(e) : null,
       );
     });
     if (features.length > 4) rows.push(h("p.muted", {}, `and ${features.length - 4} more`));

@@ -1,9 +1,11 @@
-// The floating toolbar: tool modes, edit operations, undo/redo (enabled as the stacks allow) and help.
+// The floating toolbar: tool modes, edit operations, undo/redo (enabled as the stacks allow), the camera panel
+// and help.
 import { h } from "../dom.js";
 
 /**
  * @param {{tools: import("./tools.js").Tools, ops: import("./operations.js").Operations,
- *   sync: import("./sync.js").Sync, history: import("./history.js").History, help: () => void}} c
+ *   sync: import("./sync.js").Sync, history: import("./history.js").History, help: () => void,
+ *   cameras: import("./camera-panel.js").CameraPanel}} c
  */
 export function buildToolbar(c) {
   const modeButtons = [
@@ -40,6 +42,12 @@ export function buildToolbar(c) {
       if (value > 0) c.ops.simplifyToleranceM = value;
     },
   });
+  const cameraButton = op("📷", "Camera views (⇧C)", () => c.cameras.toggle(), "camera-button");
+  cameraButton.setAttribute("aria-pressed", "false");
+  c.cameras.element.addEventListener("camera-toggle", () => {
+    cameraButton.classList.toggle("active", c.cameras.open);
+    cameraButton.setAttribute("aria-pressed", String(c.cameras.open));
+  });
   return h(
     "div.toolbar",
     { role: "toolbar" },
@@ -56,6 +64,6 @@ export function buildToolbar(c) {
       op("✕", "Delete element (Del)", () => c.ops.deleteSelected()),
     ),
     h("div.tool-group", {}, undo, redo),
-    h("div.tool-group", {}, op("?", "Keyboard shortcuts (?)", c.help, "help-button")),
+    h("div.tool-group", {}, cameraButton, op("?", "Keyboard shortcuts (?)", c.help, "help-button")),
   );
 }

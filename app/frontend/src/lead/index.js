@@ -1,8 +1,10 @@
-// The lead view of a site: confidence queue, annotator figures with a chart, and jobs.
+// The lead view of a site: confidence queue and the worst-reprojection queue beside it, annotator figures with a
+// chart, and jobs.
 import { h } from "../dom.js";
 import { FiguresCard } from "./figures.js";
 import { JobsCard } from "./jobs.js";
 import { QueueTable } from "./queue.js";
+import { ReprojectionQueue } from "./reprojection-queue.js";
 
 /**
  * @param {HTMLElement} container
@@ -13,11 +15,14 @@ export async function mountLead(container, api, siteId) {
   const queue = new QueueTable(api, siteId);
   const figures = new FiguresCard(api, siteId);
   const jobs = new JobsCard(api, siteId);
-  container.appendChild(h("div.lead-page", {}, h("div.lead-main", {}, queue.element), h("div.lead-side", {}, figures.element, jobs.element)));
-  await Promise.all([queue.reload(0), figures.reload(), jobs.reload()]);
+  const reprojection = new ReprojectionQueue(api, siteId);
+  const main = h("div.lead-main", {}, queue.element, reprojection.element);
+  container.appendChild(h("div.lead-page", {}, main, h("div.lead-side", {}, figures.element, jobs.element)));
+  await Promise.all([queue.reload(0), figures.reload(), jobs.reload(), reprojection.start()]);
   return {
     destroy() {
       jobs.destroy();
+      reprojection.destroy();
     },
   };
 }
