@@ -308,7 +308,7 @@ def test_export_of_a_folder_inside_the_roots_that_is_no_data_set_fails_without_l
 ) -> None:
     export = {
         "kind": "export",
-        "params": {"format": "maptr", "dataset_root": str(seeded.root / "not-a-dataset")},
+        "params": {"format": "maptr", "poses": "coarse", "dataset_root": str(seeded.root / "not-a-dataset")},
     }
     job = seeded.client.post(f"/api/sites/{seeded.site_id}/jobs", json=export, headers=seeded.lead)
     assert job.status_code == 202, job.text

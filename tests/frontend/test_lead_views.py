@@ -8,6 +8,7 @@ from playwright.sync_api import Page, expect
 
 from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
+from cama_pipeline.export import ExportFormat
 from tests.frontend.editor_browser_helpers import SeededServer, log_in, screenshot
 
 _SERVED = Settings.from_env()
@@ -69,6 +70,28 @@ def test_approve_return_and_open_in_editor(page: Page, seeded: SeededServer) -> 
     expect(page.locator(f".selected-element[data-id='{second['id']}']")).to_have_count(1)
 
 
+def export_a_lanelet2_map(page: Page, seeded: SeededServer) -> None:
+    """Every export format is offered; a refined-pose MapTR export of the painted site (no reconstruction) is
+    refused with the reason shown; a Lanelet2 export (no poses, an origin) is queued."""
+    offered = page.locator("#export-format option").evaluate_all("options => options.map(o => o.value)")
+    assert offered == [choice.value for choice in ExportFormat]
+    page.select_option("#export-format", "maptr")
+    expect(page.locator("#export-origin")).to_be_hidden()
+    assert seeded.raster_dir is not None
+    page.fill("#export-dataset", str(seeded.raster_dir.parent))  # a folder inside the server's data roots
+    page.click("#launch-export")
+    message = page.locator("#job-message")
+    expect(message).to_have_class("job-message error")
+    expect(message).to_contain_text("poses: site 'Test junction' has no reconstruction")
+    page.select_option("#export-format", "lanelet2")
+    expect(page.locator("#export-poses")).to_be_hidden()
+    expect(page.locator("#export-dataset")).to_be_hidden()
+    page.fill("#export-origin", "1.299, 103.788")
+    page.click("#launch-export")
+    expect(message).to_have_class("job-message")
+    expect(message).to_contain_text("export job #")
+
+
 def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
     element = seeded.create({"class": "boundary", "points": [[80.0, 78.0], [85.0, 78.0]]})
     review(seeded, element["id"], "accepted", "bob")
@@ -84,7 +107,7 @@ def test_figures_chart_and_jobs(page: Page, seeded: SeededServer) -> None:
         expect(page.locator("#job-message")).not_to_contain_text("kind: kind:")
     else:
         expect(page.locator("#job-list .job").first).to_contain_text("retrain")
-    page.click("#launch-export")
+    export_a_lanelet2_map(page, seeded)
     job = page.locator("#job-list .job").first
     expect(job).to_have_attribute("data-state", "succeeded", timeout=30_000)
     expect(job.locator(".job-text")).to_contain_text("100%")

@@ -29,6 +29,7 @@ from app.backend.jobs.kinds import read_elevation, site_annotations
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.models import Site
 from app.backend.schemas import STRICT
+from cama_pipeline.data import DatasetError
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
 from cama_pipeline.export.run import WRITERS
@@ -221,6 +222,16 @@ def summary_message(result: ExportResult, name: str) -> str:
     return message if len(message) <= _SUMMARY_LIMIT else message[: _SUMMARY_LIMIT - 3] + "..."
 
 
+def failure_message(error: Exception, hidden: Mapping[Path, str]) -> str:
+    """What a failed export tells the API caller: the error with server paths replaced (`redact`); a data set
+    error names `dataset_root` and leaves out the folder listing the loader adds (the server log has it)."""
+    if isinstance(error, DatasetError):
+        detail = error.detail.split("; subfolders found", 1)[0]
+        shown = DatasetError(detail, path=error.path, record=error.record, field=error.field)
+        return redact(f"dataset_root: not a usable data set: {shown}", hidden)
+    return redact(f"{type(error).__name__}: {error}", hidden)
+
+
 class ExportFailed(Exception):
     """An export that could not be written; the message names what is wrong without server paths."""
 
@@ -241,7 +252,7 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
         result = export(request)
     except Exception as error:
         logger.warning("export job %d of site %s failed: %s", context.job_id, name, error)
-        raise ExportFailed(redact(f"{type(error).__name__}: {error}", hidden)) from None
+        raise ExportFailed(failure_message(error, hidden)) from None
     context.report(0.8, "packing the archive", force=True)
     archive = zip_folder(context.workdir / EXPORT_FOLDER, context.workdir / EXPORT_ZIP, context)
     return JobResult(archive, redact(summary_message(result, name), hidden))
