@@ -45,6 +45,7 @@ from annotations.cama_release import (
     SITE_SIDECAR_SUFFIX,
 )
 from annotations.cama_sidecar import CamaGeoreferenceFile, CamaReleaseGeoreference, read_sidecar
+from annotations.geometry import simplify
 from annotations.lift import lift_element
 from annotations.schema import POLYGON_CLASSES, AnnotationSet, ElementClass, Georeference, MapElement
 from annotations.transforms import site_from_pixel_points
@@ -54,6 +55,9 @@ logger = logging.getLogger(__name__)
 ELEVATION = Path("maps/elevation.npy")
 """The older layout's elevation raster (our convention, NaN unobserved)."""
 IMPORT_AUTHOR = "cama-import"
+DENSIFIED_TOLERANCE_M = 1e-6
+"""Points within this of the line through their neighbours were added by the export's densifying (they lie on the
+segment exactly, up to float rounding): import drops them, giving back the exported vertices."""
 DEFAULT_RELEASE_RESOLUTION_M = 0.1
 """Metres per BEV pixel in the public CAMA release."""
 
@@ -81,6 +85,8 @@ class _Placement:
     raster: np.ndarray | None = None
     raster_georeference: Georeference | None = None
     unobserved: np.ndarray | None = None
+    densified: bool = False
+    """The export densified the labels (our sidecar's label_spacing_m): drop the points it added."""
 
 
 def import_cama(
@@ -178,6 +184,7 @@ def _release_placement(source: _Source, sidecar: CamaReleaseGeoreference) -> _Pl
         raster,
         raster_georef,
         unobserved,
+        densified=sidecar.label_spacing_m is not None,
     )
 
 
@@ -264,6 +271,8 @@ def _element(instance: CamaInstance, cls: ElementClass, placement: _Placement, w
     if cls in POLYGON_CLASSES and not np.array_equal(uv[0], uv[-1]):
         uv = np.vstack([uv, uv[:1]])  # release crosswalk lines may be open: close the ring
     xy = placement.site_from_uv(uv)
+    if placement.densified:
+        xy = simplify(xy, DENSIFIED_TOLERANCE_M)
     try:
         element = MapElement(
             id=str(instance.id),

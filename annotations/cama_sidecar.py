@@ -60,6 +60,12 @@ class CamaReleaseGeoreference(BaseModel):
     elevation_filled: str = Field(
         min_length=1, description="PNG beside this file: 255 where the elevation cell was filled, [v, u]."
     )
+    label_spacing_m: float | None = Field(
+        default=None,
+        gt=0.0,
+        description="Label polylines were densified to at most this spacing (metres) so that a reader taking z at "
+        "each point follows the surface; import drops the points that densifying added. None: written as is.",
+    )
     elevation_source: ElevationSource = Field(
         description="raster: resampled from our elevation raster; elements-mean: no raster, the mean element z."
     )

@@ -15,6 +15,8 @@ the point's cell, as CAMA's code reads them) give the map. Rows, all over the sa
                  labels, through the exported odometry
   c_uncut        as c_pipeline with the per-scene cut switched off (`--observed-radius-m 1000`): c_pipeline minus
                  this is what cutting each scene's labels at its observed range costs
+  c_uncut_observed  as c_uncut without the points on filled elevation cells: c_uncut minus this is what the
+                 filled (unobserved) heights cost
   c_sfm          the same proposals lifted through our raster (as bench/end_to_end.py does) and projected with
                  the SfM poses directly: the figure before export
 
@@ -32,6 +34,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from end_to_end import lifted_map  # bench/end_to_end.py: this script's folder is on sys.path
 from scipy.spatial.transform import Rotation
@@ -124,9 +127,10 @@ def read_scene_odometry(scene_dir: Path, scene: Scene) -> dict[str, Pose]:
     return poses
 
 
-def read_scene_labels(scene_dir: Path) -> list[VectorElement]:
+def read_scene_labels(scene_dir: Path, *, drop_filled: bool = False) -> list[VectorElement]:
     """One exported scene's labels as CAMA's code reads them: x = v * r - S/2, y = u * r - S/2 in the world frame
-    (plus the sidecar's world origin for global metres), z = the elevation raster at the point's cell [v, u]."""
+    (plus the sidecar's world origin for global metres), z = the elevation raster at the point's cell [v, u];
+    `drop_filled`: leave out the points on cells the export filled (our sidecar's PNG), as `cama import` does."""
     sidecar = read_sidecar(scene_dir / "maps" / "georeference.json")
     if not isinstance(sidecar, CamaReleaseGeoreference):
         raise SystemExit(f"{scene_dir}: not a release-layout scene folder (sidecar version 1)")
@@ -134,6 +138,9 @@ def read_scene_labels(scene_dir: Path) -> list[VectorElement]:
     labels = json.loads((scene_dir / "maps" / "map_labels.json").read_text(encoding="utf-8"))
     half, r = sidecar.map_side_m / 2, sidecar.resolution_m
     origin = np.asarray(sidecar.world_origin_global[:2], dtype=float)
+    filled = cv2.imread(str(scene_dir / "maps" / sidecar.elevation_filled), cv2.IMREAD_UNCHANGED)
+    if filled is None:
+        raise SystemExit(f"{scene_dir}: cannot read maps/{sidecar.elevation_filled}")
     out = []
     for index, instance in enumerate(labels):
         cls = CLASS_FROM_CAMA_TYPE.get(instance["attrs"]["type"])
@@ -144,19 +151,28 @@ def read_scene_labels(scene_dir: Path) -> list[VectorElement]:
         cols = np.clip(np.rint(uv[:, 0]).astype(int), 0, elevation.shape[1] - 1)
         xy = np.column_stack([uv[:, 1] * r - half, uv[:, 0] * r - half]) + origin
         points = np.column_stack([xy, elevation[rows, cols]])
+        if drop_filled:
+            points = points[filled[rows, cols] == 0]
+            if len(points) < 2:
+                continue
         out.append(VectorElement(f"{instance['id']}-{index}", cls, points, cls == "ped_crossing"))
     return out
 
 
-def read_export(out: Path, dataset: Dataset) -> tuple[dict[str, Pose], dict[str, list[VectorElement]]]:
-    """Every exported scene's odometry poses (merged) and labels (per scene)."""
+def read_export(
+    out: Path, dataset: Dataset
+) -> tuple[dict[str, Pose], dict[str, list[VectorElement]], dict[str, list[VectorElement]]]:
+    """Every exported scene's odometry poses (merged), labels (per scene) and labels without the points on filled
+    elevation cells (per scene)."""
     scenes = {scene.name: scene for scene in dataset.scenes}
     poses: dict[str, Pose] = {}
     labels: dict[str, list[VectorElement]] = {}
+    observed: dict[str, list[VectorElement]] = {}
     for scene_dir in sorted((out / "all_clips").iterdir()):
         poses.update(read_scene_odometry(scene_dir, scenes[scene_dir.name]))
         labels[scene_dir.name] = read_scene_labels(scene_dir)
-    return poses, labels
+        observed[scene_dir.name] = read_scene_labels(scene_dir, drop_filled=True)
+    return poses, labels, observed
 
 
 def sre_row(
@@ -240,6 +256,7 @@ def main() -> None:
         "b_truth_coarse": (true_map, exported["truth_coarse"][0]),
         "c_pipeline": (exported["pipeline_refined"][1], exported["pipeline_refined"][0]),
         "c_uncut": (exported["pipeline_uncut"][1], exported["pipeline_uncut"][0]),
+        "c_uncut_observed": (exported["pipeline_uncut"][2], exported["pipeline_uncut"][0]),
         "c_sfm": ({scene: pipeline_lifted for scene in scenes}, sfm_poses),
     }
     figures: dict[str, Any] = {"site": str(args.site), "site_id": site_id, "scenes": scenes}

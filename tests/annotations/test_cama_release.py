@@ -95,8 +95,13 @@ def test_uv_convention_on_a_hand_placed_element(clip: CamaReleaseResult) -> None
     near = _labels(folder / "maps/map_labels.json")["near-a"]
     assert near["attrs"] == {"type": "lane_marking"}
     assert near["shape_type"] == "polyline" and near["struct_type"] == "parsing"
-    assert near["point_attrs"] == [[], []]
-    np.testing.assert_allclose(near["data"], [[1520.0, 1390.0], [1520.0, 1490.0]], atol=1e-6)
+    data = np.asarray(near["data"])
+    assert near["point_attrs"] == [[] for _ in data]
+    np.testing.assert_allclose(data[[0, -1]], [[1520.0, 1390.0], [1520.0, 1490.0]], atol=1e-6)
+    np.testing.assert_allclose(
+        data[:, 0], 1520.0, atol=1e-6
+    )  # densified along the segment, 10 m in 0.5 m steps
+    assert len(data) == 21 and np.abs(np.diff(data[:, 1])).max() <= 5.0 + 1e-6
     elevation = np.load(folder / "maps/vision_road_mlp_ft.npy")
     assert elevation[1390, 1520] == pytest.approx(float(plane_z(10.0, 2.0)), abs=1e-4)
     assert elevation[1490, 1520] == pytest.approx(float(plane_z(20.0, 2.0)), abs=1e-4)
@@ -213,7 +218,9 @@ def test_site_layout_and_shared_frame(site: CamaReleaseResult) -> None:
         assert scene_npy.stat().st_size == (out / f"site2clip/{SITE}_vision_road_mlp_ft.npy").stat().st_size
     near = _labels(out / "all_clips/scene-a/maps/map_labels.json")["near-a"]
     # site (10, 2) and (20, 2) = world (-11, -28) and (-1, -28): u = (-28 + 300) / 0.1, v = (-11 + 300) / 0.1 ...
-    np.testing.assert_allclose(near["data"], [[2720.0, 2890.0], [2720.0, 2990.0]], atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(near["data"])[[0, -1]], [[2720.0, 2890.0], [2720.0, 2990.0]], atol=1e-6
+    )
     assert set(_labels(out / "all_clips/scene-b/maps/map_labels.json")) == {"near-b"}
     assert set(_labels(out / f"site2clip/{SITE}_map_labels.json")) == {
         e.id for e in annotation_set().elements
