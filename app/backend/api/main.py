@@ -3,6 +3,7 @@
 from fastapi import APIRouter
 
 from app.backend.api.routes import (
+    cameras,
     elements,
     issues,
     jobs,
@@ -10,6 +11,7 @@ from app.backend.api.routes import (
     quality,
     queues,
     rasters,
+    reprojection,
     review,
     sites,
     users,
@@ -19,7 +21,7 @@ api_router = APIRouter(prefix="/api")
 # Routes are matched in order: the element routes, hit by every edit, come first.
 for module in (elements, review, login, users, sites):
     api_router.include_router(module.router)
-for module in (rasters, quality):
+for module in (rasters, quality, cameras, reprojection):
     api_router.include_router(module.router)
 for module in (queues, issues):
     api_router.include_router(module.router)
