@@ -130,7 +130,9 @@ def test_lanelet2_export_zips_one_osm_file(
     assert response.status_code == 202, response.text
     done = wait_done(client, headers, response.json()["id"])
     assert done["state"] == "succeeded", done["message"]
-    assert "exported 2 elements of s1 (lanelet2, refined poses, 1 files" in done["message"]
+    assert (
+        "exported 2 elements of s1 (lanelet2, 1 files, 0 of 2 lifted (no elevation raster)" in done["message"]
+    )
     assert "tags (" in done["message"]
     archive = client.get(done["download_url"], headers=headers["lead"])
     with zipfile.ZipFile(io.BytesIO(archive.content)) as bundle:

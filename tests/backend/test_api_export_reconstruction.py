@@ -4,6 +4,7 @@ and a site without one exports the data set's logged poses when asked for."""
 
 import io
 import json
+import re
 import time
 import zipfile
 from dataclasses import replace
@@ -100,6 +101,8 @@ def test_refined_maptr_export_of_a_reconstructed_site(
     site_id, site = reconstructed
     job = run_export(client, headers, site_id, format="maptr", dataset_root=dataset_root)
     assert f"exported {ELEMENTS} elements of junction (maptr, refined poses, 1 files" in job["message"]
+    lifted = re.search(rf"\b[1-9][0-9]* of {ELEMENTS} lifted", job["message"])  # heights from the surface
+    assert lifted, job["message"]
     with archive_of(client, headers, job) as bundle:
         assert bundle.namelist() == ["maptr.json"]
         sources = pose_sources(bundle)

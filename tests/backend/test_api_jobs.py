@@ -2,6 +2,7 @@
 
 import io
 import json
+import re
 import threading
 import time
 import zipfile
@@ -97,7 +98,11 @@ def test_export_job_downloads_a_zip(
     with zipfile.ZipFile(io.BytesIO(response.content)) as bundle:
         assert bundle.namelist() == ["map.osm"]
         osm = bundle.read("map.osm").decode()
-    assert f'k="cama:id" v="{made["id"]}"' in osm
+    assert f'k="cama:id" v="{made["id"]}"' in osm and 'k="cama:lifted" v="no"' not in osm
+    assert "(lanelet2, 1 files, 1 of 1 lifted" in done["message"]  # heights from the site's elevation raster
+    heights = {float(value) for value in re.findall(r'k="ele" v="([-0-9.e]+)"', osm)}
+    # the divider (10, 10) .. (20, 11) in site metres lies on the plane 5 + 0.01 col + 0.02 row
+    assert heights and all(8.0 < height < 9.0 for height in heights), heights
 
 
 class _SlowParams(BaseModel):

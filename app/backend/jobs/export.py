@@ -16,6 +16,7 @@ import os
 import shutil
 import zipfile
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Self
 
@@ -23,9 +24,9 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 from sqlalchemy.orm import Session
 
-from annotations.schema import Georeference
+from annotations.schema import AnnotationSet, Georeference
 from app.backend.data_roots import data_folder_validator
-from app.backend.jobs.kinds import read_elevation, site_annotations
+from app.backend.jobs.kinds import lift_elements, read_elevation, site_annotations
 from app.backend.jobs.runner import JobContext, JobKind, JobResult
 from app.backend.models import Site
 from app.backend.schemas import STRICT
@@ -148,7 +149,7 @@ def check_export(session: Session, site_id: int, params: ExportParams) -> None:
 
 
 def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray | None:
-    """The site's elevation raster for a CAMA map, or None (logged) when the raster folder has no usable one."""
+    """The site's elevation raster, or None (logged) when the raster folder has no usable one."""
     try:
         return read_elevation(raster_dir, georef)
     except (FileNotFoundError, ValueError) as error:
@@ -156,17 +157,42 @@ def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray 
         return None
 
 
-def export_request(context: JobContext, params: ExportParams) -> tuple[ExportRequest, str, dict[Path, str]]:
-    """The request of one job: the site's live elements, its reconstruction (refined poses: checked again,
-    it may have gone since submission), the out path in the job's folder; with the site's name and the server
-    paths to keep out of messages."""
+@dataclass(frozen=True)
+class ExportJob:
+    """What one export job writes, and what its messages say."""
+
+    request: ExportRequest
+    name: str
+    """The site's name."""
+    lifted: str
+    """How many elements carry heights from the site's elevation raster (for the message)."""
+    hidden: dict[Path, str]
+    """Server paths to keep out of messages, with the label that replaces each (`redact`)."""
+
+
+def _lift(annotations: AnnotationSet, elevation: np.ndarray | None) -> tuple[AnnotationSet, str]:
+    """The elements with their heights from the site's elevation raster (the editor stores 2D points), so that
+    MapTR vectors and Lanelet2 `ele` carry the measured surface; unlifted where there is no raster."""
+    total = len(annotations.elements)
+    if elevation is None:
+        return annotations, f"0 of {total} lifted (no elevation raster)"
+    lifted = lift_elements(annotations, elevation)
+    return lifted.annotations, f"{total - len(lifted.flagged)} of {total} lifted"
+
+
+def export_job(context: JobContext, params: ExportParams) -> ExportJob:
+    """The request of one job: the site's live elements lifted through its elevation raster, its reconstruction
+    (refined poses: checked again, it may have gone since submission), the out path in the job's folder."""
     annotations, raster_dir, name = site_annotations(context)
     location = (
         reconstruction(raster_dir, name) if params.needs_reconstruction else locate_reconstruction(raster_dir)
     )
+    elevation = _elevation(raster_dir, annotations.georeference, name)
+    annotations, lifted = _lift(annotations, elevation)
     folder = context.workdir / EXPORT_FOLDER
     file_name = SINGLE_FILE_NAMES.get(params.format)
     dataset_root = Path(params.dataset_root) if params.dataset_root else None
+    origin = params.origin_lat_lon
     request = ExportRequest(
         annotations=annotations,
         out=folder / file_name if file_name else folder,
@@ -175,22 +201,18 @@ def export_request(context: JobContext, params: ExportParams) -> tuple[ExportReq
         workspace=location.workspace.root if location else context.workdir / NO_WORKSPACE,
         site_id=location.site_id if location else None,
         poses=params.poses,
-        elevation=_elevation(raster_dir, annotations.georeference, name)
-        if params.format is ExportFormat.cama
-        else None,
+        elevation=elevation if params.format is ExportFormat.cama else None,
         scenes=tuple(params.scenes) if params.scenes else None,
         cama_mode=params.mode,
         with_clip_data=params.with_clip_data,
-        origin_lat_lon=(params.origin_lat_lon[0], params.origin_lat_lon[1])
-        if params.origin_lat_lon
-        else None,
+        origin_lat_lon=(origin[0], origin[1]) if origin else None,
     )
     hidden = {context.workdir: "<job>", raster_dir: "<rasters>"}
     if dataset_root is not None:
         hidden[dataset_root] = "<dataset_root>"
     if location is not None:
         hidden[location.workspace.root] = "<workspace>"
-    return request, name, hidden
+    return ExportJob(request, name, lifted, hidden)
 
 
 def redact(text: str, hidden: Mapping[Path, str]) -> str:
@@ -214,11 +236,13 @@ def _describe(value: object) -> str:
     return str(value)
 
 
-def summary_message(result: ExportResult, name: str) -> str:
+def summary_message(result: ExportResult, job: ExportJob) -> str:
     """One line: what was exported, in which format, with which poses, and the writer's counts."""
-    parts = [result.format.value, f"{result.poses.value} poses", f"{result.files} files"]
+    poses = [f"{result.poses.value} poses"] if result.format in FORMATS_NEEDING_DATASET else []
+    parts = [result.format.value, *poses, f"{result.files} files", job.lifted]
     parts += [f"{key} {_describe(value)}" for key, value in result.summary.items()]
-    message = f"exported {result.elements} elements of {name} ({', '.join(parts)})"
+    message = f"exported {result.elements} elements of {job.name} ({', '.join(parts)})"
+    message = redact(message, job.hidden)
     return message if len(message) <= _SUMMARY_LIMIT else message[: _SUMMARY_LIMIT - 3] + "..."
 
 
@@ -241,21 +265,19 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
     when complete) and zip it into `<job>/export.zip` (written atomically)."""
     clean_export(context.workdir)
     try:
-        request, name, hidden = export_request(context, params)
+        job = export_job(context, params)
     except ValueError as error:  # the reconstruction went away since submission
         raise ExportFailed(str(error)) from None
-    count = len(request.annotations.elements)
-    context.report(
-        0.1, f"exporting {count} elements ({params.format.value}, {params.poses.value} poses)", force=True
-    )
+    count = len(job.request.annotations.elements)
+    context.report(0.1, f"exporting {count} elements ({params.format.value})", force=True)
     try:
-        result = export(request)
+        result = export(job.request)
     except Exception as error:
-        logger.warning("export job %d of site %s failed: %s", context.job_id, name, error)
-        raise ExportFailed(failure_message(error, hidden)) from None
+        logger.warning("export job %d of site %s failed: %s", context.job_id, job.name, error)
+        raise ExportFailed(failure_message(error, job.hidden)) from None
     context.report(0.8, "packing the archive", force=True)
     archive = zip_folder(context.workdir / EXPORT_FOLDER, context.workdir / EXPORT_ZIP, context)
-    return JobResult(archive, redact(summary_message(result, name), hidden))
+    return JobResult(archive, summary_message(result, job))
 
 
 def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:

@@ -5,6 +5,8 @@ The export kind lives in `jobs/export.py`, the VMA loop's kinds (`retrain`, `ref
 """
 
 import logging
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -80,40 +82,71 @@ def read_elevation(raster_dir: Path, georef: Georeference) -> np.ndarray:
     return np.asarray(elevation, dtype=np.float64)
 
 
-def run_lift(context: JobContext, params: LiftParams) -> JobResult:
-    """Lift every live element; the lifted set goes to `lifted.json`, flagged vertices to the message."""
-    annotations, raster_dir, _name = site_annotations(context)
+@dataclass(frozen=True)
+class Lifted:
+    """An annotation set lifted through an elevation raster, and the elements left without 3D points."""
+
+    annotations: AnnotationSet
+    flagged: list[tuple[str, int]]
+    """(element id, vertices without observed elevation near) of each element left unlifted."""
+
+
+def lift_elements(
+    annotations: AnnotationSet,
+    elevation: np.ndarray,
+    *,
+    max_spacing_m: float = DEFAULT_MAX_SPACING_M,
+    search_radius_m: float = DEFAULT_SEARCH_RADIUS_M,
+    on_element: Callable[[int], None] | None = None,
+) -> Lifted:
+    """Each element with its 3D points through `elevation` (`annotations.lift.lift_points`); one with a vertex
+    far from any observed cell stays as it is and is listed. `on_element(done)` after each element."""
     georef = annotations.georeference
-    elevation = read_elevation(raster_dir, georef)
-    total = len(annotations.elements)
-    context.report(0.05, f"lifting {total} elements", force=True)
-    lifted: list[MapElement] = []
-    flagged: list[str] = []
-    flagged_vertices = 0
+    elements: list[MapElement] = []
+    flagged: list[tuple[str, int]] = []
     for index, element in enumerate(annotations.elements):
         result = lift_points(
             element.points_2d,
             elevation,
             georef,
-            max_spacing_m=params.max_spacing_m,
-            search_radius_m=params.search_radius_m,
+            max_spacing_m=max_spacing_m,
+            search_radius_m=search_radius_m,
         )
         if result.ok:
             points = [(x, y, z) for x, y, z in result.points_3d.tolist()]
-            lifted.append(element.with_changes(points_3d=points))
+            elements.append(element.with_changes(points_3d=points))
         else:
-            lifted.append(element)
-            flagged_vertices += len(result.flagged)
-            flagged.append(f"element {element.id} ({len(result.flagged)} vertices)")
-        context.report(0.05 + 0.9 * (index + 1) / max(total, 1))
+            elements.append(element)
+            flagged.append((element.id, len(result.flagged)))
+        if on_element is not None:
+            on_element(index + 1)
+    lifted = AnnotationSet(site_id=annotations.site_id, georeference=georef, elements=elements)
+    return Lifted(lifted, flagged)
+
+
+def run_lift(context: JobContext, params: LiftParams) -> JobResult:
+    """Lift every live element; the lifted set goes to `lifted.json`, flagged vertices to the message."""
+    annotations, raster_dir, _name = site_annotations(context)
+    elevation = read_elevation(raster_dir, annotations.georeference)
+    total = len(annotations.elements)
+    context.report(0.05, f"lifting {total} elements", force=True)
+    lifted = lift_elements(
+        annotations,
+        elevation,
+        max_spacing_m=params.max_spacing_m,
+        search_radius_m=params.search_radius_m,
+        on_element=lambda done: context.report(0.05 + 0.9 * done / max(total, 1)),
+    )
     out = context.workdir / LIFTED_FILE
-    AnnotationSet(site_id=annotations.site_id, georeference=georef, elements=lifted).write_json(out)
+    lifted.annotations.write_json(out)
+    flagged = [f"element {element_id} ({count} vertices)" for element_id, count in lifted.flagged]
     message = f"lifted {total - len(flagged)} of {total} elements"
     if flagged:
         shown = ", ".join(flagged[:_FLAG_REPORT_LIMIT])
         more = f" and {len(flagged) - _FLAG_REPORT_LIMIT} more" if len(flagged) > _FLAG_REPORT_LIMIT else ""
+        vertices = sum(count for _id, count in lifted.flagged)
         message += (
-            f"; {flagged_vertices} vertices flagged (no observed elevation within "
+            f"; {vertices} vertices flagged (no observed elevation within "
             f"{params.search_radius_m} m), left without 3D points: {shown}{more}"
         )
     return JobResult(out, message)
