@@ -12,8 +12,12 @@ with the whole site in view and the timings are read from the page:
 - pan: the same two series while the whole-site view is dragged away and back;
 - idle: the frame intervals over 2 s with nothing happening (the shared machine's own stalls, a baseline).
 
-Usage: .venv/bin/python bench/editor.py [--elements 500] [--vertices 20]
-Prints the figures and writes them to bench/results/editor.json.
+Camera panel (`camera_panel`, bench/camera_panel.py): on a reconstructed site served on two cores, the time from
+selecting an element to its first image and to four images (views + images, sequential and four at once).
+
+Usage: .venv/bin/python bench/editor.py [--elements 500] [--vertices 20] [--section all|browser|camera-panel]
+    [--camera-site data/synthetic/default] [--camera-workspace W]
+Prints the figures and writes them to bench/results/editor.json (a section run alone keeps the other's keys).
 """
 
 import argparse
@@ -32,6 +36,7 @@ from playwright.sync_api import Page, ViewportSize, sync_playwright
 
 # the test helpers: `tests` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench import camera_panel  # noqa: E402
 from tests.frontend.editor_browser_helpers import (  # noqa: E402
     SITE_SIZE_M,
     SeededServer,
@@ -208,13 +213,22 @@ def main() -> None:
     )
     parser.add_argument("--elements", type=int, default=500)
     parser.add_argument("--vertices", type=int, default=20)
+    parser.add_argument("--section", choices=("all", "browser", "camera-panel"), default="all")
+    parser.add_argument("--camera-site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--camera-workspace", type=Path, default=None, help="default: the site's workspace")
     args = parser.parse_args()
     if args.elements < 1 or args.vertices < 3:
         raise SystemExit("--elements must be >= 1 and --vertices >= 3")
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    figures = run(args.elements, args.vertices)
+    logging.getLogger("httpx").setLevel(logging.WARNING)
+    path = RESULTS / "editor.json"
+    figures = json.loads(path.read_text()) if path.is_file() else {}
+    if args.section in ("all", "browser"):
+        figures.update(run(args.elements, args.vertices))
+    if args.section in ("all", "camera-panel"):
+        figures["camera_panel"] = camera_panel.run(args.camera_site, args.camera_workspace)
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "editor.json").write_text(json.dumps(figures, indent=2) + "\n")
+    path.write_text(json.dumps(figures, indent=2) + "\n")
     logger.info("%s", json.dumps(figures, indent=2))
 
 
