@@ -173,3 +173,34 @@ def test_stored_params_name_every_option(client: TestClient, headers: Headers, s
     assert params["origin_lat_lon"] == ORIGIN and params["with_clip_data"] is False
     assert params["dataset_root"] is None and params["scenes"] is None
     assert wait_done(client, headers, response.json()["id"])["state"] == "succeeded"
+
+
+def test_the_archive_holds_what_the_export_wrote_never_what_its_links_reach(
+    client: TestClient,
+    headers: Headers,
+    site_id: int,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A nuScenes-CAMAv2 root links the data set's folders into the export; the zip leaves links out."""
+    secret = tmp_path / "server-only"
+    secret.mkdir()
+    (secret / "passwords.txt").write_text("not for download")
+
+    def with_links(inputs: ExportInputs, staging: Path) -> dict[str, object]:
+        (staging / "v1.0-cama").mkdir(parents=True)
+        (staging / "v1.0-cama" / "ego_pose.json").write_text("[]")
+        (staging / "samples").symlink_to(secret, target_is_directory=True)
+        (staging / "v1.0-cama" / "linked.txt").symlink_to(secret / "passwords.txt")
+        return {}
+
+    monkeypatch.setitem(export_run.WRITERS, ExportFormat.lanelet2, with_links)
+    response = post_export(client, headers, site_id, format="lanelet2", origin_lat_lon=ORIGIN)
+    done = wait_done(client, headers, response.json()["id"])
+    assert done["state"] == "succeeded", done["message"]
+    archive = client.get(done["download_url"], headers=headers["lead"])
+    with zipfile.ZipFile(io.BytesIO(archive.content)) as bundle:
+        assert bundle.namelist() == ["map.osm/v1.0-cama/ego_pose.json"]
+    assert (
+        secret / "passwords.txt"
+    ).read_text() == "not for download"  # the cleanup removed links, not targets

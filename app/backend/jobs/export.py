@@ -280,9 +280,20 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
     return JobResult(archive, summary_message(result, job))
 
 
+def archived_files(folder: Path) -> list[Path]:
+    """The regular files under `folder`, sorted; symbolic links are not followed nor archived: the
+    nuScenes-CAMAv2 root links the source data set's samples/, sweeps/, ... so that its image paths resolve, and
+    the archive carries what the export wrote (its version folder), never what a link reaches on the server."""
+    files: list[Path] = []
+    for root, _folders, names in os.walk(folder, followlinks=False):
+        files += [Path(root, name) for name in names if not Path(root, name).is_symlink()]
+    return sorted(path for path in files if path.is_file())
+
+
 def zip_folder(folder: Path, archive: Path, context: JobContext) -> Path:
-    """Zip every file under `folder` (names relative to it) into `archive`, written atomically."""
-    files = sorted(path for path in folder.rglob("*") if path.is_file())
+    """Zip every regular file under `folder` (names relative to it; `archived_files`) into `archive`, written
+    atomically."""
+    files = archived_files(folder)
     partial = archive.with_name(archive.name + PARTIAL_SUFFIX)
     with zipfile.ZipFile(partial, "w", compression=zipfile.ZIP_DEFLATED) as bundle:
         for index, path in enumerate(files):
