@@ -33,6 +33,7 @@ export class CameraPanel {
     this.lifted = [];
     this.ticket = 0;
     this.liveFrames = 0;
+    this.liveDrawMs = []; // how long each live redraw of every view took (the last 240)
     this.enlarged = null;
     this.watched = null;
     this.frame = 0;
@@ -305,6 +306,7 @@ export class CameraPanel {
     this.frame = requestAnimationFrame(() => {
       this.frame = 0;
       if (!this.watched) return;
+      const started = performance.now();
       const points3d = liftPolyline(pointsOf(this.watched), this.lifted);
       for (const view of [...this.views, ...(this.enlarged ? [this.enlarged] : [])]) {
         if (view.camera) {
@@ -313,6 +315,8 @@ export class CameraPanel {
         }
       }
       this.liveFrames++;
+      this.liveDrawMs.push(performance.now() - started);
+      if (this.liveDrawMs.length > 240) this.liveDrawMs.shift();
     });
   }
 
@@ -340,6 +344,7 @@ export class CameraPanel {
       open: this.open,
       status: this.status.textContent,
       liveFrames: this.liveFrames,
+      liveDrawMs: this.liveDrawMs.slice(),
       views: this.views.map((v) => ({
         token: v.view.token,
         width: v.canvas.width,

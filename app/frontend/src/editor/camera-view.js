@@ -154,6 +154,7 @@ export class CameraView {
   /** A cross at a full-resolution pixel (the map point of "views of a point"), or null. */
   setMarker(pixel) {
     this.marker = pixel;
+    this.element.dataset.marker = pixel ? "shown" : "none";
     this.draw();
   }
 

@@ -42,7 +42,7 @@ export function buildToolbar(c) {
       if (value > 0) c.ops.simplifyToleranceM = value;
     },
   });
-  const cameraButton = op("📷", "Camera views (⇧C)", () => c.cameras.toggle(), "camera-button");
+  const cameraButton = op("◫", "Camera views (⇧C)", () => c.cameras.toggle(), "camera-button");
   cameraButton.setAttribute("aria-pressed", "false");
   c.cameras.element.addEventListener("camera-toggle", () => {
     cameraButton.classList.toggle("active", c.cameras.open);
