@@ -10,7 +10,7 @@ original elements: it gives one element per exported vector, at its resampled po
 
 import json
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Literal
 
@@ -175,8 +175,10 @@ def build_maptr(
     n_points: int = POINTS_PER_VECTOR,
     frame_pose: Callable[[Frame], tuple[EgoPose, PoseSource]] | None = None,
     on_sample: Callable[[], None] | None = None,
+    scenes: Collection[str] | None = None,
 ) -> MaptrFile:
-    """The MapTR file model for every key frame of the data set, ego poses (and their sources) from `poses`.
+    """The MapTR file model for every key frame of the data set (of `scenes` when given), ego poses (and their
+    sources) from `poses`.
 
     `frame_pose`: another choice of a sample's reference ego pose (the nuScenes-CAMAv2 export takes LIDAR_TOP's
     where there is one); None: `sample_pose`. `on_sample`: called after each sample (progress)."""
@@ -185,6 +187,8 @@ def build_maptr(
         logger.warning("%d elements have no 3D points: exported at the ego pose's height", flat)
     samples = []
     for scene in dataset.scenes:
+        if scenes is not None and scene.name not in scenes:
+            continue
         for frame in scene.frames:
             pose, source = sample_pose(frame, poses) if frame_pose is None else frame_pose(frame)
             vectors = sample_vectors(annotations, pose, box=box, n_points=n_points)
@@ -217,9 +221,11 @@ def export_maptr(
     poses: PoseLookup,
     box: Box = MAPTR_RANGE,
     n_points: int = POINTS_PER_VECTOR,
+    scenes: Collection[str] | None = None,
 ) -> Path:
-    """Write the MapTR vectors JSON to `out`, validated as import will read it; returns the path."""
-    model = build_maptr(annotations, dataset, poses=poses, box=box, n_points=n_points)
+    """Write the MapTR vectors JSON to `out` (the key frames of `scenes`, else of every scene), validated as import
+    will read it; returns the path."""
+    model = build_maptr(annotations, dataset, poses=poses, box=box, n_points=n_points, scenes=scenes)
     text = model.model_dump_json(by_alias=True, indent=1)
     validate_file(MaptrFile, json.loads(text), Path(out))
     atomic_write_bytes(Path(out), text.encode("utf-8"))

@@ -1,6 +1,8 @@
 """`export`: resolve what the request's format needs, write it staged, rename it into place."""
 
+import json
 import logging
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,8 +90,10 @@ def _write_clip_data(inputs: ExportInputs, scenes: list[tuple[str, Path]]) -> di
 
 def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     data, poses = inputs.need_dataset()
-    export_maptr(inputs.request.annotations, data, staging, poses=poses.lookup)
-    return {}
+    scenes = inputs.request.scenes or poses.scenes
+    written = export_maptr(inputs.request.annotations, data, staging, poses=poses.lookup, scenes=scenes)
+    sources = Counter(sample["pose_source"] for sample in json.loads(written.read_text("utf-8"))["samples"])
+    return {"scenes": list(scenes), "pose_sources": dict(sources)}
 
 
 def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:

@@ -139,3 +139,21 @@ def test_nuscenes_cama_root_carries_the_sfm_poses(
     assert posed
     for image in posed:
         np.testing.assert_allclose(image.global_from_ego.matrix(), sfm[image.token], atol=1e-6)
+
+
+def test_maptr_keeps_to_the_site_scenes(site_export, tiny_site: GeneratedSite, tmp_path: Path) -> None:
+    """Refined MapTR samples: only the site's scenes (a scene the site left out would carry logged poses), and
+    every sample's pose from the reconstruction."""
+    _out, site_id, workspace, _dataset, _count = site_export
+    source = tmp_path / "set.json"
+    AnnotationSet.read_json(next(iter(workspace.root.glob("proposals/*.json")))).write_json(source)
+    out = tmp_path / "maptr.json"
+    dataset_root = tiny_site.result.out_dir / "nuscenes"
+    args = ["export", str(source), str(out), "--format", "maptr", "--dataset", str(dataset_root)]
+    assert runner.invoke(app, [*args, "--workspace", str(workspace.root)]).exit_code == 0
+    samples = json.loads(out.read_text())["samples"]
+    site_scenes = {
+        entry["scene"] for entry in json.loads(workspace.site_manifest(site_id).read_text())["scenes"]
+    }
+    assert samples and {s["scene"] for s in samples} <= site_scenes
+    assert {s["pose_source"] for s in samples} <= {"sfm", "wigo+sfm", "wigo"}
