@@ -183,7 +183,7 @@ def test_images_are_scaled_and_cached(
     token = views["views"][0]["token"]
     scaled = get(client, headers, f"/api/sites/{site_id}/images/{token}?width=240")
     assert scaled.headers["content-type"] == "image/jpeg"
-    assert scaled.headers["cache-control"] == "public, max-age=31536000, immutable"
+    assert scaled.headers["cache-control"] == "private, max-age=31536000, immutable"
     image = np.asarray(cv2.imdecode(np.frombuffer(scaled.content, np.uint8), cv2.IMREAD_COLOR))
     full = load_dataset(tiny_site.result.out_dir / "nuscenes").image(token)
     assert image.shape[1] == 240

@@ -51,9 +51,10 @@ from app.backend.schemas_cameras import (
 logger = logging.getLogger(__name__)
 router = APIRouter(prefix="/sites/{site_id}", tags=["cameras"])
 _STATE_LOCK = threading.Lock()
-IMAGE_CACHE_CONTROL = "public, max-age=31536000, immutable"
+IMAGE_CACHE_CONTROL = "private, max-age=31536000, immutable"
 """A data set image never changes under its token (a rewritten file gets a new ETag, and the browser keys its
-cache on the URL, which holds the token and width)."""
+cache on the URL, which holds the token and width); `private` because the answer needs a login, so no shared
+cache may keep it."""
 IMAGE: dict[int | str, dict[str, object]] = {
     200: {"content": {"image/jpeg": {}}, "description": "The camera image (JPEG)."},
     304: {"description": "Not modified (If-None-Match matched the ETag)."},
