@@ -403,3 +403,27 @@ def test_end_to_end_measures_table() -> None:
         ],
         "end-to-end annotator",
     )
+
+
+EXPORT_ROWS = {
+    "true 3D map, true poses": "ref",
+    "(a) true 3D map, exported odometry (refined)": "a_truth",
+    "true 3D map, SfM poses directly": "a_truth_sfm",
+    "true map as exported (labels, elevation raster, per-scene cut), exported odometry": "a_truth_labels",
+    "(b) true 3D map, coarse odometry (`--poses coarse`)": "b_truth_coarse",
+    "(c) pipeline proposals as exported, exported odometry": "c_pipeline",
+    "pipeline proposals exported without the per-scene cut, exported odometry": "c_uncut",
+    "pipeline proposals before export, SfM poses directly": "c_sfm",
+}
+
+
+def test_export_table_both_protocols() -> None:
+    t = table("export row")
+    assert_names_source(t, "export.json", "bench/export.py")
+    recorded = results("export.json")
+    for label, key in EXPORT_ROWS.items():
+        cells = row(t, label)
+        assert_shows(
+            " | ".join(cells[1:5]), _sre_figures(recorded["strict"][key]), f"export strict {label!r}"
+        )
+        assert_shows(" | ".join(cells[5:9]), _sre_figures(recorded["cama"][key]), f"export cama {label!r}")
