@@ -33,6 +33,7 @@ export class CameraPanel {
     this.lifted = [];
     this.ticket = 0;
     this.liveFrames = 0;
+    this.shownAt = null; // performance.now() when the views of the current subject were asked for (bench)
     this.liveDrawMs = []; // how long each live redraw of every view took (the last 240)
     this.enlarged = null;
     this.watched = null;
@@ -95,12 +96,7 @@ export class CameraPanel {
   async follow() {
     const cameras = await this.figures.cameras();
     if (!this.open) return;
-    if (!cameras.available) {
-      this.subject = null;
-      this.clear(cameras.notice || "This site has no camera images.");
-      this.status.dataset.notice = "true";
-      return;
-    }
+    if (!cameras.available) return this.showNotice(cameras);
     const feature = this.tools.selected()[0];
     const element = feature ? this.store.get(/** @type {number} */ (feature.getId())) : null;
     if (!element) {
@@ -125,6 +121,13 @@ export class CameraPanel {
     this.show({ kind: "point", x: xy[0], y: xy[1] });
   }
 
+  /** A site without camera images or poses: the server's notice, nothing else. */
+  showNotice(cameras) {
+    this.subject = null;
+    this.clear(cameras.notice || "This site has no camera images.");
+    this.status.dataset.notice = "true";
+  }
+
   clear(message) {
     this.ticket++;
     this.views = [];
@@ -147,11 +150,12 @@ export class CameraPanel {
     this.start = -1;
     this.lifted = [];
     const ticket = ++this.ticket;
+    this.shownAt = performance.now();
     this.status.textContent = "Loading camera views…";
     try {
       const cameras = await this.figures.cameras();
       if (ticket !== this.ticket) return;
-      if (!cameras.available) return this.clear(cameras.notice || "This site has no camera images.");
+      if (!cameras.available) return this.showNotice(cameras);
       this.showFigures();
       const answer = await this.api.get(`${this.base}/views`, { ...this.subjectQuery(), n: this.count });
       if (ticket !== this.ticket) return;
@@ -345,12 +349,14 @@ export class CameraPanel {
       status: this.status.textContent,
       liveFrames: this.liveFrames,
       liveDrawMs: this.liveDrawMs.slice(),
+      shownAt: this.shownAt,
       views: this.views.map((v) => ({
         token: v.view.token,
         width: v.canvas.width,
         height: v.canvas.height,
         scale: v.scale,
         loaded: v.element.dataset.loaded || "",
+        loadedAt: v.loadedAt,
         projected: v.element.dataset.projected || "",
         pieces: (v.live || v.pieces).map((piece) => piece.map(([u, w]) => [u * v.scale, w * v.scale])),
       })),

@@ -121,6 +121,8 @@ export class CameraView {
     this.neighbours = [];
     this.live = null;
     this.marker = null;
+    /** @type {number|null} performance.now() when the image was first drawn (for the bench) */
+    this.loadedAt = null;
   }
 
   /** Fetch the image and camera; resolves once the first frame is drawn (rejects with the API's error). */
@@ -130,6 +132,7 @@ export class CameraView {
     this.camera = camera;
     if (image) this.canvas.height = Math.round((image.height * this.width) / image.width);
     this.draw();
+    this.loadedAt = performance.now();
     this.element.dataset.loaded = image ? "image" : "missing";
   }
 

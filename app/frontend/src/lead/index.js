@@ -16,8 +16,8 @@ export async function mountLead(container, api, siteId) {
   const figures = new FiguresCard(api, siteId);
   const jobs = new JobsCard(api, siteId);
   const reprojection = new ReprojectionQueue(api, siteId);
-  const main = h("div.lead-main", {}, queue.element, reprojection.element);
-  container.appendChild(h("div.lead-page", {}, main, h("div.lead-side", {}, figures.element, jobs.element)));
+  const side = h("div.lead-side", {}, reprojection.element, figures.element, jobs.element);
+  container.appendChild(h("div.lead-page", {}, h("div.lead-main", {}, queue.element), side));
   await Promise.all([queue.reload(0), figures.reload(), jobs.reload(), reprojection.start()]);
   return {
     destroy() {
