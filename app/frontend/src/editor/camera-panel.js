@@ -78,18 +78,20 @@ export class CameraPanel {
     );
   }
 
-  /** Open or close the panel (the first opening asks the server whether the site has cameras). */
-  toggle() {
+  /** Open or close the panel (`follow`: show the selection's views on opening). */
+  toggle(follow = true) {
     this.open = !this.open;
     this.element.hidden = !this.open;
     this.onToggle(this.open);
     this.element.dispatchEvent(new Event("camera-toggle"));
     if (!this.open) {
+      this.ticket++; // answers still on their way are dropped
       this.closeEnlarged();
       this.watch(null);
+      this.subject = null; // reopening shows the selection afresh (it may have changed meanwhile)
       return;
     }
-    this.follow();
+    if (follow) this.follow();
   }
 
   /** Show the views of the current selection (the first selected element), or the site's notice. */
@@ -116,7 +118,7 @@ export class CameraPanel {
    */
   pointViews(xy) {
     if (!xy) return;
-    if (!this.open) this.toggle();
+    if (!this.open) this.toggle(false);
     this.watch(null);
     this.show({ kind: "point", x: xy[0], y: xy[1] });
   }
@@ -211,6 +213,7 @@ export class CameraPanel {
     const projection = await this.api.get(path, { image: view.view.token, neighbours: 1 });
     if (ticket !== this.ticket) return;
     if (projection.points_3d && projection.points_3d.length) this.lifted = projection.points_3d;
+    view.live = null; // the server's projection of the saved version replaces the live one
     view.setProjection(projection);
     view.element.dataset.version = String(subject.version);
     view.element.dataset.projected = "server";
@@ -333,13 +336,7 @@ export class CameraPanel {
     if (element.deleted) return this.clear("The element was deleted.");
     s.version = element.version;
     this.showFigures();
-    for (const view of this.views) {
-      if (!view.camera) continue;
-      this.project(view, s).then(
-        () => view.setLive(null),
-        () => undefined,
-      );
-    }
+    for (const view of this.views) if (view.camera) this.project(view, s).catch(() => undefined);
   }
 
   /** What the panel shows, for the browser tests: per view its token, canvas scale and drawn pieces. */
