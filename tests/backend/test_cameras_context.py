@@ -13,6 +13,7 @@ import numpy as np
 from annotations.schema import AnnotationSet, Georeference
 from app.backend.cameras import NO_RECONSTRUCTION, ContextCache, ImageCache, SiteSources, best_views
 from app.backend.cameras.images import MASK_ALPHA, lane_overlay_png
+from app.backend.cameras.views import ViewChoice, spread
 from app.backend.crud.site_sources import camera_sources
 from app.backend.schemas import SiteCreate
 from cama_pipeline.bev import read_georeference
@@ -120,3 +121,17 @@ def test_the_lane_overlay_gives_each_instance_its_own_colour(tmp_path: Path) -> 
     colours = {tuple(overlay[row, col, :3].tolist()) for row, col in ((5, 10), (12, 10), (12, 30))}
     assert len(colours) == 3 and (0, 0, 0) not in colours
     assert (overlay[0, 0] == 0).all()
+
+
+def _view(token: str, channel: str, station_m: float, centre_x: float, score: float) -> ViewChoice:
+    return ViewChoice(token, channel, "scene", 0, 512, 288, score, 10.0, 5.0, station_m, (centre_x, 0.0))
+
+
+def test_views_from_the_same_spot_are_not_shown_twice() -> None:
+    """A parked car's frames of one camera (same spot, best scores) give one view; the next is another viewpoint,
+    even with a lower score; another camera at the same spot is a new viewpoint."""
+    parked = [_view(f"p{k}", "CAM_BACK", 5.0, 100.0 + 0.1 * k, 0.9) for k in range(3)]
+    moving = _view("m", "CAM_BACK", 5.0, 108.0, 0.5)
+    side = _view("s", "CAM_BACK_LEFT", 5.0, 100.0, 0.4)
+    chosen = spread([*parked, moving, side], 3, 10.0)
+    assert sorted(c.token for c in chosen) == ["m", "p0", "s"]

@@ -40,6 +40,10 @@ LIFT_SEARCH_RADIUS_M = 2.0
 """An unobserved elevation cell takes the nearest observed one within this distance."""
 POINT_STEP_M = 0.01
 """A point is lifted as the start of a segment this long (the lift needs a polyline)."""
+SAME_SPOT_M = 1.0
+"""Views of one camera taken closer than this to a chosen one add nothing new to the panel."""
+SAME_SPOT_FACTOR = 0.05
+"""Such a view keeps this share of its score (chosen only when nothing else sees the element)."""
 NO_ELEVATION = "no elevation under this element: drawn at the ground height of the cameras near it"
 PARTLY_LIFTED = "part of this element has no elevation under it: its height there is interpolated"
 
@@ -74,6 +78,8 @@ class ViewChoice:
     distance_m: float
     obliqueness_deg: float
     station_m: float
+    centre_xy: tuple[float, float] = (0.0, 0.0)
+    """The camera's global x, y (to tell views taken from the same spot apart from new viewpoints)."""
 
 
 def _stations(xy: np.ndarray) -> np.ndarray:
@@ -177,6 +183,7 @@ def candidates(context: CameraContext, lifted: LiftedElement) -> list[ViewChoice
                 distance_m=round(d, 2),
                 obliqueness_deg=round(float(np.degrees(np.arccos(min(1.0, cos_angle)))), 2),
                 station_m=round(float(lifted.station_m[nearest]), 2),
+                centre_xy=(float(centres[row, 0]), float(centres[row, 1])),
             )
         )
     return out
@@ -195,11 +202,22 @@ def spread(choices: list[ViewChoice], n: int, length_m: float) -> list[ViewChoic
 
 
 def _damped(choice: ViewChoice, chosen: list[ViewChoice], spacing_m: float) -> float:
-    """A choice's score damped by its station's nearness to the chosen ones (a quarter at the same station)."""
-    if not chosen or spacing_m <= 0.0:
+    """A choice's score damped by its station's nearness to the chosen ones (a quarter at the same station), and
+    nearly cancelled when a chosen view of the same camera was taken from the same spot (a parked or slow car's
+    frames show the same picture again)."""
+    if not chosen:
+        return choice.score
+    if any(c.channel == choice.channel and _apart_m(c, choice) < SAME_SPOT_M for c in chosen):
+        return choice.score * SAME_SPOT_FACTOR
+    if spacing_m <= 0.0:
         return choice.score
     gap = min(abs(choice.station_m - c.station_m) for c in chosen)
     return choice.score * (0.25 + 0.75 * min(1.0, gap / spacing_m))
+
+
+def _apart_m(a: ViewChoice, b: ViewChoice) -> float:
+    """Horizontal distance between two views' cameras."""
+    return float(np.hypot(a.centre_xy[0] - b.centre_xy[0], a.centre_xy[1] - b.centre_xy[1]))
 
 
 def in_station_order(choices: list[ViewChoice]) -> list[ViewChoice]:
