@@ -1,4 +1,5 @@
-"""Open a site in the 3D review: read its files, fill a `ReviewScene`, keep the vectors in step with a source."""
+"""Open a site in the 3D review: read its files, fill a `ReviewScene`, keep the vectors in step with a source, and
+(for a backend source) show the selected element's camera views."""
 
 import logging
 import threading
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import viser
 
+from app.viewer.cameras import attach_camera_views
 from app.viewer.content import (
     camera_segments,
     first_site,
@@ -53,7 +55,9 @@ def open_review(server: viser.ViserServer, inputs: ViewInputs, source: VectorSou
         logger.info("no sparse points yet (run `cama sfm`)")
     else:
         scene.add_points(points)
-    return show_vectors(scene, source)
+    show_vectors(scene, source)
+    attach_camera_views(scene, source)
+    return scene
 
 
 def show_vectors(scene: ReviewScene, source: VectorSource) -> ReviewScene:

@@ -5,7 +5,7 @@ redrawing only elements whose id, version, state or class changed, so polling a 
 """
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,6 +65,7 @@ class ReviewScene:
         self._vectors: dict[str, tuple[ViewElement, np.ndarray]] = {}
         self._handles: dict[str, viser.SceneNodeHandle] = {}
         self.selected: str | None = None
+        self._select_listeners: list[Callable[[str | None], None]] = []
         self._panel = server.gui.add_markdown("Click a vector to see its id and state.")
         self._toggles: dict[str, viser.GuiCheckboxHandle] = {}
         server.scene.on_click()(self._on_click)
@@ -140,6 +141,7 @@ class ReviewScene:
             self._handles.pop(element_id).remove()
             del self._vectors[element_id]
         added = updated = not_lifted = 0
+        redrawn: set[str] = set()
         for element in changes.elements:
             known = self._vectors.get(element.id)
             if known is not None and known[0].key == element.key:
@@ -151,8 +153,11 @@ class ReviewScene:
             added, updated = (added + 1, updated) if known is None else (added, updated + 1)
             self._vectors[element.id] = (element, points)
             self._draw(element, points)
+            redrawn.add(element.id)
         if self.selected is not None and self.selected not in self._vectors:
             self.select(None)
+        elif self.selected in redrawn:
+            self._notify()  # the selected element changed: whoever shows more of it redraws
         return SyncCounts(added, updated, len(removed), not_lifted)
 
     def select(self, element_id: str | None) -> None:
@@ -163,9 +168,20 @@ class ReviewScene:
                 self._draw(*self._vectors[redraw])
         if element_id is None:
             self._panel.content = "Click a vector to see its id and state."
+            self._notify()
             return
         element = self._vectors[element_id][0]
         self._panel.content = f"**Element {element.id}**  \nclass: {element.cls}  \nstate: {element.state}  \nversion: {element.version}"
+        self._notify()
+
+    def on_select(self, callback: Callable[[str | None], None]) -> None:
+        """Call `callback(element_id)` after each selection (None: nothing selected) and after the selected
+        element changed in its source (e.g. app/viewer/cameras.py shows its camera views)."""
+        self._select_listeners.append(callback)
+
+    def _notify(self) -> None:
+        for callback in self._select_listeners:
+            callback(self.selected)
 
     def element_centre(self, element_id: str) -> np.ndarray | None:
         """The view-frame centre of a drawn element (its lifted vertices' mean); None when not drawn."""

@@ -171,6 +171,28 @@ class ApiVectorSource:
         elements, _, self._cursor = self._changes_since(0)
         return elements
 
+    @property
+    def site_id(self) -> int:
+        """The backend's site id."""
+        return self._site_id
+
+    @property
+    def site_origin_xy(self) -> np.ndarray:
+        """(2,) global metres of the site's origin (read with the first `load`): API coordinates are relative
+        to it in x and y."""
+        if self._site_origin_xy is None:
+            self.load()
+        assert self._site_origin_xy is not None  # set by load
+        return self._site_origin_xy
+
+    def get(self, path: str, **params: object) -> httpx.Response:
+        """GET another endpoint of the backend (e.g. the camera views of `app/viewer/cameras.py`) as this
+        source's user, logging in first when needed; VectorSourceError for a transport failure or an error
+        status."""
+        if self._token is None:
+            self._token = self._login()
+        return self._request("GET", path, params=params)
+
     def changes(self) -> VectorChanges:
         if self._cursor is None:
             return VectorChanges(self.load(), complete=True)

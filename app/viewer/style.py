@@ -11,6 +11,10 @@ REJECTED_RGB = (120, 120, 120)
 RETURNED_RGB = (250, 204, 21)
 SELECTED_RGB = (255, 255, 255)
 CAMERA_RGB = (34, 197, 94)
+VIEW_FRUSTUM_RGB = (251, 146, 60)
+"""The selected element's camera views (app/viewer/cameras.py): orange, apart from the green keyframe cameras."""
+LIFTED_ELEMENT_RGB = (255, 235, 59)
+"""The selected element as the backend lifts it (the line its camera views project): bright yellow."""
 _PROPOSED_DIM = 0.55
 """Proposals not yet reviewed are drawn darker than reviewed work, as the editor dims the opposite way."""
 SEMANTIC_RGB = np.array(
