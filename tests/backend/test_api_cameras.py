@@ -163,6 +163,7 @@ def test_views_see_the_element_and_respect_n(
         "x=1",
         "element_id={e}&x=1&y=2",
         "x=nan&y=1",
+        "x=1e300&y=1",
         "element_id=0",
     ],
 )

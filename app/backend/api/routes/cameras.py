@@ -66,6 +66,9 @@ MASK: dict[int | str, dict[str, object]] = {
     404: {"description": "Not a camera image of the site's data set, or no lane mask for it."},
 }
 Token = Annotated[str, Path(pattern=TOKEN_PATTERN, description="A camera image's sample_data token.")]
+MAX_SITE_M = 100_000.0
+"""A site point further than this from the site origin (metres) is refused (422): no site is that large, and
+squaring such numbers overflows."""
 Width = Annotated[int | None, Query(description="One of 240, 320, 480, 640, 960; omitted: full size.")]
 
 
@@ -138,8 +141,10 @@ def read_views(
     session: SessionDep,
     _user: CurrentUser,
     element_id: Annotated[int | None, Query(ge=1, description="The element to see.")] = None,
-    x: Annotated[float | None, Query(description="Or a site point: x (metres).")] = None,
-    y: Annotated[float | None, Query(description="And y (metres).")] = None,
+    x: Annotated[
+        float | None, Query(ge=-MAX_SITE_M, le=MAX_SITE_M, description="Or a site point: x (metres).")
+    ] = None,
+    y: Annotated[float | None, Query(ge=-MAX_SITE_M, le=MAX_SITE_M, description="And y (metres).")] = None,
     n: Annotated[int, Query(ge=2, le=6, description="How many views (2..6).")] = 4,
     all_: Annotated[
         bool, Query(alias="all", description="Every view that sees it, in station order.")
