@@ -8,6 +8,7 @@ whose file resolves outside the data set root, is a 404. Answers name no server 
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path as FilePath
 from typing import Annotated
@@ -156,9 +157,7 @@ def read_views(
     if element_id is not None:
         element = crud.get_element(session=session, site_id=site_id, element_id=element_id)
         lifted = lift_site_points(context, element.points)
-    else:
-        if not all(abs(v) < 1e7 for v in (x, y)):  # type: ignore[arg-type]  # both set: checked above
-            raise InvalidInputError("x", "must be finite site metres")
+    else:  # both set (checked above), finite and within MAX_SITE_M (the query's bounds)
         lifted = lift_site_point(context, (x, y))  # type: ignore[arg-type]
     if not context.available:
         return ViewsPublic(notice=context.notice, views=[])
@@ -179,6 +178,30 @@ def _served(request: Request, state: CameraState, kind: str, path: FilePath, wid
     return Response(encoded.data, media_type=encoded.media_type, headers=headers)
 
 
+def _served_lookup(
+    request: Request,
+    state: CameraState,
+    kind: str,
+    width: int | None,
+    find: Callable[[], FilePath],
+) -> Response:
+    """Check the width, find the file (404 naming why when there is none) and serve it (`_served`)."""
+    check_width(width)
+    try:
+        path = find()
+    except ImageNotFound as error:
+        raise NotFoundError(str(error)) from None
+    return _served(request, state, kind, path, width)
+
+
+def _lane_mask(context: CameraContext, token: str) -> FilePath:
+    """The image's lane instance mask file; NotFoundError when the image has none."""
+    path = lane_mask_file(context, token)
+    if path is None:
+        raise NotFoundError(NO_LANE_MASK)
+    return path
+
+
 @router.get("/images/{token}", response_class=Response, response_model=None, responses=IMAGE)
 def read_image(
     token: Token,
@@ -189,12 +212,7 @@ def read_image(
     width: Width = None,
 ) -> Response:
     """A camera image of the site's data set, scaled to `width` (INTER_AREA), JPEG, cached for a year."""
-    check_width(width)
-    try:
-        path = image_file(context, token)
-    except ImageNotFound as error:
-        raise NotFoundError(str(error)) from None
-    return _served(request, state, "image", path, width)
+    return _served_lookup(request, state, "image", width, lambda: image_file(context, token))
 
 
 @router.get("/images/{token}/lane-mask", response_class=Response, response_model=None, responses=MASK)
@@ -207,14 +225,7 @@ def read_lane_mask(
     width: Width = None,
 ) -> Response:
     """The image's lane instances as an RGBA overlay (data set's masks, else predicted or imported ones)."""
-    check_width(width)
-    try:
-        path = lane_mask_file(context, token)
-    except ImageNotFound as error:
-        raise NotFoundError(str(error)) from None
-    if path is None:
-        raise NotFoundError(NO_LANE_MASK)
-    return _served(request, state, "lane-mask", path, width)
+    return _served_lookup(request, state, "lane-mask", width, lambda: _lane_mask(context, token))
 
 
 @router.get("/images/{token}/camera", response_model=CameraPublic)
