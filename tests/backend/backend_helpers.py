@@ -1,9 +1,14 @@
 """Backend test helpers shared by the fixtures and tests: constants, login, element bodies."""
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from fastapi.testclient import TestClient
+
+from app.backend.config import Settings
+from cama_studio.pipeline import PipelineResult
+from tests.conftest import GeneratedSite
 
 PASSWORD = "correct horse battery"
 ROLES = ("annotator", "lead", "admin")
@@ -41,3 +46,9 @@ def crosswalk(x0: float = 50.0, y0: float = 50.0) -> dict[str, Any]:
     """A closed 4 m x 3 m crosswalk body."""
     ring = [[x0, y0], [x0 + 4, y0], [x0 + 4, y0 + 3], [x0, y0 + 3], [x0, y0]]
     return {"class": "ped_crossing", "points": ring}
+
+
+def with_reconstruction(settings: Settings, tiny_site: GeneratedSite, whole_path: PipelineResult) -> Settings:
+    """The settings with the tiny site's data set and its reconstruction (`whole_path`) inside the data roots."""
+    roots = (*settings.data_roots, tiny_site.result.out_dir, whole_path.workspace)
+    return replace(settings, data_roots=roots)

@@ -5,7 +5,6 @@ headers, camera parameters that agree with the server's projection, lane-mask ov
 
 import logging
 import shutil
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,7 @@ from app.demo import site_request
 from cama_pipeline.data import load_dataset
 from cama_pipeline.workspace import Workspace
 from cama_studio.pipeline import PipelineResult
-from tests.backend.backend_helpers import divider
+from tests.backend.backend_helpers import divider, with_reconstruction
 from tests.conftest import GeneratedSite
 
 Headers = dict[str, dict[str, str]]
@@ -32,8 +31,7 @@ ELEMENTS = 6
 @pytest.fixture
 def settings(settings: Settings, tiny_site: GeneratedSite, whole_path: PipelineResult) -> Settings:
     """The conftest settings with the tiny site's data set and its reconstruction inside the data roots."""
-    roots = (*settings.data_roots, tiny_site.result.out_dir, whole_path.workspace)
-    return replace(settings, data_roots=roots)
+    return with_reconstruction(settings, tiny_site, whole_path)
 
 
 def register(

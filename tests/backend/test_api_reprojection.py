@@ -4,7 +4,6 @@ with the lane masks, the same divider 1 m aside does not; figures are cached per
 
 import json
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -18,7 +17,7 @@ from app.backend.crud import reprojection
 from app.demo import site_request
 from cama_pipeline.workspace import Workspace
 from cama_studio.pipeline import PipelineResult
-from tests.backend.backend_helpers import crosswalk, divider
+from tests.backend.backend_helpers import crosswalk, divider, with_reconstruction
 from tests.conftest import GeneratedSite
 
 Headers = dict[str, dict[str, str]]
@@ -30,8 +29,7 @@ INSET_M = 2.0
 @pytest.fixture
 def settings(settings: Settings, tiny_site: GeneratedSite, whole_path: PipelineResult) -> Settings:
     """The conftest settings with the tiny site's data set and its reconstruction inside the data roots."""
-    roots = (*settings.data_roots, tiny_site.result.out_dir, whole_path.workspace)
-    return replace(settings, data_roots=roots)
+    return with_reconstruction(settings, tiny_site, whole_path)
 
 
 @pytest.fixture
