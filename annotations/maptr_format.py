@@ -226,6 +226,11 @@ def export_maptr(
     """Write the MapTR vectors JSON to `out` (the key frames of `scenes`, else of every scene), validated as import
     will read it; returns the path."""
     model = build_maptr(annotations, dataset, poses=poses, box=box, n_points=n_points, scenes=scenes)
+    return write_maptr(model, out)
+
+
+def write_maptr(model: MaptrFile, out: Path) -> Path:
+    """Write a MapTR file model to `out`, validated as import will read it; returns the path."""
     text = model.model_dump_json(by_alias=True, indent=1)
     validate_file(MaptrFile, json.loads(text), Path(out))
     atomic_write_bytes(Path(out), text.encode("utf-8"))

@@ -1,6 +1,5 @@
 """`export`: resolve what the request's format needs, write it staged, rename it into place."""
 
-import json
 import logging
 from collections import Counter
 from collections.abc import Callable
@@ -10,12 +9,12 @@ from pathlib import Path
 from annotations.cama_clip_data import write_clip_data
 from annotations.cama_release import export_cama_release
 from annotations.lanelet2_format import export_lanelet2
-from annotations.maptr_format import export_maptr
+from annotations.maptr_format import build_maptr, write_maptr
 from annotations.nuscenes_cama_format import export_nuscenes_cama
 from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.data.masks import mask_roots
 from cama_pipeline.export.poses import ExportPoses, export_poses
-from cama_pipeline.export.request import ExportFormat, ExportRequest, ExportResult
+from cama_pipeline.export.request import FORMATS_NEEDING_DATASET, ExportFormat, ExportRequest, ExportResult
 from cama_pipeline.export.staging import staged_output
 from cama_pipeline.workspace import Workspace
 
@@ -91,8 +90,9 @@ def _write_clip_data(inputs: ExportInputs, scenes: list[tuple[str, Path]]) -> di
 def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     data, poses = inputs.need_dataset()
     scenes = inputs.request.scenes or poses.scenes
-    written = export_maptr(inputs.request.annotations, data, staging, poses=poses.lookup, scenes=scenes)
-    sources = Counter(sample["pose_source"] for sample in json.loads(written.read_text("utf-8"))["samples"])
+    model = build_maptr(inputs.request.annotations, data, poses=poses.lookup, scenes=scenes)
+    write_maptr(model, staging)
+    sources = Counter(sample.pose_source for sample in model.samples)
     return {"scenes": list(scenes), "pose_sources": dict(sources)}
 
 
@@ -128,7 +128,7 @@ WRITERS: dict[ExportFormat, Writer] = {
 
 def export_inputs(request: ExportRequest) -> ExportInputs:
     """Load the data set and the poses the request's format needs (errors name the missing input)."""
-    if request.dataset_root is None:
+    if request.dataset_root is None or request.format not in FORMATS_NEEDING_DATASET:
         return ExportInputs(request, None, None, None)
     dataset_root = Path(request.dataset_root)
     workspace = Workspace.resolve(request.workspace, dataset_root)
