@@ -127,10 +127,10 @@ def read_scene_odometry(scene_dir: Path, scene: Scene) -> dict[str, Pose]:
     return poses
 
 
-def read_scene_labels(scene_dir: Path, *, drop_filled: bool = False) -> list[VectorElement]:
+def read_scene_labels(scene_dir: Path) -> tuple[list[VectorElement], list[VectorElement]]:
     """One exported scene's labels as CAMA's code reads them: x = v * r - S/2, y = u * r - S/2 in the world frame
-    (plus the sidecar's world origin for global metres), z = the elevation raster at the point's cell [v, u];
-    `drop_filled`: leave out the points on cells the export filled (our sidecar's PNG), as `cama import` does."""
+    (plus the sidecar's world origin for global metres), z = the elevation raster at the point's cell [v, u]; and
+    the same labels without the points on cells the export filled (our sidecar's PNG), as `cama import` reads them."""
     sidecar = read_sidecar(scene_dir / "maps" / "georeference.json")
     if not isinstance(sidecar, CamaReleaseGeoreference):
         raise SystemExit(f"{scene_dir}: not a release-layout scene folder (sidecar version 1)")
@@ -141,7 +141,7 @@ def read_scene_labels(scene_dir: Path, *, drop_filled: bool = False) -> list[Vec
     filled = cv2.imread(str(scene_dir / "maps" / sidecar.elevation_filled), cv2.IMREAD_UNCHANGED)
     if filled is None:
         raise SystemExit(f"{scene_dir}: cannot read maps/{sidecar.elevation_filled}")
-    out = []
+    out, observed = [], []
     for index, instance in enumerate(labels):
         cls = CLASS_FROM_CAMA_TYPE.get(instance["attrs"]["type"])
         if cls is None:
@@ -151,12 +151,12 @@ def read_scene_labels(scene_dir: Path, *, drop_filled: bool = False) -> list[Vec
         cols = np.clip(np.rint(uv[:, 0]).astype(int), 0, elevation.shape[1] - 1)
         xy = np.column_stack([uv[:, 1] * r - half, uv[:, 0] * r - half]) + origin
         points = np.column_stack([xy, elevation[rows, cols]])
-        if drop_filled:
-            points = points[filled[rows, cols] == 0]
-            if len(points) < 2:
-                continue
-        out.append(VectorElement(f"{instance['id']}-{index}", cls, points, cls == "ped_crossing"))
-    return out
+        name, closed = f"{instance['id']}-{index}", cls == "ped_crossing"
+        out.append(VectorElement(name, cls, points, closed))
+        seen = points[filled[rows, cols] == 0]
+        if len(seen) >= 2:
+            observed.append(VectorElement(name, cls, seen, closed))
+    return out, observed
 
 
 def read_export(
@@ -170,8 +170,7 @@ def read_export(
     observed: dict[str, list[VectorElement]] = {}
     for scene_dir in sorted((out / "all_clips").iterdir()):
         poses.update(read_scene_odometry(scene_dir, scenes[scene_dir.name]))
-        labels[scene_dir.name] = read_scene_labels(scene_dir)
-        observed[scene_dir.name] = read_scene_labels(scene_dir, drop_filled=True)
+        labels[scene_dir.name], observed[scene_dir.name] = read_scene_labels(scene_dir)
     return poses, labels, observed
 
 
