@@ -9,6 +9,9 @@ the point's cell, as CAMA's code reads them) give the map. Rows, all over the sa
   ref            the true 3D map through the true poses (the floor set by the masks alone)
   a_truth        the true 3D map through the exported (refined) odometry; target: within 0.5 px of `ref`
   a_truth_sfm    the true 3D map through the SfM poses directly (a_truth minus this is what the export loses)
+  a_truth_placed the true 3D map through the exported odometry after one rigid transform of the whole site onto
+                 the true poses (a diagnostic split, not a result: a_truth minus this is what the site's global
+                 placement costs, which comes from GNSS and the logged poses; this minus `ref` is the SfM shape)
   a_truth_labels the true map as exported (labels + elevation raster, cut per scene) through the exported odometry
   b_truth_coarse the true 3D map through the odometry of a `--poses coarse` export (the logged poses)
   c_pipeline     the pipeline's proposals exported (z from the exported elevation raster), read back from the
@@ -47,6 +50,7 @@ from annotations.cama_sidecar import CamaReleaseGeoreference, read_sidecar
 from cama_pipeline.bev import read_bev
 from cama_pipeline.data import Dataset, Pose, Scene, load_dataset
 from cama_pipeline.evaluate import SreConfig, SreProtocol, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate.errors import pose_errors, umeyama_alignment
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.sre_report import ImageSre, SreReport
 from cama_pipeline.export import ExportFormat, ExportRequest, PoseChoice, export
@@ -190,6 +194,41 @@ def sre_row(
     return dict(vars(SreReport.from_images(results, config).overall))
 
 
+def placed_on_truth(poses: Mapping[str, Pose], truth: Mapping[str, Pose]) -> tuple[dict[str, Pose], dict]:
+    """`poses` moved by the one rigid transform that best fits them onto `truth` (positions and orientations:
+    each pose contributes its origin and the tips of its unit axes), and what the move was."""
+    tokens = sorted(set(poses) & set(truth))
+
+    def axis_points(pose: Pose) -> np.ndarray:
+        return pose.translation + np.vstack([np.zeros(3), pose.rotation_matrix().T])
+
+    source = np.vstack([axis_points(poses[t]) for t in tokens])
+    target = np.vstack([axis_points(truth[t]) for t in tokens])
+    rotation, translation, _ = umeyama_alignment(source, target, with_scale=False)
+    turn = Rotation.from_matrix(rotation)
+    placed = {
+        token: Pose(
+            rotation @ pose.translation + translation,
+            (turn * Rotation.from_quat(pose.rotation, scalar_first=True)).as_quat(scalar_first=True),
+        )
+        for token, pose in poses.items()
+    }
+    before = pose_errors([poses[t] for t in tokens], [truth[t] for t in tokens])
+    after = pose_errors([placed[t] for t in tokens], [truth[t] for t in tokens])
+    move = {
+        "poses": len(tokens),
+        "turn_deg": float(np.degrees(turn.magnitude())),
+        "tilt_deg": float(np.degrees(np.linalg.norm(turn.as_rotvec()[:2]))),
+        "yaw_deg": float(np.degrees(turn.as_rotvec()[2])),
+        "shift_cm": [round(100 * v, 2) for v in translation + rotation @ source.mean(0) - source.mean(0)],
+        "position_rmse_cm_before": round(100 * before.position_rmse_m, 2),
+        "rotation_rmse_deg_before": round(before.rotation_rmse_deg, 4),
+        "position_rmse_cm_after": round(100 * after.position_rmse_m, 2),
+        "rotation_rmse_deg_after": round(after.rotation_rmse_deg, 4),
+    }
+    return placed, move
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
@@ -247,10 +286,13 @@ def main() -> None:
         token: Pose(matrix[:3, 3], Rotation.from_matrix(matrix[:3, :3]).as_quat(scalar_first=True))
         for token, matrix in sfm.items()
     }
+    true_poses = load_true_poses(args.site / "ground_truth" / "poses.json")
+    placed, placement = placed_on_truth(exported["truth_refined"][0], true_poses)
     rows = {
-        "ref": (true_map, load_true_poses(args.site / "ground_truth" / "poses.json")),
+        "ref": (true_map, true_poses),
         "a_truth": (true_map, exported["truth_refined"][0]),
         "a_truth_sfm": (true_map, sfm_poses),
+        "a_truth_placed": (true_map, placed),
         "a_truth_labels": (exported["truth_refined"][1], exported["truth_refined"][0]),
         "b_truth_coarse": (true_map, exported["truth_coarse"][0]),
         "c_pipeline": (exported["pipeline_refined"][1], exported["pipeline_refined"][0]),
@@ -261,6 +303,7 @@ def main() -> None:
     figures: dict[str, Any] = {"site": str(args.site), "site_id": site_id, "scenes": scenes}
     figures["images"] = len(images)
     figures["export_seconds"] = timings
+    figures["placement_of_exported_poses"] = placement
     for protocol in PROTOCOLS:
         figures[protocol] = {
             name: sre_row(dataset, maps, poses, images, protocol) for name, (maps, poses) in rows.items()
@@ -268,6 +311,10 @@ def main() -> None:
         ref = figures[protocol]["ref"]["sre_ref_px"]
         got = figures[protocol]["a_truth"]["sre_ref_px"]
         figures[protocol]["a_minus_ref_px"] = None if ref is None or got is None else got - ref
+        placed_px = figures[protocol]["a_truth_placed"]["sre_ref_px"]
+        figures[protocol]["a_placed_minus_ref_px"] = (
+            None if ref is None or placed_px is None else placed_px - ref
+        )
     figures["command"] = "python bench/export.py " + " ".join(sys.argv[1:])
     figures["machine"] = {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")}
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -409,6 +409,7 @@ EXPORT_ROWS = {
     "true 3D map, true poses": "ref",
     "(a) true 3D map, exported odometry (refined)": "a_truth",
     "true 3D map, SfM poses directly": "a_truth_sfm",
+    "true 3D map, exported odometry moved rigidly onto the true poses (diagnostic)": "a_truth_placed",
     "true map as exported (labels, elevation raster, per-scene cut), exported odometry": "a_truth_labels",
     "(b) true 3D map, coarse odometry (`--poses coarse`)": "b_truth_coarse",
     "(c) pipeline proposals as exported, exported odometry": "c_pipeline",
