@@ -5,13 +5,19 @@ looked silent. Here the same `add_task` / `advance` / `update` calls then log, t
 at most one line per task every `interval_s` (env `CAMA_PROGRESS_INTERVAL_S`, default 5 s), plus one when a
 task reaches its total (or the block ends before), e.g.
 `synthetic: render images 812/2406 (34 %), 9.1/s, about 2 min 55 s left`.
+
+A caller that shows progress elsewhere (the editor's job runner) wraps the stage in `observed_progress`: every
+step of every bar made inside the block then also reaches its observer, bar shown or not, and an observer that
+raises stops the stage at that step.
 """
 
 import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -22,6 +28,21 @@ INTERVAL_ENV = "CAMA_PROGRESS_INTERVAL_S"
 DEFAULT_INTERVAL_S = 5.0
 
 logger = logging.getLogger(__name__)
+
+ProgressObserver = Callable[[str, float, float | None], None]
+"""Called with a bar's text (`label: description`), its completed count and its total (None: unknown)."""
+_OBSERVER: ContextVar[ProgressObserver | None] = ContextVar("cama_progress_observer", default=None)
+
+
+@contextmanager
+def observed_progress(observer: ProgressObserver) -> Iterator[None]:
+    """Within the block (in this thread and context), every `StageProgress` created also calls `observer` on
+    each step; an exception the observer raises stops the stage where it stepped (how a job is cancelled)."""
+    token = _OBSERVER.set(observer)
+    try:
+        yield
+    finally:
+        _OBSERVER.reset(token)
 
 
 def output_is_terminal() -> bool:
@@ -92,6 +113,8 @@ class StageProgress:
         self.interval_s = interval_from_env() if interval_s is None else interval_s
         self.clock = clock
         self._bar: Progress | None = None
+        self._bar_ids: dict[int, TaskID] = {}
+        self._observer = _OBSERVER.get()
         self._tasks: dict[int, _Task] = {}
         self._lock = threading.Lock()
 
@@ -121,12 +144,12 @@ class StageProgress:
 
     def add_task(self, description: str = "", total: float | None = None) -> int:
         """A new bar; its id for `advance` and `update`."""
-        if self._bar is not None:
-            return int(self._bar.add_task(self._text(description), total=total))
         with self._lock:
             task_id = len(self._tasks)
             now = self.clock()
             self._tasks[task_id] = _Task(description, total, started=now, last_line=now)
+            if self._bar is not None:
+                self._bar_ids[task_id] = self._bar.add_task(self._text(description), total=total)
         return task_id
 
     def advance(self, task_id: int, amount: float = 1) -> None:
@@ -145,11 +168,8 @@ class StageProgress:
         if self._bar is not None:
             text = None if description is None else self._text(description)
             self._bar.update(
-                TaskID(task_id), advance=advance, completed=completed, total=total, description=text
+                self._bar_ids[task_id], advance=advance, completed=completed, total=total, description=text
             )
-            return
-        if not self.enabled:
-            return
         with self._lock:
             task = self._tasks[task_id]
             now = self.clock()
@@ -160,12 +180,20 @@ class StageProgress:
             if task.first is None and task.completed != before:
                 task.first = (now, task.completed)
             task.description = task.description if description is None else description
-            at_total = task.total is not None and task.completed >= task.total
-            if at_total and not task.finished:
-                task.finished = True
-                self._write(task)
-            elif now - task.last_line >= self.interval_s and task.logged != _state(task):
-                self._write(task)
+            state = _state(task)
+            if self._bar is None and self.enabled:
+                self._log_step(task, now)
+        if self._observer is not None:
+            self._observer(self._text(state[2]), state[0], state[1])
+
+    def _log_step(self, task: _Task, now: float) -> None:
+        """The task's line when it reaches its total, or when the interval has passed since its last line."""
+        at_total = task.total is not None and task.completed >= task.total
+        if at_total and not task.finished:
+            task.finished = True
+            self._write(task)
+        elif now - task.last_line >= self.interval_s and task.logged != _state(task):
+            self._write(task)
 
     def _text(self, description: str) -> str:
         return f"{self.label}: {description}" if description else self.label

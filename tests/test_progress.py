@@ -10,7 +10,7 @@ import pytest
 import cama_pipeline.progress as progress_module
 from app.backend.tiles import build_pyramid
 from cama_pipeline.bev import RasterGeoreference
-from cama_pipeline.progress import INTERVAL_ENV, StageProgress, format_duration
+from cama_pipeline.progress import INTERVAL_ENV, StageProgress, format_duration, observed_progress
 
 
 class FakeClock:
@@ -115,6 +115,46 @@ def test_a_terminal_gets_the_rich_bar_and_no_logged_lines(capsys: pytest.Capture
             progress.advance(task)
     assert log.lines == []
     assert "wigo: fuse scenes" in capsys.readouterr().out  # rich's final frame, as it draws into a file
+
+
+@pytest.mark.parametrize(("terminal", "enabled"), [(True, True), (False, True), (False, False)])
+def test_an_observer_sees_every_step_of_every_bar_shown_or_not(terminal: bool, enabled: bool) -> None:
+    clock = FakeClock()
+    log = Lines(clock)
+    seen: list[tuple[str, float, float | None]] = []
+    with observed_progress(lambda text, done, total: seen.append((text, done, total))):
+        with _plain("cama export", log, clock, terminal=terminal, enabled=enabled) as progress:
+            scenes = progress.add_task("scenes", total=2)
+            progress.advance(scenes)
+            progress.advance(scenes)
+            images = progress.add_task("clip data scene-0001")
+            progress.update(images, completed=5, total=6)
+    assert seen == [
+        ("cama export: scenes", 1, 2),
+        ("cama export: scenes", 2, 2),
+        ("cama export: clip data scene-0001", 5, 6),
+    ]
+    with _plain("after", log, clock) as progress:  # the block is over: no observer
+        progress.advance(progress.add_task("x", total=1))
+    assert len(seen) == 3
+
+
+def test_an_observer_that_raises_stops_the_stage_at_that_step() -> None:
+    clock = FakeClock()
+    log = Lines(clock)
+    done: list[int] = []
+
+    def stop_at_three(text: str, completed: float, total: float | None) -> None:
+        if completed >= 3:
+            raise InterruptedError(f"{text} stopped")
+
+    with pytest.raises(InterruptedError, match="wigo: fuse scenes stopped"):
+        with observed_progress(stop_at_three), _plain("wigo", log, clock) as progress:
+            task = progress.add_task("fuse scenes", total=10)
+            for step in range(10):
+                done.append(step)
+                progress.advance(task)
+    assert done == [0, 1, 2]
 
 
 def test_interval_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:

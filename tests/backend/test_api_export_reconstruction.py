@@ -12,10 +12,14 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy import update
 
 from annotations.poses import POSE_SOURCES
 from annotations.schema import AnnotationSet
 from app.backend.config import Settings
+from app.backend.jobs import export as export_job
+from app.backend.jobs.runner import REPORT_INTERVAL_S, JobContext
+from app.backend.models_jobs import Job
 from app.demo import site_request
 from cama_pipeline import refined_poses
 from cama_pipeline.data import load_dataset
@@ -161,3 +165,35 @@ def test_a_failing_refined_export_names_no_server_path(
     assert str(tmp_path) not in job["message"], job["message"]
     workdir = client.app.state.jobs.workdir(job["id"])  # type: ignore[attr-defined]
     assert list(workdir.iterdir()) == []
+
+
+def test_a_cancel_stops_the_export_at_its_next_progress_step_and_leaves_nothing(
+    client: TestClient,
+    headers: Headers,
+    reconstructed: tuple[int, str],
+    dataset_root: str,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    site_id, _site = reconstructed
+    steps: list[str] = []
+    real_observer = export_job.progress_observer
+
+    def cancelled_at_first_step(context: JobContext) -> export_job.ProgressObserver:
+        observe = real_observer(context)
+
+        def step(text: str, completed: float, total: float | None) -> None:
+            steps.append(text)
+            with context.session() as session:  # what POST /api/jobs/{id}/cancel records
+                session.execute(update(Job).where(Job.id == context.job_id).values(cancel_requested=True))
+                session.commit()
+            time.sleep(REPORT_INTERVAL_S)  # past the report throttle: this step reads the flag
+            observe(text, completed, total)
+
+        return step
+
+    monkeypatch.setattr(export_job, "progress_observer", cancelled_at_first_step)
+    job = run_export(client, headers, site_id, format="cama", dataset_root=dataset_root, with_clip_data=True)
+    assert job["state"] == "cancelled", job["message"]
+    assert steps == [steps[0]] and steps[0].startswith("cama export: "), steps  # stopped at the first step
+    workdir = client.app.state.jobs.workdir(job["id"])  # type: ignore[attr-defined]
+    assert not workdir.exists() or list(workdir.iterdir()) == []  # no export, staging or archive

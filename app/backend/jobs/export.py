@@ -27,13 +27,14 @@ from sqlalchemy.orm import Session
 from annotations.schema import AnnotationSet, Georeference
 from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.kinds import lift_elements, read_elevation, site_annotations
-from app.backend.jobs.runner import JobContext, JobKind, JobResult
+from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.models import Site
 from app.backend.schemas import STRICT
 from cama_pipeline.data import DatasetError
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
 from cama_pipeline.export.run import WRITERS
+from cama_pipeline.progress import ProgressObserver, observed_progress
 from cama_pipeline.workspace import SiteLocation, Workspace
 
 logger = logging.getLogger(__name__)
@@ -256,6 +257,24 @@ def failure_message(error: Exception, hidden: Mapping[Path, str]) -> str:
     return redact(f"{type(error).__name__}: {error}", hidden)
 
 
+EXPORT_PROGRESS = (0.1, 0.8)
+"""The job's progress while the export writes: each of the export's bars (scenes, a scene's clip data, map
+vectors) fills this span in turn, its text and counts in the job's message."""
+
+
+def progress_observer(context: JobContext) -> ProgressObserver:
+    """Each step of the export's progress bars as the job's progress and message; a cancel asked for meanwhile
+    stops the export at that step (`JobContext.report` raises, the staging is removed)."""
+    low, high = EXPORT_PROGRESS
+
+    def observe(text: str, completed: float, total: float | None) -> None:
+        fraction = min(1.0, completed / total) if total else 0.0
+        counts = f"{completed:.0f}/{total:.0f}" if total else f"{completed:.0f}"
+        context.report(low + (high - low) * fraction, f"{text} {counts}")
+
+    return observe
+
+
 class ExportFailed(Exception):
     """An export that could not be written; the message names what is wrong without server paths."""
 
@@ -269,13 +288,16 @@ def run_export(context: JobContext, params: ExportParams) -> JobResult:
     except ValueError as error:  # the reconstruction went away since submission
         raise ExportFailed(str(error)) from None
     count = len(job.request.annotations.elements)
-    context.report(0.1, f"exporting {count} elements ({params.format.value})", force=True)
+    context.report(EXPORT_PROGRESS[0], f"exporting {count} elements ({params.format.value})", force=True)
     try:
-        result = export(job.request)
+        with observed_progress(progress_observer(context)):
+            result = export(job.request)
+    except JobCancelled:
+        raise
     except Exception as error:
         logger.warning("export job %d of site %s failed: %s", context.job_id, job.name, error)
         raise ExportFailed(failure_message(error, job.hidden)) from None
-    context.report(0.8, "packing the archive", force=True)
+    context.report(EXPORT_PROGRESS[1], "packing the archive", force=True)
     archive = zip_folder(context.workdir / EXPORT_FOLDER, context.workdir / EXPORT_ZIP, context)
     return JobResult(archive, summary_message(result, job))
 
