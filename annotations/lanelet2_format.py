@@ -10,10 +10,15 @@ What each class becomes (tag values lowercase, as Lanelet2 asks; our own tags ar
   `MapElement`) has no marking pattern (solid / dashed / double), so rather than guess one the way says
   `cama:marking_pattern=unknown`. Lanelet2 reads a boundary whose type it cannot resolve as one that forbids lane
   changes, the safe reading.
-- `boundary` -> a way `type=curbstone`, `subtype=high`, with `cama:kerb=assumed`: a boundary element does not
-  say whether a kerb was seen or the road just ends (VMA's `boundary_source="road_edge"` is a way of extracting
-  boundaries from the rasters, not an attribute of the element), so every boundary is written as a kerb and the
-  tag says that this was not observed per element. `road_border` is never written.
+- `boundary` -> a way whose type says whether a kerb is there. A boundary element does not say whether a kerb
+  was seen or the road just ends (VMA's `boundary_source="road_edge"` is a way of extracting boundaries from the
+  rasters, not an attribute of the element); the site's semantic raster does, read by
+  `annotations.kerb_evidence` and given as `kerbs` (element id -> verdict):
+  `observed` -> `type=curbstone`, `subtype=high`, `cama:kerb=observed` (curb cells along it);
+  `none` -> `type=road_border`, `cama:kerb=none` (Lanelet2's end of the passable area without a kerb: road on
+  one side, no curb);
+  `unobserved`, or no verdict (no raster) -> `type=curbstone`, `subtype=high`, `cama:kerb=assumed`: written as a
+  kerb, the safe reading (nothing drives over it), and the tag says it was not seen.
 - `ped_crossing` -> an area: a relation `type=multipolygon`, `subtype=crosswalk` (a subtype Lanelet2 lists for
   lanelets and areas) whose single `outer` member is a closed way `type=zebra_marking` (its first node repeated
   at its end), its points in clockwise order as Lanelet2 wants an area's outer bound (a counter-clockwise ring is
@@ -47,6 +52,7 @@ import logging
 import math
 import xml.etree.ElementTree as ET
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -56,14 +62,15 @@ import lanelet2.io
 import lanelet2.projection
 import numpy as np
 
+from annotations.kerb_evidence import KERB_VERDICTS, KerbVerdict
 from annotations.schema import AnnotationSet, ElementClass, MapElement
 from annotations.transforms import global_from_site_points
 from cama_pipeline.io import atomic_write_bytes
 
 logger = logging.getLogger(__name__)
 
-Lanelet2Tag = Literal["line_thin", "curbstone", "crosswalk"]
-LANELET2_TAGS: tuple[Lanelet2Tag, ...] = ("line_thin", "curbstone", "crosswalk")
+Lanelet2Tag = Literal["line_thin", "curbstone", "road_border", "crosswalk"]
+LANELET2_TAGS: tuple[Lanelet2Tag, ...] = ("line_thin", "curbstone", "road_border", "crosswalk")
 """What each class is counted as in `Lanelet2Result.counts` (the way's type; the area's subtype)."""
 
 CLASS_TAG: dict[ElementClass, Lanelet2Tag] = {
@@ -77,7 +84,20 @@ WAY_TAGS: dict[ElementClass, dict[str, str]] = {
     "boundary": {"type": "curbstone", "subtype": "high", "cama:kerb": "assumed"},
     "ped_crossing": {"type": "zebra_marking"},
 }
-"""Lanelet2 tags of each class's way (see the module docstring for why)."""
+"""Lanelet2 tags of each class's way (see the module docstring for why); a boundary's are `KERB_TAGS`'s."""
+
+KerbTag = Literal["observed", "none", "assumed"]
+KERB_TAGS: dict[KerbTag, dict[str, str]] = {
+    "observed": {"type": "curbstone", "subtype": "high", "cama:kerb": "observed"},
+    "none": {"type": "road_border", "cama:kerb": "none"},
+    "assumed": WAY_TAGS["boundary"],
+}
+"""A boundary's tags by what the semantic raster says (`cama:kerb`); `assumed` where it says nothing."""
+KERB_FROM_VERDICT: dict[KerbVerdict, KerbTag] = {
+    "observed": "observed",
+    "none": "none",
+    "unobserved": "assumed",
+}
 
 AREA_TAGS: dict[str, str] = {"type": "multipolygon", "subtype": "crosswalk"}
 """Tags of a crosswalk's area relation."""
@@ -96,11 +116,14 @@ class Lanelet2Result:
     path: Path
     """The .osm file."""
     counts: dict[str, int] = field(default_factory=dict)
-    """Elements written per Lanelet2 tag: line_thin (dividers), curbstone (boundaries), crosswalk (areas)."""
+    """Elements written per Lanelet2 tag: line_thin (dividers), curbstone and road_border (boundaries), crosswalk
+    (areas)."""
     nodes: int = 0
     """Nodes written (a crosswalk ring's closing point is its first node again)."""
     unlifted: tuple[str, ...] = ()
     """Ids of the elements without 3D points, written at ele 0 (`cama:lifted=no`)."""
+    kerbs: dict[str, int] = field(default_factory=dict)
+    """Boundaries per `cama:kerb` value: observed (curbstone), none (road_border), assumed (curbstone)."""
 
 
 def origin_projector(origin_lat_lon: tuple[float, float]) -> lanelet2.projection.UtmProjector:
@@ -168,8 +191,10 @@ class _OsmBuilder:
         self.nodes.append(node)
         return len(self.nodes)
 
-    def add_element(self, element: MapElement, site_origin_xy: tuple[float, float]) -> bool:
-        """The element's nodes, way and (crosswalk) area; returns whether it was lifted."""
+    def add_element(
+        self, element: MapElement, site_origin_xy: tuple[float, float], class_tags: dict[str, str]
+    ) -> bool:
+        """The element's nodes, way (`class_tags` first) and (crosswalk) area; returns whether it was lifted."""
         xyz, lifted = element_global_xyz(element, site_origin_xy)
         far = float(np.abs(xyz[:, :2]).max())
         if far > MAX_FROM_ORIGIN_M:
@@ -183,7 +208,7 @@ class _OsmBuilder:
         if ring:
             refs.append(refs[0])
         tags = {
-            **WAY_TAGS[element.cls],
+            **class_tags,
             "cama:id": element.id,
             "cama:class": element.cls,
             "cama:source": element.source,
@@ -213,23 +238,53 @@ class _OsmBuilder:
         return root
 
 
+def _check_kerbs(annotations: AnnotationSet, kerbs: Mapping[str, KerbVerdict]) -> None:
+    """ValueError naming `kerbs` and the element when a verdict is unknown or not about a boundary of the set."""
+    boundaries = {element.id for element in annotations.by_class("boundary")}
+    for element_id, verdict in kerbs.items():
+        if element_id not in boundaries:
+            raise ValueError(
+                f"kerbs: element {element_id!r} is not a boundary of site {annotations.site_id!r}"
+            )
+        if verdict not in KERB_VERDICTS:
+            raise ValueError(
+                f"kerbs: element {element_id!r}: verdict {verdict!r} is not one of {KERB_VERDICTS}"
+            )
+
+
 def lanelet2_osm_bytes(
-    annotations: AnnotationSet, *, origin_lat_lon: tuple[float, float]
+    annotations: AnnotationSet,
+    *,
+    origin_lat_lon: tuple[float, float],
+    kerbs: Mapping[str, KerbVerdict] | None = None,
 ) -> tuple[bytes, Lanelet2Result]:
-    """The OSM XML of the set (UTF-8, indented) and its counts (`path` left empty for the caller)."""
+    """The OSM XML of the set (UTF-8, indented) and its counts (`path` left empty for the caller); `kerbs` as
+    in `export_lanelet2`."""
+    kerbs = kerbs or {}
+    _check_kerbs(annotations, kerbs)
     builder = _OsmBuilder(origin_projector(origin_lat_lon))
     site_origin_xy = annotations.georeference.site_origin_xy
     counts: Counter[str] = Counter({tag: 0 for tag in LANELET2_TAGS})
+    kerb_counts: Counter[str] = Counter({kerb: 0 for kerb in KERB_TAGS})
     unlifted = []
     for element in annotations.elements:
-        if not builder.add_element(element, site_origin_xy):
+        tags = WAY_TAGS[element.cls]
+        if element.cls == "boundary":
+            kerb = KERB_FROM_VERDICT[kerbs.get(element.id, "unobserved")]
+            tags = KERB_TAGS[kerb]
+            kerb_counts[kerb] += 1
+        if not builder.add_element(element, site_origin_xy, tags):
             unlifted.append(element.id)
-        counts[CLASS_TAG[element.cls]] += 1
+        counts[tags["type"] if element.cls == "boundary" else CLASS_TAG[element.cls]] += 1
     root = builder.tree()
     ET.indent(root)
     data = ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
     result = Lanelet2Result(
-        Path(), {tag: counts[tag] for tag in LANELET2_TAGS}, len(builder.nodes), tuple(unlifted)
+        Path(),
+        {tag: counts[tag] for tag in LANELET2_TAGS},
+        len(builder.nodes),
+        tuple(unlifted),
+        dict(kerb_counts),
     )
     return data, result
 
@@ -240,12 +295,14 @@ def export_lanelet2(
     *,
     origin_lat_lon: tuple[float, float],
     require_lifted: bool = False,
+    kerbs: Mapping[str, KerbVerdict] | None = None,
 ) -> Lanelet2Result:
     """Write the set as a Lanelet2 OSM file at `out` (atomically; its folder must exist).
 
     `origin_lat_lon` is the latitude, longitude of the site's global frame's (0, 0) (ValueError when out of
     range). Elements without 3D points are written at ele 0 and tagged `cama:lifted=no`, or refused with a
-    ValueError naming them when `require_lifted`.
+    ValueError naming them when `require_lifted`. `kerbs` (boundary id -> verdict, `kerb_evidence.kerb_evidence`)
+    decides each boundary's type; a boundary without one, or with no mapping at all, is an assumed kerb.
     """
     out = Path(out)
     missing = [element.id for element in annotations.elements if element.points_3d is None]
@@ -253,9 +310,9 @@ def export_lanelet2(
         shown = ", ".join(repr(element_id) for element_id in missing[:5])
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
         raise ValueError(f"{len(missing)} elements have no 3D points (not lifted): {shown}{more}")
-    data, result = lanelet2_osm_bytes(annotations, origin_lat_lon=origin_lat_lon)
+    data, result = lanelet2_osm_bytes(annotations, origin_lat_lon=origin_lat_lon, kerbs=kerbs)
     if missing:
         logger.warning("%d elements have no 3D points: written at ele 0 with cama:lifted=no", len(missing))
     atomic_write_bytes(out, data)
     logger.info("wrote %d elements (%s) to %s", len(annotations.elements), result.counts, out)
-    return Lanelet2Result(out, result.counts, result.nodes, result.unlifted)
+    return Lanelet2Result(out, result.counts, result.nodes, result.unlifted, result.kerbs)

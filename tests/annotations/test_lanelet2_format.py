@@ -6,6 +6,7 @@ is a collection error here, locally and under CI alike.
 
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import lanelet2
 import lanelet2.io
@@ -13,8 +14,10 @@ import numpy as np
 import pytest
 
 from annotations import AnnotationSet, Georeference, MapElement
+from annotations.kerb_evidence import kerb_evidence
 from annotations.lanelet2_format import Lanelet2Result, export_lanelet2, origin_projector
 from tests.annotations.annotation_helpers import SITE_ORIGIN_XY, SQUARE, element_kwargs
+from tests.annotations.kerb_helpers import kerb_raster, kerb_set
 
 BOSTON = (42.336849169438615, -71.05785369873047)
 SINGAPORE = (1.2882100868743724, 103.78475189208984)
@@ -98,7 +101,11 @@ def test_tags_per_class_and_the_counts(annotation_set: AnnotationSet, tmp_path: 
     out = tmp_path / "map.osm"
     result = export_lanelet2(annotation_set, out, origin_lat_lon=BOSTON)
     assert result == Lanelet2Result(
-        out, {"line_thin": 1, "curbstone": 2, "crosswalk": 1}, nodes=4 + 3 + 2 + 4, unlifted=("flat",)
+        out,
+        {"line_thin": 1, "curbstone": 2, "road_border": 0, "crosswalk": 1},
+        nodes=4 + 3 + 2 + 4,
+        unlifted=("flat",),
+        kerbs={"observed": 0, "none": 0, "assumed": 2},
     )
     lanelet_map = load(out, BOSTON)
     tags = {key: dict(ls.attributes) for key, ls in linestrings(lanelet_map).items()}
@@ -217,5 +224,47 @@ def test_require_lifted_refuses_unlifted_elements_naming_them(
 def test_an_empty_set_is_an_empty_map_that_loads(georef: Georeference, tmp_path: Path) -> None:
     out = tmp_path / "map.osm"
     result = export_lanelet2(AnnotationSet(site_id="s", georeference=georef), out, origin_lat_lon=BOSTON)
-    assert result.counts == {"line_thin": 0, "curbstone": 0, "crosswalk": 0} and result.nodes == 0
+    assert result.counts == {"line_thin": 0, "curbstone": 0, "road_border": 0, "crosswalk": 0}
+    assert result.nodes == 0
     assert len(load(out, BOSTON).lineStringLayer) == 0
+
+
+def test_kerbs_from_the_semantic_raster_become_curbstone_or_road_border(tmp_path: Path) -> None:
+    annotations = kerb_set()
+    kerbs = kerb_evidence(annotations, kerb_raster()).verdicts
+    out = tmp_path / "map.osm"
+    result = export_lanelet2(annotations, out, origin_lat_lon=BOSTON, kerbs=kerbs)
+    assert result.counts == {"line_thin": 1, "curbstone": 3, "road_border": 1, "crosswalk": 0}
+    assert result.kerbs == {"observed": 1, "none": 1, "assumed": 2}
+    tags = {key: dict(ls.attributes) for key, ls in linestrings(load(out, BOSTON)).items()}
+    assert (tags["kerb"]["type"], tags["kerb"]["subtype"], tags["kerb"]["cama:kerb"]) == (
+        "curbstone",
+        "high",
+        "observed",
+    )
+    assert (tags["border"]["type"], tags["border"]["cama:kerb"]) == ("road_border", "none")
+    assert "subtype" not in tags["border"]
+    for unseen in (
+        "hidden",
+        "inside",
+    ):  # no evidence either way: the assumed kerb of an export without raster
+        assert (tags[unseen]["type"], tags[unseen]["subtype"], tags[unseen]["cama:kerb"]) == (
+            "curbstone",
+            "high",
+            "assumed",
+        )
+    assert tags["div"]["type"] == "line_thin" and "cama:kerb" not in tags["div"]
+    without = export_lanelet2(annotations, tmp_path / "plain.osm", origin_lat_lon=BOSTON)
+    assert without.kerbs == {"observed": 0, "none": 0, "assumed": 4}
+
+
+@pytest.mark.parametrize(
+    ("kerbs", "message"),
+    [({"div": "observed"}, "'div' is not a boundary"), ({"kerb": "maybe"}, "verdict 'maybe'")],
+)
+def test_bad_kerb_verdicts_are_refused_naming_them(
+    tmp_path: Path, kerbs: dict[str, Any], message: str
+) -> None:
+    with pytest.raises(ValueError, match=f"kerbs: element .*{message}"):
+        export_lanelet2(kerb_set(), tmp_path / "map.osm", origin_lat_lon=BOSTON, kerbs=kerbs)
+    assert list(tmp_path.iterdir()) == []
