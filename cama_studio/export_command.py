@@ -13,6 +13,7 @@ import logging
 from pathlib import Path
 from typing import Annotated, Any
 
+import cv2
 import numpy as np
 import typer
 from pydantic import BaseModel
@@ -20,14 +21,17 @@ from pydantic import BaseModel
 from annotations import cama_format
 from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, import_cama
+from annotations.kerb_evidence import check_semantic
 from annotations.maptr_format import MaptrFile, import_maptr
 from annotations.schema import AnnotationSet, Georeference
+from cama_pipeline.bev import is_raster_folder, read_bev
 from cama_pipeline.cli_options import MasksOpt
 from cama_pipeline.console import bad_input
 from cama_pipeline.data import DatasetError
 from cama_pipeline.data.masks import parse_mask_choice
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, PoseChoice, export
 from cama_pipeline.io import WorkspaceError, atomic_write_bytes
+from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
@@ -62,6 +66,63 @@ def _load_elevation(path: Path | None) -> np.ndarray | None:
         raise ValueError(f"{path}: cannot read elevation raster: {error}") from error
 
 
+def load_semantic(path: Path, georef: Georeference) -> np.ndarray:
+    """A semantic BEV raster from a .npy file, an image (a raster folder's semantic.png) or a raster folder (its
+    semantic layer, its georeference the annotation set's); ValueError naming `path` when unreadable or not of
+    the set's georeference."""
+    try:
+        if path.is_dir():
+            rasters = read_bev(path, ["semantic"])
+            if rasters.georeference != georef.as_raster():
+                raise ValueError("its georeference.json is not the annotation set's georeference")
+            semantic = rasters.require("semantic")
+        elif path.suffix == ".npy":
+            semantic = np.asarray(np.load(path, allow_pickle=False))
+        else:
+            image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise ValueError("not a readable .npy or image file")
+            semantic = image
+        return check_semantic(semantic, georef, name="raster")
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: cannot use as the semantic raster: {error}") from error
+
+
+def default_semantic_folder(
+    workspace: Path | None, dataset: Path | None, annotations: AnnotationSet, site_id: str | None
+) -> Path | None:
+    """The site's surface raster folder in the export's workspace (`--workspace`, else the data set's): the
+    `--site-id`'s, else the annotation set's site's, else the workspace's only one; None when there is none."""
+    if workspace is not None:
+        space = Workspace(workspace)
+    elif dataset is not None:
+        space = Workspace.for_dataset(dataset)
+    else:
+        return None
+    if site_id is not None:
+        return space.surface_bev(site_id) if is_raster_folder(space.surface_bev(site_id)) else None
+    if is_raster_folder(space.surface_bev(annotations.site_id)):
+        return space.surface_bev(annotations.site_id)
+    surface = space.stage_dir("surface")
+    found = sorted(bev for bev in surface.glob("*/bev") if is_raster_folder(bev)) if surface.is_dir() else []
+    return found[0] if len(found) == 1 else None
+
+
+def _semantic(
+    path: Path | None, format: ExportFormat, annotations: AnnotationSet, default: Path | None
+) -> tuple[np.ndarray | None, str]:
+    """The semantic raster for the export (the given file, else lanelet2's default) and where it came from."""
+    if path is not None:
+        return load_semantic(path, annotations.georeference), str(path)
+    if format is not ExportFormat.lanelet2 or default is None:
+        return None, "none"
+    try:
+        return load_semantic(default, annotations.georeference), str(default)
+    except (FileNotFoundError, ValueError) as error:
+        logger.warning("exporting without kerb evidence: %s", error)
+        return None, f"none ({error})"
+
+
 def _origin(text: str | None) -> tuple[float, float] | None:
     """`LAT,LON` in degrees; ValueError naming the option when malformed."""
     if text is None:
@@ -85,6 +146,15 @@ def export_command(
         typer.Option(help="Data set root (nuScenes layout): needed by cama, maptr and nuscenes-cama."),
     ] = None,
     elevation: Annotated[Path | None, typer.Option(help="Elevation raster .npy (H, W) for cama.")] = None,
+    semantic: Annotated[
+        Path | None,
+        typer.Option(
+            help="lanelet2: semantic BEV raster (.npy, semantic.png or a raster folder) in the set's "
+            "georeference; a boundary along curb becomes curbstone, one at a road edge without curb road_border, "
+            "one too little seen an assumed curbstone. Default: the workspace's surface/<site>/bev when there "
+            "is one (--workspace, or the data set's; the --site-id's, the set's or the only site)."
+        ),
+    ] = None,
     name: Annotated[str | None, typer.Option(help="cama: the site's name (default: site id).")] = None,
     scene: Annotated[
         list[str] | None,
@@ -125,6 +195,8 @@ def export_command(
     """Export an annotation set (refined poses by default); the export appears at OUT only when complete."""
     try:
         annotation_set = AnnotationSet.read_json(annotations_json)
+        default = default_semantic_folder(workspace, dataset, annotation_set, site_id)
+        semantic_raster, semantic_source = _semantic(semantic, format, annotation_set, default)
         request = ExportRequest(
             annotations=annotation_set,
             site_name=name,
@@ -135,6 +207,7 @@ def export_command(
             site_id=site_id,
             poses=poses,
             elevation=_load_elevation(elevation),
+            semantic=semantic_raster,
             scenes=tuple(scene) if scene else None,
             cama_mode=mode,
             observed_radius_m=observed_radius_m,
@@ -151,6 +224,9 @@ def export_command(
         f"exported {result.elements} elements ({format.value}, {poses.value} poses, {result.files} files) "
         f"to {result.path}"
     )
+    if format is ExportFormat.lanelet2:
+        kerbs = result.summary.get("kerbs", {})
+        typer.echo(f"boundaries by kerb evidence {kerbs} (semantic raster: {semantic_source})")
 
 
 def import_command(

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
+from annotations.kerb_evidence import check_semantic
 from annotations.schema import AnnotationSet
 from cama_pipeline.data.masks import MaskChoice
 
@@ -68,6 +69,10 @@ class ExportRequest:
     poses: PoseChoice = PoseChoice.refined
     elevation: np.ndarray | None = field(default=None, compare=False, repr=False)
     """The site's (H, W) elevation raster in the annotation set's georeference (cama's map height)."""
+    semantic: np.ndarray | None = field(default=None, compare=False, repr=False)
+    """lanelet2: the site's (H, W) semantic BEV raster (`cama_pipeline.semantics` ids, 255 unobserved) in the
+    annotation set's georeference; each boundary is then written as a kerb or a road border by what it shows
+    (`annotations.kerb_evidence`). None: every boundary is an assumed kerb."""
     scenes: tuple[str, ...] | None = None
     """Only these scenes (default: the site's scenes with refined poses; every scene with coarse poses)."""
     cama_mode: CamaMode = CamaMode.clip
@@ -96,6 +101,10 @@ class ExportRequest:
             raise ValueError("--format lanelet2 needs --origin LAT,LON (the geographic origin of the map)")
         if not (np.isfinite(self.observed_radius_m) and self.observed_radius_m > 0):
             raise ValueError(f"--observed-radius-m: expected a value > 0, got {self.observed_radius_m}")
+        if self.semantic is not None:
+            if self.format is not ExportFormat.lanelet2:
+                raise ValueError("--semantic: only for --format lanelet2 (kerbs and road borders)")
+            check_semantic(self.semantic, self.annotations.georeference)
         if self.scenes is not None and not self.scenes:
             raise ValueError("scenes: an empty list; leave it out for the site's scenes")
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from annotations.cama_clip_data import write_clip_data
 from annotations.cama_release import export_cama_release
+from annotations.kerb_evidence import kerb_evidence
 from annotations.lanelet2_format import export_lanelet2
 from annotations.maptr_format import build_maptr, write_maptr
 from annotations.nuscenes_cama_format import export_nuscenes_cama
@@ -100,8 +101,17 @@ def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     origin = inputs.request.origin_lat_lon
     if origin is None:  # the request refuses lanelet2 without an origin; this keeps the type checker honest
         raise ValueError("--format lanelet2 needs --origin LAT,LON")
-    result = export_lanelet2(inputs.request.annotations, staging, origin_lat_lon=origin)
-    return {"tags": result.counts, "nodes": result.nodes, "unlifted": len(result.unlifted)}
+    request = inputs.request
+    kerbs = (
+        None if request.semantic is None else kerb_evidence(request.annotations, request.semantic).verdicts
+    )
+    result = export_lanelet2(request.annotations, staging, origin_lat_lon=origin, kerbs=kerbs)
+    return {
+        "tags": result.counts,
+        "kerbs": result.kerbs,
+        "nodes": result.nodes,
+        "unlifted": len(result.unlifted),
+    }
 
 
 def _write_nuscenes_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
