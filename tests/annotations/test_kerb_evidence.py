@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from annotations import AnnotationSet
+from annotations import AnnotationSet, MapElement
 from annotations.kerb_evidence import KERB_MIN_FRACTION, kerb_evidence
 from cama_pipeline.semantics import Semantic
 from tests.annotations.kerb_helpers import (
@@ -32,7 +32,7 @@ def test_kerb_road_border_unobserved_and_inside_the_road() -> None:
     assert inside.observed == inside.stations and inside.edge_fraction == 0.0 and "road edge" in inside.reason
 
 
-def _set(*elements: object) -> AnnotationSet:
+def _set(*elements: MapElement) -> AnnotationSet:
     return AnnotationSet(site_id="s", georeference=KERB_GEOREF, elements=list(elements))
 
 

@@ -1,17 +1,22 @@
 """`cama export` over `cama_pipeline.export`: requests are checked before anything is written, a failing writer
 leaves nothing, and the Lanelet2 format (no data set needed) goes through the whole path."""
 
+import re
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 import typer
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement
+from cama_pipeline.bev import BevRasters, write_bev
 from cama_pipeline.export import ExportFormat, ExportRequest, export
 from cama_pipeline.export import run as export_run
 from cama_studio.export_command import export_command
 from tests.annotations.annotation_helpers import element_kwargs
+from tests.annotations.kerb_helpers import KERB_GEOREF, kerb_raster, kerb_set
 
 app = typer.Typer()
 app.command("export")(export_command)
@@ -73,3 +78,81 @@ def test_failing_writer_leaves_nothing(tmp_path: Path, monkeypatch: pytest.Monke
     with pytest.raises(ValueError, match="broken"):
         export(request)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["annotations.json"]
+
+
+KERBS_LINE = "boundaries by kerb evidence {'observed': 1, 'none': 1, 'assumed': 2}"
+LANELET2 = ["--format", "lanelet2", "--origin", "1.2990,103.7880"]
+
+
+def _kerb_set_file(tmp_path: Path) -> Path:
+    path = tmp_path / "kerbs.json"
+    kerb_set().write_json(path)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".png"])
+def test_lanelet2_semantic_option_tells_kerbs_from_road_borders(tmp_path: Path, suffix: str) -> None:
+    source, out, raster = _kerb_set_file(tmp_path), tmp_path / "map.osm", tmp_path / f"semantic{suffix}"
+    if suffix == ".npy":
+        np.save(raster, kerb_raster())
+    else:
+        cv2.imwrite(str(raster), kerb_raster())
+    result = runner.invoke(app, ["export", str(source), str(out), *LANELET2, "--semantic", str(raster)])
+    assert result.exit_code == 0, result.output
+    assert KERBS_LINE in result.output and f"semantic raster: {raster}" in result.output
+    osm = out.read_text(encoding="utf-8")
+    assert osm.count('v="road_border"') == 1 and osm.count('v="curbstone"') == 3
+
+
+def test_lanelet2_reads_the_workspace_surface_raster_by_default(tmp_path: Path) -> None:
+    source, out = _kerb_set_file(tmp_path), tmp_path / "map.osm"
+    bev = tmp_path / "ws" / "surface" / "site-001" / "bev"
+    write_bev(bev, BevRasters(KERB_GEOREF.as_raster(), semantic=kerb_raster()))
+    result = runner.invoke(
+        app, ["export", str(source), str(out), *LANELET2, "--workspace", str(tmp_path / "ws")]
+    )
+    assert result.exit_code == 0, result.output
+    assert KERBS_LINE in result.output and str(bev) in result.output
+    plain = runner.invoke(app, ["export", str(source), str(tmp_path / "plain.osm"), *LANELET2])
+    assert plain.exit_code == 0, plain.output
+    assert "{'observed': 0, 'none': 0, 'assumed': 4} (semantic raster: none)" in plain.output
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("small.npy", np.zeros((10, 10), dtype=np.uint8), r"shape \(10, 10\)"),
+        ("float.npy", np.zeros((200, 200)), "integer class ids"),
+        ("broken.png", b"not an image", "not a readable"),
+        ("missing.npy", None, "No such file"),
+    ],
+)
+def test_a_bad_semantic_raster_exits_2_naming_the_file(
+    tmp_path: Path, name: str, content: np.ndarray | bytes | None, message: str
+) -> None:
+    source, raster = _kerb_set_file(tmp_path), tmp_path / name
+    if isinstance(content, bytes):
+        raster.write_bytes(content)
+    elif content is not None:
+        np.save(raster, content)
+    result = runner.invoke(
+        app, ["export", str(source), str(tmp_path / "map.osm"), *LANELET2, "--semantic", str(raster)]
+    )
+    assert result.exit_code == 2, result.output
+    assert f"{raster}: cannot use as the semantic raster" in result.output
+    assert re.search(message, result.output)
+    assert not (tmp_path / "map.osm").exists()
+
+
+def test_a_semantic_raster_is_only_for_lanelet2_and_of_the_set_shape(tmp_path: Path) -> None:
+    annotations = kerb_set()
+    with pytest.raises(ValueError, match="--semantic: only for --format lanelet2"):
+        ExportRequest(annotations, tmp_path / "m.json", ExportFormat.maptr, tmp_path, semantic=kerb_raster())
+    with pytest.raises(ValueError, match=r"semantic: semantic raster shape \(3, 3\)"):
+        ExportRequest(
+            annotations,
+            tmp_path / "map.osm",
+            format=ExportFormat.lanelet2,
+            origin_lat_lon=(1.0, 2.0),
+            semantic=np.zeros((3, 3), dtype=np.uint8),
+        )
