@@ -9,6 +9,8 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -16,6 +18,7 @@ from cama_pipeline.export import CamaMode, ExportFormat, PoseChoice
 from cama_pipeline.export import run as export_run
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
 from cama_pipeline.export.run import ExportInputs
+from cama_pipeline.semantics import Semantic
 from tests.backend.backend_helpers import crosswalk, divider, register_site
 
 Headers = dict[str, dict[str, str]]
@@ -141,6 +144,37 @@ def test_lanelet2_export_zips_one_osm_file(
     assert all(f'k="cama:id" v="{element["id"]}"' in osm for element in made)
     workdir = client.app.state.jobs.workdir(done["id"])  # type: ignore[attr-defined]
     assert sorted(path.name for path in workdir.iterdir()) == ["export.zip"]
+
+
+def _exported_osm(client: TestClient, headers: Headers, site_id: int) -> tuple[str, str]:
+    """Export the site as Lanelet2; the job's message and the OSM file."""
+    response = post_export(client, headers, site_id, format="lanelet2", origin_lat_lon=ORIGIN)
+    assert response.status_code == 202, response.text
+    done = wait_done(client, headers, response.json()["id"])
+    assert done["state"] == "succeeded", done["message"]
+    archive = client.get(done["download_url"], headers=headers["lead"])
+    with zipfile.ZipFile(io.BytesIO(archive.content)) as bundle:
+        return done["message"], bundle.read("map.osm").decode()
+
+
+def test_lanelet2_kerbs_come_from_the_site_semantic_raster(
+    client: TestClient, headers: Headers, site_id: int, make_element: Any, raster_dir: Path
+) -> None:
+    """Boundaries along y 40 (a kerb above the road) and y 20 (the road's grass edge); the site's raster folder
+    first has an unreadable semantic.png (the export runs, every boundary an assumed kerb), then a real one."""
+    for y in (40.0, 20.0):
+        make_element({"class": "boundary", "points": [[10.0, y], [35.0, y], [60.0, y]]})
+    message, osm = _exported_osm(client, headers, site_id)
+    assert "kerbs (observed 0, none 0, assumed 2)" in message
+    assert osm.count('k="cama:kerb" v="assumed"') == 2 and 'v="road_border"' not in osm
+    rows = np.arange(200)[:, None].repeat(200, axis=1)
+    y_site = 100.0 - 0.5 * rows  # the test georeference: row 0 at site y 100, 0.5 m per row
+    semantic = np.where((y_site >= 20.0) & (y_site < 40.0), int(Semantic.ROAD), int(Semantic.BACKGROUND))
+    semantic[y_site == 40.0] = int(Semantic.CURB)
+    assert cv2.imwrite(str(raster_dir / "semantic.png"), semantic.astype(np.uint8))
+    message, osm = _exported_osm(client, headers, site_id)
+    assert "kerbs (observed 1, none 1, assumed 0)" in message
+    assert 'k="cama:kerb" v="observed"' in osm and osm.count('v="road_border"') == 1
 
 
 def test_a_failing_export_leaves_no_partial_files_and_no_server_path(

@@ -24,12 +24,14 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 from sqlalchemy.orm import Session
 
+from annotations.kerb_evidence import check_semantic
 from annotations.schema import AnnotationSet, Georeference
 from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.kinds import lift_elements, read_elevation, site_annotations
 from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.models import Site
 from app.backend.schemas import STRICT
+from cama_pipeline.bev import layer_path, read_layer
 from cama_pipeline.data import DatasetError
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
@@ -158,6 +160,17 @@ def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray 
         return None
 
 
+def _semantic(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray | None:
+    """The site's semantic raster (Lanelet2's kerb evidence), or None (logged; boundaries stay assumed kerbs)."""
+    try:
+        return check_semantic(
+            read_layer(raster_dir, "semantic"), georef, name=str(layer_path(raster_dir, "semantic"))
+        )
+    except (FileNotFoundError, ValueError) as error:
+        logger.warning("site %s: exporting Lanelet2 without kerb evidence: %s", name, error)
+        return None
+
+
 @dataclass(frozen=True)
 class ExportJob:
     """What one export job writes, and what its messages say."""
@@ -194,6 +207,7 @@ def export_job(context: JobContext, params: ExportParams) -> ExportJob:
     file_name = SINGLE_FILE_NAMES.get(params.format)
     dataset_root = Path(params.dataset_root) if params.dataset_root else None
     origin = params.origin_lat_lon
+    lanelet2 = params.format is ExportFormat.lanelet2
     request = ExportRequest(
         annotations=annotations,
         out=folder / file_name if file_name else folder,
@@ -203,6 +217,7 @@ def export_job(context: JobContext, params: ExportParams) -> ExportJob:
         site_id=location.site_id if location else None,
         poses=params.poses,
         elevation=elevation if params.format is ExportFormat.cama else None,
+        semantic=_semantic(raster_dir, annotations.georeference, name) if lanelet2 else None,
         scenes=tuple(params.scenes) if params.scenes else None,
         cama_mode=params.mode,
         with_clip_data=params.with_clip_data,
