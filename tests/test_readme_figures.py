@@ -428,3 +428,51 @@ def test_export_table_both_protocols() -> None:
             " | ".join(cells[1:5]), _sre_figures(recorded["strict"][key]), f"export strict {label!r}"
         )
         assert_shows(" | ".join(cells[5:9]), _sre_figures(recorded["cama"][key]), f"export cama {label!r}")
+
+
+NATIVE_RESOLUTION_STAGES = ("segment", "features", "sfm", "surface")
+
+
+def test_native_resolution_table_from_both_runs() -> None:
+    t = table("whole path, tiny site, predicted masks")
+    assert_names_source(t, "end_to_end_1600.json", "bench/end_to_end.py")
+    assert "bench/results/end_to_end_256.json" in t.context
+    low, high = results("end_to_end_256.json"), results("end_to_end_1600.json")
+
+    def per_keyframe_total(run: dict[str, Any]) -> float:
+        return float(sum(run["stage_seconds"].values()) / run["keyframes"])
+
+    def quality(run: dict[str, Any]) -> list[float]:
+        return [
+            run["poses"]["sfm"]["position_cm"],
+            run["elevation"]["rmse_cm"],
+            run["proposals_ap"]["all_truth"]["mean_ap"],
+            run["sre"]["c1_proposals"]["sre_ref_px"],
+        ]
+
+    measured = {
+        **{
+            f"{stage} (s per key frame)": (
+                low["stage_seconds_per_keyframe"][stage],
+                high["stage_seconds_per_keyframe"][stage],
+            )
+            for stage in NATIVE_RESOLUTION_STAGES
+        },
+        "whole path (s per key frame)": (per_keyframe_total(low), per_keyframe_total(high)),
+        "peak memory, main process (MB)": (low["peak_memory"]["self_mb"], high["peak_memory"]["self_mb"]),
+        "peak memory, largest worker (MB)": (
+            low["peak_memory"]["largest_child_mb"],
+            high["peak_memory"]["largest_child_mb"],
+        ),
+    }
+    for label, (small, large) in measured.items():
+        cells = row(t, label)
+        assert_shows(" | ".join(cells[1:4]), [small, large, large / small], f"native resolution {label!r}")
+    labels = [
+        "SfM position error (cm)",
+        "elevation RMSE (cm)",
+        "proposal mAP",
+        "SRE 960x540 of the proposals (px)",
+    ]
+    for label, small, large in zip(labels, quality(low), quality(high), strict=True):
+        assert_shows(" | ".join(row(t, label)[1:3]), [small, large], f"native resolution {label!r}")
