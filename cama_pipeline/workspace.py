@@ -163,6 +163,10 @@ class Workspace:
         """`features/<site_id>/features.json`."""
         return self.features_dir(site_id) / "features.json"
 
+    def features_extraction(self, site_id: str) -> Path:
+        """`features/<site_id>/extraction.json`: what the database's features were extracted with."""
+        return self.features_dir(site_id) / "extraction.json"
+
     # -- SfM ----------------------------------------------------------------------------------------------------
 
     def sfm_dir(self, site_id: str) -> Path:

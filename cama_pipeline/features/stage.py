@@ -3,9 +3,11 @@
 `cama pairs`; its report is `features.json` (`cama_pipeline.features.io`).
 
 A rerun whose fingerprint and database are unchanged does nothing (it does not even open the database, so
-later stages keyed on it stay up to date). Otherwise the database is reused: images already in it are not
+later stages keyed on it stay up to date). Otherwise the database is reused when its features were extracted
+with the same settings, masks and code (`extraction.json` records that): images already in it are not
 extracted again, matched pairs are not matched again, and the matches of pairs the list no longer holds are
-deleted ("pairs_pruned"), so the database matches exactly the listed pairs. A change of extractor needs
+deleted ("pairs_pruned"), so the database matches exactly the listed pairs. Features from other settings or
+masks (a new segmenter's, say) are dropped and every image is extracted again. A change of extractor needs
 `--overwrite`.
 """
 
@@ -33,7 +35,7 @@ from cama_pipeline.features.masks import ego_estimates, feature_block, keypoints
 from cama_pipeline.features.matching import BlasMatcher
 from cama_pipeline.features.sift import ColmapMatcher, SiftExtractor
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
-from cama_pipeline.io import WorkspaceError
+from cama_pipeline.io import WorkspaceError, atomic_write_json, read_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.semantics import Semantic
@@ -167,6 +169,30 @@ def _previous_report(path: Path, extractor: FeatureExtractor) -> dict[str, Any]:
     return report
 
 
+EXTRACTION_SCHEMA = "cama.features-extraction/1"
+
+
+def drop_stale_features(database: Path, record: Path, extraction: str) -> bool:
+    """Remove the database when its features were extracted with other settings, masks or code, or when it is
+    not recorded with what (`record` holds the extraction fingerprint), so that every image is extracted again:
+    reusing them would keep features from masks or settings the run no longer has. Then record this run's
+    extraction, before it extracts, so that an interrupted run resumes. Whether a database was removed."""
+    try:
+        recorded = read_json(record, EXTRACTION_SCHEMA, "cama features")
+    except (FileNotFoundError, WorkspaceError):  # none, or unreadable: not known what the features came from
+        recorded = {}
+    stale = database.is_file() and recorded.get("extraction") != extraction
+    if stale:
+        logger.info(
+            "%s: extracted with other settings, masks or code; extracting every image again", database
+        )
+        for leftover in (database, *(database.with_name(database.name + s) for s in ("-shm", "-wal"))):
+            leftover.unlink(missing_ok=True)
+    record.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(record, {"schema": EXTRACTION_SCHEMA, "extraction": extraction}, indent=1)
+    return stale
+
+
 def run_site(
     dataset: Dataset,
     workspace: Workspace,
@@ -190,18 +216,19 @@ def run_site(
         report_path.unlink(missing_ok=True)
     previous = _previous_report(report_path, extractor)
     manifest_path = workspace.site_manifest(site_id)
-    digest = fingerprint(
+    extraction = fingerprint(
         code_version("cama_pipeline.features"),
         asdict(config),
         extractor.name,
-        matcher.name,
-        file_stats([manifest_path, pairs_file]),
         masks_fingerprint(masks, dataset.mask_roots, dataset.root),
     )
+    digest = fingerprint(extraction, matcher.name, file_stats([manifest_path, pairs_file]))
     size = database.stat().st_size if database.is_file() else None
     if size is not None and is_up_to_date(report_path, digest) and previous.get("database_bytes") == size:
         logger.info("features of %s up to date", site_id)
         return ItemResult(site_id, folder, previous, skipped=True)
+    if drop_stale_features(database, workspace.features_extraction(site_id), extraction):
+        previous = {}
     views = site_views(dataset, read_site_manifest(manifest_path))
     started = time.perf_counter()
     with open_database(database) as db:

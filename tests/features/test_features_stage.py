@@ -202,3 +202,20 @@ def test_matches_of_pairs_no_longer_listed_are_dropped(dataset_root: Path, works
         assert pruned.report["pairs_pruned"] >= len(before - after) > 0
     finally:
         pairs_file.write_text("".join(f"{line}\n" for line in lines))
+
+
+def test_features_extracted_with_other_settings_are_extracted_again(
+    dataset_root: Path, workspace: Path
+) -> None:
+    folder = Workspace(workspace)
+    (normal,) = run(FeaturesConfig(), dataset_root, workspace).items
+    few = FeaturesConfig(max_num_features=64)
+    (changed,) = run(few, dataset_root, workspace).items  # reusing the stored features would keep ~1000 each
+    before = {name: count["features"] for name, count in normal.report["images"].items()}
+    after = {name: count["features"] for name, count in changed.report["images"].items()}
+    assert after.keys() == before.keys() and all(after[name] <= before[name] for name in before), after
+    assert sum(after.values()) < 0.8 * sum(before.values()), (after, before)  # stored features: equal sums
+    assert all(count["masked"] is not None for count in changed.report["images"].values())
+    folder.features_extraction("site-001").write_text("{not json")  # not known what the features came from
+    (again,) = run(FeaturesConfig(), dataset_root, workspace).items
+    assert again.report["images"] == normal.report["images"]  # every image extracted again, as at first
