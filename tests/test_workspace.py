@@ -24,6 +24,7 @@ EXPECTED = {
     "features_dir": ("site-001", "features/site-001"),
     "features_db": ("site-001", "features/site-001/database.db"),
     "features_report": ("site-001", "features/site-001/features.json"),
+    "features_extraction": ("site-001", "features/site-001/extraction.json"),
     "sfm_dir": ("site-001", "sfm/site-001"),
     "sfm_model": ("site-001", "sfm/site-001/model"),
     "sfm_clips": ("site-001", "sfm/site-001/clips"),
