@@ -1,8 +1,10 @@
 """Segmentation benchmark (issue 23.6): the shipped segmenter on a site it never saw, and the whole path on a
 mask-free site with predicted masks against the same site with the generator's masks, in one run.
 
-1. Per-class IoU of the checkpoint's masks against the generator's on the day images of `--site` (refused, with
-   an error, when the checkpoint saw that site: same seed, layout or location), the confusion of each class
+1. Per-class IoU of the segment stage's masks (the checkpoint's, with each camera's ego body made one through its
+   clips: `cama_pipeline.segment.ego_clip`; the network's own per-image IoU beside it) against the generator's
+   on the day key-frame images of `--site` (refused, with an error, when the checkpoint saw that site: same
+   seed, layout or location), measured after part 2 on the masks its predicted run used; the confusion of each class
    (what it is taken for), the share of true lane-marking and crosswalk instances the masks miss (under half of
    their pixels predicted as their class), per camera, and the CPU seconds per 512x288 image on one thread.
 2. `cama run` twice on the site's data set, into two workspaces beside it: `--masks <site>/ground_truth` (the
@@ -45,11 +47,13 @@ from surface import IOU_CLASSES, truth_at  # bench/surface.py
 
 from cama_pipeline.bev import read_bev
 from cama_pipeline.cameras import site_views
-from cama_pipeline.data import CameraImage
+from cama_pipeline.data import CameraImage, load_dataset
 from cama_pipeline.data.masks import has_masks
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, load_checkpoint
-from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES
+from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
 from cama_pipeline.segment.predict import confusion, iou_report, resolve_device
+from cama_pipeline.segment.stage import run as segment_stage
 from cama_pipeline.segment.train import cpu_seconds_per_image
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
 from cama_pipeline.site.io import read_site_manifest
@@ -70,6 +74,7 @@ IOU_TARGETS = {
 PATH_TOLERANCES = {"proposal_map": 0.05, "elevation_rmse_cm": 1.0, "sre_ref_px": 0.5}
 """How far the predicted-mask run may fall behind the generator-mask run (issue 23.6)."""
 SECONDS_PER_IMAGE_TARGET = 0.15
+PREDICTED_WORKSPACE = "workspace-predicted-masks"
 INSTANCE_CLASSES = (Semantic.LANE_MARKING, Semantic.CROSSWALK)
 
 
@@ -115,29 +120,52 @@ def confused_with(matrix: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
-def segmentation_figures(checkpoint: Checkpoint, site: Path, device: torch.device) -> dict[str, Any]:
-    """Part 1: IoU, confusion, missed instances and per-camera IoU of the checkpoint on the site's day images."""
+def network_iou(
+    net: SegmentationNet, images: list[CameraImage], device: torch.device
+) -> dict[str, float | None]:
+    """Per-class IoU of the network's own per-image masks (before the stage's ego step) on `images`."""
+    total = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
+    for k in range(0, len(images), 8):
+        batch = images[k : k + 8]
+        for image, labels in zip(batch, net.predict([im.load_rgb() for im in batch], device), strict=True):
+            total += confusion(labels, image.load_semantic())
+    return iou_report(total, len(images))["per_class_iou"]
+
+
+def segmentation_figures(
+    checkpoint: Checkpoint, site: Path, workspace: Workspace, device: torch.device
+) -> dict[str, Any]:
+    """Part 1: IoU, confusion, missed instances and per-camera IoU, on the site's day key-frame images, of the
+    masks the segment stage writes into `workspace` (run here; up to date when `cama run` made them), and the
+    IoU of the network's own per-image masks beside them."""
     identity = ensure_unseen(checkpoint, site)
-    net = checkpoint.net.to(device)
+    started = time.perf_counter()
+    stage = segment_stage(SegmentConfig(checkpoint=checkpoint.path), site / "nuscenes", workspace)
+    stage_seconds = time.perf_counter() - started
     total = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
     per_camera: dict[str, np.ndarray] = {}
     missed: dict[str, list[int]] = {}
     images = day_images(site)
-    started = time.perf_counter()
-    for k in range(0, len(images), 8):
-        batch = images[k : k + 8]
-        for image, labels in zip(batch, net.predict([im.load_rgb() for im in batch], device), strict=True):
-            matrix = confusion(labels, image.load_semantic())
-            total += matrix
-            per_camera.setdefault(image.channel, np.zeros_like(matrix))
-            per_camera[image.channel] += matrix
-            missed_instances(labels, image.load_instance(), missed)
-    seconds = time.perf_counter() - started
+    mask_root = workspace.masks_dir("predicted")
+    predicted = load_dataset(site / "nuscenes", mask_roots=(mask_root,))
+    for image in images:
+        labels = predicted.image(image.token).load_semantic()
+        matrix = confusion(labels, image.load_semantic())
+        total += matrix
+        per_camera.setdefault(image.channel, np.zeros_like(matrix))
+        per_camera[image.channel] += matrix
+        missed_instances(labels, image.load_instance(), missed)
     report = iou_report(total, len(images))
+    (item,) = stage.items
     return {
         "site": identity.to_json(),
         "checkpoint": {"path": str(checkpoint.path), "label": checkpoint.label, "digest": checkpoint.digest},
+        "masks": str(mask_root),
+        "stage_seconds": round(stage_seconds, 2),
+        "stage_skipped": item.skipped,
+        "ego_body_pixels": item.report.get("ego_body_pixels"),
         **report,
+        "network_per_class_iou": network_iou(checkpoint.net.to(device), images, device),
         "targets": {
             name: {"target": t, "met": (report["per_class_iou"].get(name) or 0.0) >= t}
             for name, t in IOU_TARGETS.items()
@@ -148,7 +176,6 @@ def segmentation_figures(checkpoint: Checkpoint, site: Path, device: torch.devic
             for name, (m, n) in missed.items()
         },
         "per_camera_iou": {cam: iou_report(m, 0)["per_class_iou"] for cam, m in sorted(per_camera.items())},
-        "wall_seconds_per_image": round(seconds / max(len(images), 1), 4),
         "cpu_seconds_per_512x288_image_one_thread": cpu_seconds_per_image(checkpoint.net),
         "cpu_target_s": SECONDS_PER_IMAGE_TARGET,
     }
@@ -213,13 +240,16 @@ def differences(reference: dict[str, Any], predicted: dict[str, Any]) -> dict[st
     return out
 
 
-def pipeline_run(site: Path, masks: str, name: str) -> tuple[Workspace, dict[str, float]]:
-    """`cama run` on the site's data set into `<site>/<name>` with the given mask choice; seconds per stage."""
+def pipeline_run(
+    site: Path, masks: str, name: str, checkpoint: Path | None = None
+) -> tuple[Workspace, dict[str, float]]:
+    """`cama run` on the site's data set into `<site>/<name>` with the given mask choice (and segmenter
+    checkpoint, for predicted masks); seconds per stage."""
     workspace = Workspace(site / name)
     result = run_pipeline(
         site / "nuscenes",
         workspace.root,
-        PipelineConfig(masks=masks),
+        PipelineConfig(masks=masks, segment=SegmentConfig(checkpoint=checkpoint)),
         on_stage=lambda s: print(f"== {name} {s}"),
     )
     return workspace, {k: round(v, 1) for k, v in result.seconds.items()}
@@ -236,17 +266,15 @@ def main() -> None:
     logging.basicConfig(level=logging.WARNING)
     site = args.site
     checkpoint = load_checkpoint(args.checkpoint)
-    figures: dict[str, Any] = {
-        "segmentation": segmentation_figures(checkpoint, site, resolve_device("auto")),
-    }
-    print(json.dumps(figures["segmentation"]["per_class_iou"], indent=1))
+    ensure_unseen(checkpoint, site)
+    figures: dict[str, Any] = {}
     if not args.skip_pipeline:
         reference_masks = (
             "dataset" if has_masks(site / "nuscenes") else str((site / "ground_truth").absolute())
         )
         runs = {
             "generator_masks": pipeline_run(site, reference_masks, "workspace-generator-masks"),
-            "predicted_masks": pipeline_run(site, "predicted", "workspace-predicted-masks"),
+            "predicted_masks": pipeline_run(site, "predicted", PREDICTED_WORKSPACE, checkpoint.path),
         }
         figures["runs"] = {
             name: run_figures(site, ws, args.site_id, seconds) for name, (ws, seconds) in runs.items()
@@ -255,6 +283,10 @@ def main() -> None:
             figures["runs"]["generator_masks"], figures["runs"]["predicted_masks"]
         )
         print(json.dumps(figures["differences"], indent=1))
+    figures["segmentation"] = segmentation_figures(
+        checkpoint, site, Workspace(site / PREDICTED_WORKSPACE), resolve_device("auto")
+    )
+    print(json.dumps(figures["segmentation"]["per_class_iou"], indent=1))
     figures["command"] = "python bench/segment.py " + " ".join(sys.argv[1:])
     figures["machine"] = {
         "python": platform.python_version(),

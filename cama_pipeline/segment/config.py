@@ -6,9 +6,11 @@ trained with); the training config is recorded beside it; the stage config says 
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
+
+from cama_pipeline.segment.ego_clip import EgoClipConfig
 
 DeviceName = Literal["auto", "cpu", "cuda"]
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
@@ -125,6 +127,8 @@ class SegmentConfig:
     """`auto`: CUDA when present, else the CPU."""
     threads_per_worker: int = 1
     """torch CPU threads of each worker process."""
+    ego_clip: EgoClipConfig = field(default_factory=EgoClipConfig)
+    """How each camera's ego body is made one through its clips after the network ran (`segment.ego_clip`)."""
 
     def __post_init__(self) -> None:
         _positive_int("SegmentConfig", "batch_size", self.batch_size)
@@ -140,4 +144,5 @@ class SegmentConfig:
             "batch_size": self.batch_size,
             "device": self.device,
             "threads_per_worker": self.threads_per_worker,
+            "ego_clip": self.ego_clip.to_json(),
         }

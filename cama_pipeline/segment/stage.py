@@ -4,9 +4,13 @@ segmenter checkpoint, into the workspace's `masks/predicted/` root (never into t
 Images: the keyframe images of every scene the keyframes stage wrote (`keyframes/<scene>.json`) and every
 key-frame (sample) camera image of the data set. They go in chunks of `batch_size` to one network call each,
 in this process (one worker, or CUDA) or in a local process pool or on Ray (`executor`, `workers`); masks are
-written atomically as each chunk ends. Resumable: the manifest (written last) records the checkpoint and the
+written atomically as each chunk ends. Then each camera's ego body is made one through its clips
+(`segment.ego_clip`: the network's per-pixel vote united with the pixels constant through the moving clips) and
+the masks that differ from it are rewritten (so is their lane-instance mask). Resumable: the manifest (written last) records the checkpoint and the
 images, so a rerun with the same ones does nothing; while running, a journal (`segment.io`) lists the images
-done, so a run after an interruption segments only the rest. A run with another checkpoint redoes them all.
+done, so a run after an interruption segments only the rest (and makes the ego bodies again: a mask already given
+its body votes for that body, so a pass cut short and run again ends where one pass would, up to pixels within
+`vote_share` of the threshold). A run with another checkpoint or ego setting redoes them all.
 """
 
 import logging
@@ -22,7 +26,7 @@ import numpy as np
 import torch
 
 from cama_pipeline.code_version import code_version
-from cama_pipeline.data import Dataset, DatasetError, load_dataset
+from cama_pipeline.data import CameraImage, Dataset, DatasetError, load_dataset
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
 from cama_pipeline.fingerprints import fingerprint
 from cama_pipeline.io import atomic_write_image
@@ -31,6 +35,9 @@ from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.segment.checkpoint import load_checkpoint, shipped_checkpoint
 from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.ego import estimate_ego_mask
+from cama_pipeline.segment.ego_clip import EgoClipConfig, EgoVote, camera_body, with_body
+from cama_pipeline.segment.instances import lane_instances
 from cama_pipeline.segment.io import (
     MaskManifest,
     progress_path,
@@ -106,6 +113,71 @@ def segment_chunk(chunk: Chunk) -> tuple[str, ...]:
         atomic_write_image(root / mask_relpath(SEMANTIC_DIR, name), semantic)
         atomic_write_image(root / mask_relpath(INSTANCE_DIR, name), instances.astype(np.uint16))
     return chunk.filenames
+
+
+def _read_mask(path: Path) -> np.ndarray:
+    """A predicted semantic mask this stage wrote ((H, W) uint8); DatasetError naming the file otherwise."""
+    mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if mask is None or mask.ndim != 2 or mask.dtype != np.uint8:
+        raise DatasetError("predicted semantic mask cannot be read as (H, W) uint8", path=path)
+    return np.asarray(mask)
+
+
+def camera_groups(dataset: Dataset, filenames: Sequence[str]) -> dict[str, list[CameraImage]]:
+    """The images of `filenames` per camera on the car (calibrated_sensor token), in data set order."""
+    wanted = set(filenames)
+    groups: dict[str, list[CameraImage]] = {}
+    for image in dataset.camera_images():
+        if image_filename(dataset, image.path) in wanted:
+            groups.setdefault(image.calibration.token, []).append(image)
+    return groups
+
+
+def constant_estimates(dataset: Dataset, calibration: str, config: EgoClipConfig) -> list[np.ndarray]:
+    """The constant-pixel ego body of each clip of one camera (calibrated_sensor) that moves enough to give one,
+    from all of the clip's images of that camera (sweeps too)."""
+    estimates = []
+    for scene in dataset.scenes:
+        for images in scene.images.values():
+            if images and images[0].calibration.token == calibration:
+                estimate = estimate_ego_mask(images, config.constant)
+                if estimate is not None:
+                    estimates.append(estimate)
+    return estimates
+
+
+def make_ego_bodies(
+    dataset: Dataset,
+    filenames: Sequence[str],
+    mask_root: Path,
+    config: EgoClipConfig,
+    progress: StageProgress,
+) -> dict[str, int]:
+    """Give every predicted mask of each camera that camera's one ego body (see `segment.ego_clip`); rewrites
+    the masks that change (semantic and lane instances, atomically). Returns the body's pixel count per channel
+    (the largest over the channel's cameras) for the manifest."""
+    groups = camera_groups(dataset, filenames)
+    bar = progress.add_task("ego body", total=len(filenames))
+    sizes: dict[str, int] = {}
+    for calibration, images in groups.items():
+        paths = [mask_root / mask_relpath(SEMANTIC_DIR, image_filename(dataset, im.path)) for im in images]
+        vote = EgoVote()
+        for path in paths:
+            vote.add(_read_mask(path))
+        body = camera_body(vote, constant_estimates(dataset, calibration, config), config.vote_share)
+        channel = images[0].channel
+        sizes[channel] = max(sizes.get(channel, 0), int(body.sum()))
+        for image, path in zip(images, paths, strict=True):
+            semantic = _read_mask(path)
+            consistent = with_body(semantic, body)
+            if not np.array_equal(consistent, semantic):
+                name = image_filename(dataset, image.path)
+                atomic_write_image(path, consistent)
+                atomic_write_image(
+                    mask_root / mask_relpath(INSTANCE_DIR, name), lane_instances(consistent).astype(np.uint16)
+                )
+            progress.advance(bar)
+    return sizes
 
 
 def _run_chunks(
@@ -191,7 +263,9 @@ def run(
     checkpoint = load_checkpoint(checkpoint_dir)
     device = resolve_device(config.device)
     images = needed_images(dataset, ws)
-    made_with = fingerprint("segment", code_version("cama_pipeline.segment"), checkpoint.digest)
+    made_with = fingerprint(
+        "segment", code_version("cama_pipeline.segment"), checkpoint.digest, config.ego_clip.to_json()
+    )
     digest = fingerprint(made_with, images)
     mask_root, manifest_path = ws.masks_dir(SOURCE), ws.masks_manifest(SOURCE)
     if not overwrite and manifest_path.is_file():
@@ -226,6 +300,11 @@ def run(
             progress.advance(bar, len(chunk.filenames))
 
         _run_chunks(chunks, executor, workers if device.type == "cpu" else 1, finished)
+        ego_pixels = (
+            make_ego_bodies(dataset, images, mask_root, config.ego_clip, progress)
+            if config.ego_clip.enabled
+            else None
+        )
     seconds = time.perf_counter() - started
     manifest = MaskManifest(
         source=SOURCE,
@@ -239,7 +318,12 @@ def run(
         images=tuple(images),
         fingerprint=digest,
         seconds=round(seconds, 2),
-        extra={"segmented": len(todo), "reused": len(images) - len(todo), "device": device.type},
+        extra={
+            "segmented": len(todo),
+            "reused": len(images) - len(todo),
+            "device": device.type,
+            "ego_body_pixels": ego_pixels,
+        },
     )
     write_mask_manifest(manifest_path, manifest)
     progress_path(mask_root).unlink(missing_ok=True)

@@ -3,6 +3,7 @@ for every key-frame image and every keyframe image, in the data set's layout und
 does nothing; an interrupted run goes on where it stopped."""
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -17,6 +18,7 @@ from cama_pipeline.keyframes.io import FrameRecord, KeyframesFile, write_keyfram
 from cama_pipeline.segment import stage
 from cama_pipeline.segment.checkpoint import CheckpointError
 from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.ego_clip import EgoClipConfig
 from cama_pipeline.segment.io import progress_path, read_mask_manifest
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
 from cama_pipeline.workspace import Workspace
@@ -134,3 +136,33 @@ def test_segment_command_and_its_bad_input(
     assert bad.exit_code == 2 and str(tmp_path / "checkpoint.json") in bad.output, bad.output
     with pytest.raises(CheckpointError):
         stage.run(SegmentConfig(checkpoint=tmp_path), Path(root), Path(ws), show_progress=False)
+
+
+def test_every_mask_of_a_camera_gets_its_one_ego_body(
+    tiny_site: GeneratedSite, checkpoint: Path, tmp_path: Path
+) -> None:
+    root = tiny_site.result.dataset_root
+    ws = Workspace(tmp_path / "ws")
+    item = stage.run(config(checkpoint), root, ws, workers=1, show_progress=False).items[0]
+    dataset = load_dataset(root)  # the generator's own masks, for the truth
+    bodies: dict[str, np.ndarray] = {}
+    true_ego = predicted_ego = both = 0
+    for image in dataset.camera_images():
+        if not image.is_key_frame:
+            continue
+        name = image.path.relative_to(dataset.root).as_posix()
+        ego = read_png(ws.masks_dir("predicted") / mask_relpath(SEMANTIC_DIR, name)) == int(Semantic.EGO)
+        body = bodies.setdefault(image.calibration.token, ego)
+        assert (ego == body).all(), f"{name}: its ego pixels differ from its camera's other masks"
+        if image.channel == "CAM_BACK":
+            truth = image.load_semantic() == int(Semantic.EGO)
+            true_ego, predicted_ego, both = (
+                true_ego + truth.sum(),
+                predicted_ego + ego.sum(),
+                both + (ego & truth).sum(),
+            )
+    assert true_ego > 0 and both / (true_ego + predicted_ego - both) > 0.9  # the trunk, from the clips
+    assert item.report["ego_body_pixels"]["CAM_BACK"] > 0
+    off = replace(config(checkpoint), ego_clip=EgoClipConfig(enabled=False))
+    plain = stage.run(off, root, ws, workers=1, show_progress=False).items[0]
+    assert not plain.skipped and plain.report["ego_body_pixels"] is None  # another ego setting: made again
