@@ -30,6 +30,7 @@ from cama_pipeline.console import bad_input
 from cama_pipeline.data import DatasetError
 from cama_pipeline.data.masks import parse_mask_choice
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, PoseChoice, export
+from cama_pipeline.export.poses import export_site_id
 from cama_pipeline.io import WorkspaceError, atomic_write_bytes
 from cama_pipeline.workspace import Workspace
 
@@ -91,21 +92,22 @@ def load_semantic(path: Path, georef: Georeference) -> np.ndarray:
 def default_semantic_folder(
     workspace: Path | None, dataset: Path | None, annotations: AnnotationSet, site_id: str | None
 ) -> Path | None:
-    """The site's surface raster folder in the export's workspace (`--workspace`, else the data set's): the
-    `--site-id`'s, else the annotation set's site's, else the workspace's only one; None when there is none."""
+    """The surface raster folder of the site the export takes its poses from (`export_site_id`: `--site-id`, else
+    the annotation set's site, else the workspace's only site), in the export's workspace (`--workspace`, else the
+    data set's); None when the workspace names no such site or the site has no raster, so the kerbs and the poses
+    always come from one site."""
     if workspace is not None:
         space = Workspace(workspace)
     elif dataset is not None:
         space = Workspace.for_dataset(dataset)
     else:
         return None
-    if site_id is not None:
-        return space.surface_bev(site_id) if is_raster_folder(space.surface_bev(site_id)) else None
-    if is_raster_folder(space.surface_bev(annotations.site_id)):
-        return space.surface_bev(annotations.site_id)
-    surface = space.stage_dir("surface")
-    found = sorted(bev for bev in surface.glob("*/bev") if is_raster_folder(bev)) if surface.is_dir() else []
-    return found[0] if len(found) == 1 else None
+    try:
+        site = export_site_id(space, annotations.site_id, site_id)
+    except (FileNotFoundError, ValueError):
+        return None
+    bev = space.surface_bev(site)
+    return bev if is_raster_folder(bev) else None
 
 
 def _semantic(

@@ -14,6 +14,8 @@ from annotations import AnnotationSet, Georeference, MapElement
 from cama_pipeline.bev import BevRasters, write_bev
 from cama_pipeline.export import ExportFormat, ExportRequest, export
 from cama_pipeline.export import run as export_run
+from cama_pipeline.site.io import write_sites_index
+from cama_pipeline.workspace import Workspace
 from cama_studio.export_command import export_command
 from tests.annotations.annotation_helpers import element_kwargs
 from tests.annotations.kerb_helpers import KERB_GEOREF, kerb_raster, kerb_set
@@ -104,13 +106,19 @@ def test_lanelet2_semantic_option_tells_kerbs_from_road_borders(tmp_path: Path, 
     assert osm.count('v="road_border"') == 1 and osm.count('v="curbstone"') == 3
 
 
-def test_lanelet2_reads_the_workspace_surface_raster_by_default(tmp_path: Path) -> None:
+def test_lanelet2_reads_the_surface_raster_of_the_export_site_by_default(tmp_path: Path) -> None:
     source, out = _kerb_set_file(tmp_path), tmp_path / "map.osm"
-    bev = tmp_path / "ws" / "surface" / "site-001" / "bev"
+    workspace = Workspace(tmp_path / "ws")
+    bev = workspace.surface_bev("site-002")
     write_bev(bev, BevRasters(KERB_GEOREF.as_raster(), semantic=kerb_raster()))
-    result = runner.invoke(
-        app, ["export", str(source), str(out), *LANELET2, "--workspace", str(tmp_path / "ws")]
-    )
+    sites = [{"site_id": "s"}, {"site_id": "site-002"}]  # "s": the annotation set's site
+    write_sites_index(workspace.sites_index(), {"sites": sites, "dropped": []})
+    args = ["export", str(source), str(out), *LANELET2, "--workspace", str(workspace.root)]
+    # the annotation set's site (the poses' site) has no raster: no kerb evidence from another site's
+    unrastered = runner.invoke(app, args)
+    assert unrastered.exit_code == 0, unrastered.output
+    assert "'assumed': 4} (semantic raster: none)" in unrastered.output
+    result = runner.invoke(app, [*args, "--site-id", "site-002", "--overwrite"])
     assert result.exit_code == 0, result.output
     assert KERBS_LINE in result.output and str(bev) in result.output
     plain = runner.invoke(app, ["export", str(source), str(tmp_path / "plain.osm"), *LANELET2])
