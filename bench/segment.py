@@ -17,7 +17,7 @@ mask-free site with predicted masks against the same site with the generator's m
 Make the site first, e.g. a randomised one of the default size without masks or GNSS, as real nuScenes is:
     .venv/bin/cama synth --preset default --random-seed 9001 --no-masks --out data/synthetic/random-9001
 Usage: .venv/bin/python bench/segment.py --site data/synthetic/random-9001 [--checkpoint DIR]
-       [--out bench/results/segment.json] [--skip-pipeline]
+       [--out bench/results/segment.json] [--skip-pipeline] [--no-ego-clip]
 """
 
 import argparse
@@ -51,6 +51,7 @@ from cama_pipeline.data import CameraImage, load_dataset
 from cama_pipeline.data.masks import has_masks
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, load_checkpoint
 from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.ego_clip import EgoClipConfig
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
 from cama_pipeline.segment.predict import confusion, iou_report, resolve_device
 from cama_pipeline.segment.stage import run as segment_stage
@@ -133,14 +134,14 @@ def network_iou(
 
 
 def segmentation_figures(
-    checkpoint: Checkpoint, site: Path, workspace: Workspace, device: torch.device
+    config: SegmentConfig, checkpoint: Checkpoint, site: Path, workspace: Workspace, device: torch.device
 ) -> dict[str, Any]:
     """Part 1: IoU, confusion, missed instances and per-camera IoU, on the site's day key-frame images, of the
     masks the segment stage writes into `workspace` (run here; up to date when `cama run` made them), and the
     IoU of the network's own per-image masks beside them."""
     identity = ensure_unseen(checkpoint, site)
     started = time.perf_counter()
-    stage = segment_stage(SegmentConfig(checkpoint=checkpoint.path), site / "nuscenes", workspace)
+    stage = segment_stage(config, site / "nuscenes", workspace)
     stage_seconds = time.perf_counter() - started
     total = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
     per_camera: dict[str, np.ndarray] = {}
@@ -241,15 +242,15 @@ def differences(reference: dict[str, Any], predicted: dict[str, Any]) -> dict[st
 
 
 def pipeline_run(
-    site: Path, masks: str, name: str, checkpoint: Path | None = None
+    site: Path, masks: str, name: str, segment: SegmentConfig | None = None
 ) -> tuple[Workspace, dict[str, float]]:
-    """`cama run` on the site's data set into `<site>/<name>` with the given mask choice (and segmenter
-    checkpoint, for predicted masks); seconds per stage."""
+    """`cama run` on the site's data set into `<site>/<name>` with the given mask choice (and segment stage
+    settings, for predicted masks); seconds per stage."""
     workspace = Workspace(site / name)
     result = run_pipeline(
         site / "nuscenes",
         workspace.root,
-        PipelineConfig(masks=masks, segment=SegmentConfig(checkpoint=checkpoint)),
+        PipelineConfig(masks=masks, segment=segment or SegmentConfig()),
         on_stage=lambda s: print(f"== {name} {s}"),
     )
     return workspace, {k: round(v, 1) for k, v in result.seconds.items()}
@@ -262,11 +263,18 @@ def main() -> None:
     parser.add_argument("--checkpoint", type=Path, default=None, help="default: the shipped segmenter")
     parser.add_argument("--out", type=Path, default=RESULTS / "segment.json")
     parser.add_argument("--skip-pipeline", action="store_true", help="part 1 only (no `cama run`)")
+    parser.add_argument(
+        "--no-ego-clip",
+        action="store_true",
+        help="ablation: the network's per-image ego pixels as they are (predicted workspace *-no-ego-clip)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site = args.site
     checkpoint = load_checkpoint(args.checkpoint)
     ensure_unseen(checkpoint, site)
+    segment = SegmentConfig(checkpoint=checkpoint.path, ego_clip=EgoClipConfig(enabled=not args.no_ego_clip))
+    predicted_workspace = PREDICTED_WORKSPACE + ("-no-ego-clip" if args.no_ego_clip else "")
     figures: dict[str, Any] = {}
     if not args.skip_pipeline:
         reference_masks = (
@@ -274,7 +282,7 @@ def main() -> None:
         )
         runs = {
             "generator_masks": pipeline_run(site, reference_masks, "workspace-generator-masks"),
-            "predicted_masks": pipeline_run(site, "predicted", PREDICTED_WORKSPACE, checkpoint.path),
+            "predicted_masks": pipeline_run(site, "predicted", predicted_workspace, segment),
         }
         figures["runs"] = {
             name: run_figures(site, ws, args.site_id, seconds) for name, (ws, seconds) in runs.items()
@@ -284,7 +292,7 @@ def main() -> None:
         )
         print(json.dumps(figures["differences"], indent=1))
     figures["segmentation"] = segmentation_figures(
-        checkpoint, site, Workspace(site / PREDICTED_WORKSPACE), resolve_device("auto")
+        segment, checkpoint, site, Workspace(site / predicted_workspace), resolve_device("auto")
     )
     print(json.dumps(figures["segmentation"]["per_class_iou"], indent=1))
     figures["command"] = "python bench/segment.py " + " ".join(sys.argv[1:])

@@ -476,3 +476,39 @@ def test_native_resolution_table_from_both_runs() -> None:
     ]
     for label, small, large in zip(labels, quality(low), quality(high), strict=True):
         assert_shows(" | ".join(row(t, label)[1:3]), [small, large], f"native resolution {label!r}")
+
+
+SEGMENT_SITES = {"9001 (tuning)": "segment.json", "9002 (confirmation)": "segment_9002.json"}
+
+
+def test_segmentation_iou_table_from_both_sites() -> None:
+    t = table("class", "bench/results/segment_9002.json")
+    assert_names_source(t, "segment.json", "bench/segment.py")
+    for column, name in SEGMENT_SITES.items():
+        index = t.header.index(column)
+        figures_of = results(name)["segmentation"]
+        for label, cells in t.rows.items():
+            key = label.replace(" ", "_")
+            expected = [figures_of["per_class_iou"][key], figures_of["network_per_class_iou"][key]]
+            assert_shows(cells[index], expected, f"segmentation {column} {label!r}")
+
+
+def test_segmentation_whole_path_table_from_both_sites() -> None:
+    t = table("run", "bench/results/segment_9002.json")
+    assert_names_source(t, "segment.json", "bench/segment.py")
+    for site, name in (("9001", "segment.json"), ("9002", "segment_9002.json")):
+        for run_label, key in (
+            ("generator masks", "generator_masks"),
+            ("predicted masks", "predicted_masks"),
+        ):
+            run = results(name)["runs"][key]
+            expected = [
+                run["poses"]["sfm"]["position_cm"],
+                run["elevation"]["rmse_cm"],
+                run["bev_iou"]["lane_marking"],
+                run["proposals_ap"]["observed_truth"]["mean_ap"],
+                run["sre"]["sre_ref_px"],
+                run["annotator_speed_up"],
+            ]
+            cells = row(t, f"{site}, {run_label}")
+            assert_shows(" | ".join(cells[1:]), expected, f"segmentation whole path {site} {run_label}")
