@@ -65,8 +65,10 @@ from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
+from models.vma.checkpoint import ensure_unseen, load_checkpoint
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
+from models.vma.shipped import resolve_checkpoint
 from models.vma.vectors import Vector, read_vectors, vectors_from_annotations
 
 matplotlib.use("Agg")
@@ -359,6 +361,8 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
+    if args.proposer == "learned":  # SeenSiteError when the shipped VMA trained on this site
+        ensure_unseen(load_checkpoint(resolve_checkpoint(None)), site)
     workspace = Workspace.for_dataset(site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:

@@ -28,7 +28,7 @@ import torch
 from rich.console import Console
 
 from models.vma.bev_sites import ensure_bev_sites
-from models.vma.checkpoint import load_checkpoint
+from models.vma.checkpoint import ensure_unseen, load_checkpoint
 from models.vma.commands import seed_range
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_proposer
@@ -58,6 +58,11 @@ def main() -> None:
     console = Console()
     sites = ensure_bev_sites(seed_range(args.seeds), args.site_root)
     checkpoint = load_checkpoint(args.checkpoint)
+    free = load_checkpoint(Path(args.free_checkpoint)) if args.free_checkpoint else None
+    for site in sites:  # SeenSiteError when a checkpoint trained on a held-out site
+        for model in (checkpoint, free):
+            if model is not None:
+                ensure_unseen(model, site)
     started = time.perf_counter()
 
     proposers: dict[str, Callable[[SiteRasters], list[Vector]]] = {
@@ -66,9 +71,8 @@ def main() -> None:
     }
     if checkpoint.config.anchored:  # the same network with its own refined points instead of the candidates'
         proposers["learned_refined"] = _learned(checkpoint.model, InferenceConfig(anchored_output="refined"))
-    if args.free_checkpoint:
-        free = load_checkpoint(Path(args.free_checkpoint)).model
-        proposers["learned_free"] = _learned(free, InferenceConfig())
+    if free is not None:
+        proposers["learned_free"] = _learned(free.model, InferenceConfig())
     results: dict[str, dict] = {"clean": {}, "degraded": {}}
     for name, propose in proposers.items():
         console.print(f"evaluating {name} ...")

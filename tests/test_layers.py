@@ -32,6 +32,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "cama_pipeline.workspace",
             "cama_pipeline.fingerprints",
             "cama_pipeline.results",
+            "cama_pipeline.site_identity",
         ),
     ),
     ("annotations", ("annotations",)),

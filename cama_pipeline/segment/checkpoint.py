@@ -36,6 +36,7 @@ from cama_pipeline.code_version import code_version
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.segment.config import NetworkConfig
 from cama_pipeline.segment.network import IMAGE_CLASSES, SegmentationNet
+from cama_pipeline.site_identity import SiteIdentity, ensure_not_among, site_identity
 
 logger = logging.getLogger(__name__)
 
@@ -48,62 +49,6 @@ SHIPPED_NAME = "shipped"
 
 class CheckpointError(ValueError):
     """A checkpoint folder that is missing, unreadable or not a segmenter checkpoint; names the file."""
-
-
-class SeenSiteError(ValueError):
-    """A checkpoint asked to be scored on (or trained on) a site it must not see; names the site."""
-
-
-@dataclass(frozen=True)
-class SiteIdentity:
-    """What names a generated site: from its `manifest.json` (written by `cama synth`)."""
-
-    path: str
-    preset: str
-    seed: int
-    location: str
-    layout_digest: str
-    config_digest: str
-
-    def to_json(self) -> dict[str, Any]:
-        return dict(self.__dict__)
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "SiteIdentity":
-        return cls(**{k: data[k] for k in cls.__dataclass_fields__})
-
-    def shares_with(self, other: "SiteIdentity") -> str | None:
-        """What this site has in common with `other` that makes them one place (seed, layout, location)."""
-        if self.seed == other.seed:
-            return f"seed {self.seed}"
-        if self.layout_digest == other.layout_digest:
-            return f"layout {self.layout_digest}"
-        if self.location == other.location:
-            return f"location {self.location!r}"
-        return None
-
-
-def _digest(value: Any) -> str:
-    return hashlib.sha256(json.dumps(value, sort_keys=True).encode()).hexdigest()[:16]
-
-
-def site_identity(site: Path) -> SiteIdentity:
-    """The identity of a generated site folder (`<site>/manifest.json`); ValueError naming the file when the
-    folder is not a generated site."""
-    manifest = Path(site) / "manifest.json"
-    if not manifest.is_file():
-        raise FileNotFoundError(f"{manifest}: not found; not a site written by `cama synth`")
-    try:
-        data = json.loads(manifest.read_text(encoding="utf-8"))
-        config = data["config"]
-        preset, seed = str(data["preset"]), int(data["seed"])
-        layout = config["layout"]
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as err:
-        raise ValueError(f"{manifest}: not a generator manifest ({type(err).__name__}: {err})") from None
-    location = config.get("location") or f"synthetic-{preset}"
-    return SiteIdentity(
-        str(Path(site).absolute()), preset, seed, str(location), _digest(layout), _digest(config)
-    )
 
 
 @dataclass(frozen=True)
@@ -205,12 +150,6 @@ def load_checkpoint(folder: Path | None = None) -> Checkpoint:
 def ensure_unseen(checkpoint: Checkpoint, site: Path) -> SiteIdentity:
     """The identity of `site` when `checkpoint` never trained on it; SeenSiteError naming the site and the
     training site it shares a seed, layout or location with (scores on a seen site would flatter it)."""
-    identity = site_identity(site)
-    for seen in checkpoint.training_sites:
-        shared = identity.shares_with(seen)
-        if shared is not None:
-            raise SeenSiteError(
-                f"{site}: checkpoint {checkpoint.label} ({checkpoint.path}) was trained on {seen.path}, "
-                f"which has the same {shared}; measure it on a site it never saw"
-            )
-    return identity
+    return ensure_not_among(
+        site_identity(site), checkpoint.training_sites, f"checkpoint {checkpoint.label} ({checkpoint.path})"
+    )

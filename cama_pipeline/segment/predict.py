@@ -10,10 +10,11 @@ import numpy as np
 import torch
 
 from cama_pipeline.data import CameraImage, load_dataset
-from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, site_identity
+from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen
 from cama_pipeline.segment.config import DeviceName
 from cama_pipeline.segment.instances import lane_instances
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
+from cama_pipeline.site_identity import site_identity
 
 logger = logging.getLogger(__name__)
 

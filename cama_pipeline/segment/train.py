@@ -28,12 +28,9 @@ from cama_pipeline.progress import StageProgress
 from cama_pipeline.segment.checkpoint import (
     Checkpoint,
     CheckpointError,
-    SeenSiteError,
-    SiteIdentity,
     ensure_unseen,
     load_checkpoint,
     save_checkpoint,
-    site_identity,
 )
 from cama_pipeline.segment.config import (
     MEASUREMENT_PRESET_SEED,
@@ -43,6 +40,7 @@ from cama_pipeline.segment.config import (
 )
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet
 from cama_pipeline.segment.predict import score_held_out, site_images
+from cama_pipeline.site_identity import SeenSiteError, SiteIdentity, site_identity
 
 logger = logging.getLogger(__name__)
 

@@ -6,6 +6,8 @@ writes under `ground_truth/` for it (every cell observed). Seeds name sites: dis
 location-disjoint training and held-out sets.
 """
 
+import dataclasses
+import json
 import logging
 from dataclasses import replace
 from pathlib import Path
@@ -19,6 +21,10 @@ from cama_pipeline.synthetic.config import LayoutConfig, SynthConfig
 from cama_pipeline.synthetic.site_model import build_synthetic_site
 
 logger = logging.getLogger(__name__)
+
+BEV_PRESET = "vma"
+"""The preset name in a BEV-only site's manifest."""
+MANIFEST = "manifest.json"
 
 
 def layout_for_seed(seed: int) -> LayoutConfig:
@@ -44,30 +50,59 @@ def layout_for_seed(seed: int) -> LayoutConfig:
     )
 
 
+def bev_site_config(seed: int, resolution_m: float = 0.1) -> SynthConfig:
+    """The generator config of the BEV-only site of `seed`: its own layout and its own location."""
+    return SynthConfig(
+        preset=BEV_PRESET,
+        seed=seed,
+        layout=layout_for_seed(seed),
+        bev_resolution_m=resolution_m,
+        location=f"synth-vma-{seed}",
+    )
+
+
+def bev_site_manifest(cfg: SynthConfig) -> dict[str, object]:
+    """`manifest.json` of a BEV-only site: what names it as a place (`cama_pipeline.site_identity`)."""
+    return {
+        "preset": cfg.preset,
+        "seed": cfg.seed,
+        "location": cfg.log_location,
+        "config": dataclasses.asdict(cfg),
+    }
+
+
 def write_bev_site(seed: int, out_dir: Path, *, resolution_m: float = 0.1, overwrite: bool = False) -> Path:
-    """Write `<out_dir>/ground_truth/{vector_map.json, bev/...}` for the site of `seed`; skip if already there."""
+    """Write `<out_dir>/ground_truth/{vector_map.json, bev/...}` and `manifest.json` for the site of `seed`; skip
+    what is already there (a site written before manifests named their place gets its manifest)."""
     out_dir = Path(out_dir)
     bev = out_dir / "ground_truth" / "bev"
+    cfg = bev_site_config(seed, resolution_m)
+    manifest = bev_site_manifest(cfg)
     if is_raster_folder(bev) and not overwrite:
+        if read_manifest(out_dir) != json.loads(json.dumps(manifest)):
+            atomic_write_json(out_dir / MANIFEST, manifest, indent=2)
         logger.info("%s is up to date; nothing to do", out_dir)
         return out_dir
-    cfg = SynthConfig(preset="vma", seed=seed, layout=layout_for_seed(seed), bev_resolution_m=resolution_m)
     site = build_synthetic_site(cfg)
     gt_dir = out_dir / "ground_truth"
     atomic_write_json(
         gt_dir / "vector_map.json", {"elements": gt.vector_map(site.layout, site.world, cfg.site_origin_xy)}
     )
-    atomic_write_json(
-        out_dir / "manifest.json",
-        {"seed": seed, "config": {"site_origin_xy": list(cfg.site_origin_xy)}},
-        indent=2,
-    )
+    atomic_write_json(out_dir / MANIFEST, manifest, indent=2)
     grid = gt.bev_grid_for(site.world, resolution_m)
     semantic, photometric, elevation = gt.render_bev(site.world, grid)
     # its georeference, written last, marks the site complete
     write_bev(bev, BevRasters(grid.georeference(cfg.site_origin_xy), semantic, photometric, elevation))
     logger.info("wrote BEV site of seed %d to %s", seed, out_dir)
     return out_dir
+
+
+def read_manifest(site: Path) -> object:
+    """The parsed `manifest.json` of a site folder; None when it is missing or not JSON."""
+    try:
+        return json.loads((Path(site) / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
 
 
 def ensure_bev_sites(seeds: list[int], root: Path) -> list[Path]:

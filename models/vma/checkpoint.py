@@ -2,13 +2,17 @@
 
 A registry folder holds one sub-folder per version (`v0001`, `v0002`, ...), each with `model.pt` (float16
 state dict) and `checkpoint.json` (version, parent, model config and its fingerprint, train config, metrics,
-data), plus `current.json` naming the promoted version that proposers load. Versions are written atomically
+data), plus `current.json` naming the promoted version that proposers load. `data.seen_sites` lists the
+identity (`cama_pipeline.site_identity`) of every generated site the version and its parents trained on, and
+`data.seen_folders` every folder they trained on (corrections' sites have no generator identity);
+`ensure_unseen` refuses to let a version be scored on any of them. Versions are written atomically
 (staged, then renamed) and never changed afterwards, except that a rejected candidate stays unpromoted.
 """
 
 import json
 import logging
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -17,6 +21,7 @@ from typing import Any
 import torch
 
 from cama_pipeline.io import atomic_write_json
+from cama_pipeline.site_identity import SeenSiteError, SiteIdentity, ensure_not_among, site_identity
 from models.vma.config import ModelConfig, config_dict, config_fingerprint
 from models.vma.model import VmaNet
 
@@ -112,3 +117,52 @@ def load_checkpoint(path: Path, expected: ModelConfig | None = None, device: str
         raise CheckpointError(f"{folder / WEIGHTS}: weights do not fit the model config: {err}") from None
     model.to(device).eval()
     return Checkpoint(model, config, meta, folder)
+
+
+def seen_sites(checkpoint: Checkpoint) -> tuple[SiteIdentity, ...]:
+    """The generated sites a version (and its parents) trained on; CheckpointError for a version that does not
+    record them (it could not be kept off its own training sites)."""
+    data = checkpoint.meta.get("data", {})
+    if "seen_sites" not in data:
+        raise CheckpointError(
+            f"{checkpoint.path / META}: field 'data.seen_sites' missing: the sites it trained on are unknown"
+        )
+    try:
+        return tuple(SiteIdentity.from_json(entry) for entry in data["seen_sites"])
+    except (KeyError, TypeError) as err:
+        raise CheckpointError(f"{checkpoint.path / META}: field 'data.seen_sites': {err!r}") from None
+
+
+def ensure_unseen(checkpoint: Checkpoint, site: Path) -> SiteIdentity | None:
+    """Refuse (SeenSiteError) to let a version be scored on a site it trained on (`refuse_seen`)."""
+    folders = checkpoint.meta.get("data", {}).get("seen_folders", [])
+    return refuse_seen(site, seen_sites(checkpoint), folders, f"VMA checkpoint {checkpoint.path}")
+
+
+def refuse_seen(
+    site: Path, seen: Sequence[SiteIdentity], folders: Sequence[str], model: str
+) -> SiteIdentity | None:
+    """SeenSiteError naming `site` and `model` when `site` is one of the `folders` trained on, or a generated
+    site (one with a generator manifest) sharing a seed, layout or location with a `seen` site. Returns the
+    site's identity (None for a folder without a generator manifest)."""
+    if Path(site).absolute() in {Path(folder).absolute() for folder in folders}:
+        raise SeenSiteError(f"{site}: {model} was trained on this folder; measure it on a site it never saw")
+    if not (Path(site) / "manifest.json").is_file():
+        return None
+    return ensure_not_among(site_identity(site), seen, model)
+
+
+def seen_records(sites: Sequence[Path], parent: Checkpoint | None) -> dict[str, list[Any]]:
+    """`data.seen_sites` and `data.seen_folders` of a new version trained on `sites` (from `parent`, if any):
+    the parent's, plus the identities of those of `sites` that are generated sites and all their folders."""
+    seen = [s.to_json() for s in seen_sites(parent)] if parent is not None else []
+    folders = list(parent.meta["data"].get("seen_folders", [])) if parent is not None else []
+    for site in sites:
+        folder = str(Path(site).absolute())
+        if folder not in folders:
+            folders.append(folder)
+        if (Path(site) / "manifest.json").is_file():
+            identity = site_identity(Path(site)).to_json()
+            if identity not in seen:
+                seen.append(identity)
+    return {"seen_sites": seen, "seen_folders": folders}

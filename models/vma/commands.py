@@ -13,7 +13,7 @@ from cama_pipeline.data import DatasetError
 from cama_pipeline.evaluate.inputs import EvaluationInputError
 from cama_pipeline.io import atomic_write_json
 from models.vma.bev_sites import ensure_bev_sites
-from models.vma.checkpoint import CheckpointError, load_checkpoint, promote
+from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint, promote
 from models.vma.config import ANCHORED_MODEL, ModelConfig, TrainConfig
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
@@ -213,12 +213,16 @@ def vma_eval_command(
     ] = None,
     out: Annotated[Path, typer.Option(help="JSON report to write.")] = Path("vma_eval.json"),
 ) -> None:
-    """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer."""
+    """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer; a learned
+    checkpoint is refused (exit 2) on a site it trained on."""
     try:
         if proposer == "learned":
             version = resolve_checkpoint(checkpoint)
             console.print(f"VMA checkpoint {checkpoint_label(version)}")
-            model = load_checkpoint(version).model
+            loaded = load_checkpoint(version)
+            for folder in site:
+                ensure_unseen(loaded, folder)
+            model = loaded.model
             report = evaluate_proposer(lambda r: predict_site(model, r, InferenceConfig()), site)
         elif proposer == "rule":
             report = evaluate_proposer(propose_rule_based, site)

@@ -22,7 +22,15 @@ from typing import Any
 import numpy as np
 
 from annotations import AnnotationSet
-from models.vma.checkpoint import load_checkpoint, promote, save_version
+from cama_pipeline.site_identity import SiteIdentity
+from models.vma.checkpoint import (
+    ensure_unseen,
+    load_checkpoint,
+    promote,
+    refuse_seen,
+    save_version,
+    seen_records,
+)
 from models.vma.config import ModelConfig, TrainConfig, config_dict
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
@@ -141,6 +149,10 @@ def retrain_from_corrections(
     config = config or RetrainConfig()
     started = time.perf_counter()
     current = load_checkpoint(Path(registry))
+    seen = seen_records([c.site for c in corrections], current)
+    identities = [SiteIdentity.from_json(entry) for entry in seen["seen_sites"]]
+    for site in validation_sites:
+        refuse_seen(Path(site), identities, seen["seen_folders"], f"{current.path} with these corrections")
     prepared = []
     for item in corrections:
         labels = vectors_from_annotations(item.annotations, LABEL_STATES)
@@ -188,6 +200,7 @@ def retrain_from_corrections(
             "labels": num_labels,
             "negatives": num_negatives,
             "validation_sites": [str(s) for s in validation_sites],
+            **seen,
         },
         "promoted": promoted,
         THRESHOLD_KEY: candidate_metrics.get(THRESHOLD_KEY),
@@ -222,6 +235,9 @@ def gate_checkpoint(
     config = config or RetrainConfig()
     current = load_checkpoint(Path(registry))
     challenger = load_checkpoint(Path(candidate), None if allow_new_config else current.config)
+    for site in validation_sites:
+        ensure_unseen(current, Path(site))
+        ensure_unseen(challenger, Path(site))
     current_metrics = evaluate_model(current.model, validation_sites, config.inference)
     candidate_metrics = evaluate_model(challenger.model, validation_sites, config.inference)
     promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)

@@ -19,8 +19,9 @@ import numpy as np
 import torch
 
 from cama_pipeline.progress import StageProgress
+from cama_pipeline.site_identity import SiteIdentity
 from models.vma.anchors import stack_anchors
-from models.vma.checkpoint import load_checkpoint, promote, save_version
+from models.vma.checkpoint import load_checkpoint, promote, refuse_seen, save_version, seen_records
 from models.vma.config import ModelConfig, TrainConfig, config_dict
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_proposer
@@ -164,8 +165,13 @@ def train(
     the version is only saved (to be promoted by the evaluation gate, `models.vma.retrain.gate_checkpoint`).
     With `validation_sites` its validation Chamfer-AP and calibrated pre-accept threshold are recorded."""
     started = time.perf_counter()
+    parent = load_checkpoint(init, model_config) if init is not None else None
+    seen = seen_records(sites, parent)
+    identities = [SiteIdentity.from_json(entry) for entry in seen["seen_sites"]]
+    for site in validation_sites:
+        refuse_seen(Path(site), identities, seen["seen_folders"], "the model being trained")
     training_sites = [t for p in sites for t in load_training_sites(Path(p), model_config, damaged_copies)]
-    model = load_checkpoint(init, model_config).model if init is not None else VmaNet(model_config)
+    model = parent.model if parent is not None else VmaNet(model_config)
     losses = fit(
         model,
         mixed_sampler(training_sites, model_config, train_config.procedural_share),
@@ -189,6 +195,7 @@ def train(
         THRESHOLD_KEY: metrics.get("validation", {}).get(THRESHOLD_KEY),
         "data": {
             "sites": [str(p) for p in sites],
+            **seen,
             "procedural_share": train_config.procedural_share,
             "damaged_copies": damaged_copies if model_config.anchored else 0,
             "samples_seen": len(losses) * train_config.batch_size,

@@ -30,7 +30,8 @@ def loop_site(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Settings:
-    """Backend settings with a tiny registry, the drawn site as validation site, auto-retrain after 2,
+    """Backend settings with a tiny registry, a copy of the drawn site as validation site (the retrain refuses
+    to validate on the folder it trains on), auto-retrain after 2,
     pre-accept at confidence 0.9 (the rule-based proposer's clean lines score 1.0) and half of those to QA."""
     return Settings(
         data_dir=tmp_path / "data",
@@ -41,7 +42,7 @@ def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Setti
         admin_username="root",
         admin_password=PASSWORD,
         vma_registry=write_registry(tmp_path / "registry"),
-        vma_validation_sites=(loop_site,),
+        vma_validation_sites=(write_site(tmp_path / "validation").parents[1],),
         retrain_after=2,
         qa_share=0.5,
         preaccept_threshold=0.9,

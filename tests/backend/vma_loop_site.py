@@ -58,6 +58,7 @@ def write_site(folder: Path) -> Path:
 
 
 def write_registry(folder: Path) -> Path:
-    """A registry whose promoted v0001 is an untrained tiny model."""
-    promote(folder, save_version(folder, VmaNet(TINY), {"metrics": {}, "data": {"sites": []}}).name)
+    """A registry whose promoted v0001 is an untrained tiny model (it saw no site)."""
+    unseen = {"sites": [], "seen_sites": [], "seen_folders": []}
+    promote(folder, save_version(folder, VmaNet(TINY), {"metrics": {}, "data": unseen}).name)
     return folder

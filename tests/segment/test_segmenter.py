@@ -15,15 +15,14 @@ from cama_pipeline.segment.checkpoint import (
     META,
     WEIGHTS,
     CheckpointError,
-    SeenSiteError,
     ensure_unseen,
     load_checkpoint,
-    site_identity,
 )
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
 from cama_pipeline.segment.predict import score_site
 from cama_pipeline.segment.train import check_training_sites, train
+from cama_pipeline.site_identity import SeenSiteError, site_identity
 from cama_studio.cli import app
 from tests.conftest import GeneratedSite
 from tests.segment.segmenter_fixture import FEW_STEPS, SMALL_NETWORK, relabelled_copy, train_small

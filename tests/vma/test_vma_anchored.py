@@ -20,6 +20,7 @@ from models.vma.retrain import Corrections, RetrainConfig, retrain_from_correcti
 from models.vma.rule_based import propose_rule_based
 from models.vma.train import fit, load_training_sites, mixed_sampler
 from models.vma.vectors import CLASSES, Vector, proposals_as_annotations, read_vectors
+from tests.vma.vma_test_sites import hand_drawn_site
 
 ANCHORED = ModelConfig(
     resolution_m=0.4,
@@ -126,7 +127,8 @@ def test_procedural_patches_get_rule_based_anchors() -> None:
 
 def test_anchored_retrain_records_the_calibrated_threshold(drawn_site: Path, tmp_path: Path) -> None:
     registry = tmp_path / "registry"
-    promote(registry, save_version(registry, VmaNet(ANCHORED), {"metrics": {}}).name)
+    unseen = {"seen_sites": [], "seen_folders": []}
+    promote(registry, save_version(registry, VmaNet(ANCHORED), {"metrics": {}, "data": unseen}).name)
     rasters = load_site_rasters(drawn_site)
     georeference = Georeference(
         site_origin_xy=rasters.origin_xy, origin_xy=rasters.origin_xy, resolution=0.1, width=600, height=400
@@ -136,6 +138,7 @@ def test_anchored_retrain_records_the_calibrated_threshold(drawn_site: Path, tmp
         update={"elements": [e.with_changes(review_state="accepted") for e in truth.elements]}
     )
     config = RetrainConfig(train=TrainConfig(steps=3, batch_size=2, threads=1), replay_share=0.0)
-    result = retrain_from_corrections(registry, [Corrections(drawn_site, accepted)], [drawn_site], config)
+    validation = hand_drawn_site(tmp_path / "validation")
+    result = retrain_from_corrections(registry, [Corrections(drawn_site, accepted)], [validation], config)
     meta = json.loads((result.candidate / "checkpoint.json").read_text(encoding="utf-8"))
     assert THRESHOLD_KEY in meta and meta[THRESHOLD_KEY] == result.candidate_metrics[THRESHOLD_KEY]

@@ -9,7 +9,7 @@ from annotations import AnnotationSet
 from cama_studio.cli import app
 from models.vma.propose import propose
 from models.vma.rule_based import RuleConfig
-from tests.vma.vma_test_sites import drawn_semantic, write_raster_site
+from tests.vma.vma_test_sites import drawn_semantic, hand_drawn_site, write_raster_site
 
 runner = CliRunner()
 
@@ -105,20 +105,25 @@ def test_train_propose_eval_retrain(drawn_site: Path, tmp_path: Path) -> None:
         update={"elements": [e.with_changes(review_state="accepted") for e in reviewed.elements]}
     )
     reviewed.write_json(rule)
-    result = runner.invoke(
-        app,
-        [
-            "retrain",
-            "--registry",
-            str(registry),
-            "--corrections",
-            f"{drawn_site}={rule}",
-            "--val",
-            str(drawn_site),
-            "--steps",
-            "2",
-        ],
+    retrain = [
+        "retrain",
+        "--registry",
+        str(registry),
+        "--corrections",
+        f"{drawn_site}={rule}",
+        "--steps",
+        "2",
+    ]
+    # the model trained on the drawn site: it may be neither scored nor gated on it
+    seen = runner.invoke(
+        app, ["vma-eval", str(drawn_site), "--checkpoint", str(registry), "--out", str(report)]
     )
+    assert seen.exit_code == 2 and "trained on this folder" in seen.output, seen.output
+    refused = runner.invoke(app, [*retrain, "--val", str(drawn_site)])
+    assert refused.exit_code == 2 and "trained on this folder" in refused.output, refused.output
+    assert not (registry / "v0002").exists()
+    validation = hand_drawn_site(tmp_path / "validation")
+    result = runner.invoke(app, [*retrain, "--val", str(validation)])
     assert result.exit_code == 0, result.output
     assert (registry / "v0002" / "checkpoint.json").is_file()
     assert "candidate" in result.output

@@ -21,7 +21,10 @@ from models.vma.retrain import (
 )
 from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import Vector, proposals_as_annotations, read_vectors
+from tests.vma.vma_test_sites import hand_drawn_site
 
+NOTHING_SEEN = {"sites": [], "seen_sites": [], "seen_folders": []}
+"""`data` of a version saved untrained: it saw no site."""
 LOOP = ModelConfig(
     resolution_m=0.5, patch_px=64, num_queries=12, num_points=8, dim=64, decoder_layers=2, heads=4
 )
@@ -63,7 +66,7 @@ def simulated_review(site: Path, proposals: list[Vector], share: float, rng: np.
 @pytest.mark.slow
 def test_corrections_raise_validation_map(bev_sites: dict[str, Path], tmp_path: Path) -> None:
     registry = tmp_path / "registry"
-    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}, "data": {"sites": []}}).name)
+    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}, "data": NOTHING_SEEN}).name)
     proposals = propose_rule_based(load_site_rasters(bev_sites["train"]))
     annotations, fixed, rejected = simulated_review(
         bev_sites["train"], proposals, 0.7, np.random.default_rng(0)
@@ -88,7 +91,9 @@ def test_gate_refuses_a_deliberately_bad_checkpoint(bev_sites: dict[str, Path], 
         (registry / "v0001" / name).write_bytes((good / name).read_bytes())
     promote(registry, "v0001")
     bad = VmaNet(load_checkpoint(good).config)  # untrained weights: proposes nothing useful
-    candidate = save_version(registry, bad, {"metrics": {}, "data": {"note": "deliberately bad"}})
+    candidate = save_version(
+        registry, bad, {"metrics": {}, "data": {"note": "deliberately bad", **NOTHING_SEEN}}
+    )
     promoted, current, challenger = gate_checkpoint(registry, candidate, [bev_sites["val"]])
     assert current["mean_ap"] > 0.0
     assert not promoted and challenger["mean_ap"] < current["mean_ap"]
@@ -102,11 +107,13 @@ def test_gate_rule() -> None:
 
 def test_retrain_needs_labels(drawn_site: Path, tmp_path: Path) -> None:
     registry = tmp_path / "registry"
-    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}}).name)
+    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}, "data": NOTHING_SEEN}).name)
     rasters = load_site_rasters(drawn_site)
     georeference = Georeference(
         site_origin_xy=rasters.origin_xy, origin_xy=rasters.origin_xy, resolution=0.1, width=600, height=400
     )
     empty = proposals_as_annotations([], georeference, "drawn", "nobody")
     with pytest.raises(ValueError, match="accepted/fixed annotations"):
-        retrain_from_corrections(registry, [Corrections(drawn_site, empty)], [drawn_site])
+        retrain_from_corrections(
+            registry, [Corrections(drawn_site, empty)], [hand_drawn_site(tmp_path / "val")]
+        )

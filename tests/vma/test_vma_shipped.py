@@ -1,5 +1,6 @@
 """The shipped VMA model is found from any working directory, says which checkpoint it is, and is never
-written to: retraining servers get their own seeded registry."""
+written to: retraining servers get their own seeded registry. Every version records the sites it saw and is
+refused on them."""
 
 import json
 import os
@@ -13,11 +14,18 @@ from annotations import AnnotationSet
 from app.backend.config import Settings
 from app.backend.jobs.vma import unavailable_kinds
 from app.backend.vma_loop import with_shipped_registry
+from cama_pipeline.site_identity import SeenSiteError
 from cama_studio.config import PipelineConfig
-from models.vma.checkpoint import CURRENT, CheckpointError
+from models.vma.bev_sites import write_bev_site
+from models.vma.checkpoint import CURRENT, CheckpointError, ensure_unseen, load_checkpoint
+from models.vma.config import ModelConfig, TrainConfig
 from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
+from models.vma.train import train
 
 REPO = Path(__file__).resolve().parents[2]
+TINY_MODEL = ModelConfig(
+    resolution_m=0.2, patch_px=64, num_queries=4, num_points=4, dim=16, decoder_layers=1, heads=2
+)
 
 
 def _promoted_version() -> str:
@@ -94,3 +102,43 @@ def test_servers_get_a_seeded_registry_so_the_learned_model_and_retrain_are_avai
     assert "retrain" not in unavailable_kinds(gated)
     chosen = Settings(data_dir=tmp_path / "data", vma_registry=tmp_path / "mine")
     assert with_shipped_registry(chosen) == chosen  # a configured registry is used as it is
+
+
+def test_a_checkpoint_refuses_to_be_scored_on_the_sites_it_trained_on(
+    bev_sites: dict[str, Path], tmp_path: Path
+) -> None:
+    registry = tmp_path / "registry"
+    config = TrainConfig(steps=2, batch_size=2, threads=1)
+    elsewhere = write_bev_site(
+        3001, tmp_path / "same-place", resolution_m=0.2
+    )  # the same place, another folder
+    with pytest.raises(SeenSiteError, match="trained on this folder"):  # validating on a training site
+        train(TINY_MODEL, config, [bev_sites["train"]], registry, validation_sites=[bev_sites["train"]])
+    with pytest.raises(SeenSiteError, match="same seed 3001"):
+        train(TINY_MODEL, config, [bev_sites["train"]], registry, validation_sites=[elsewhere])
+    folder = train(TINY_MODEL, config, [bev_sites["train"]], registry, show_progress=False)
+    checkpoint = load_checkpoint(folder)
+    seen = checkpoint.meta["data"]["seen_sites"]
+    assert [(s["preset"], s["seed"], s["location"]) for s in seen] == [("vma", 3001, "synth-vma-3001")]
+    with pytest.raises(SeenSiteError, match="trained on this folder"):
+        ensure_unseen(checkpoint, bev_sites["train"])
+    elsewhere = write_bev_site(
+        3001, tmp_path / "same-place", resolution_m=0.2
+    )  # the same place, another folder
+    with pytest.raises(SeenSiteError, match="same seed 3001"):
+        ensure_unseen(checkpoint, elsewhere)
+    assert ensure_unseen(checkpoint, bev_sites["val"]).seed == 3002  # type: ignore[union-attr]
+    # a version trained from it inherits what its parent saw
+    child = load_checkpoint(
+        train(TINY_MODEL, config, [bev_sites["val"]], registry, init=folder, show_progress=False)
+    )
+    assert {s["seed"] for s in child.meta["data"]["seen_sites"]} == {3001, 3002}
+    with pytest.raises(SeenSiteError):
+        ensure_unseen(child, elsewhere)
+
+
+def test_the_shipped_model_never_saw_the_benchmarks_held_out_or_validation_sites() -> None:
+    shipped = load_checkpoint(shipped_registry())
+    locations = {s["location"] for s in shipped.meta["data"]["seen_sites"]}
+    assert not any(f"synth-vma-{seed}" in locations for seed in range(2000, 2005))
+    assert not any(f"synth-vma-{seed}" in locations for seed in range(3000, 3003))
