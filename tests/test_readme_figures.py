@@ -478,7 +478,11 @@ def test_native_resolution_table_from_both_runs() -> None:
         assert_shows(" | ".join(row(t, label)[1:3]), [small, large], f"native resolution {label!r}")
 
 
-SEGMENT_SITES = {"9001 (tuning)": "segment.json", "9002 (confirmation)": "segment_9002.json"}
+SEGMENT_SITES = {
+    "9001 (tuning)": "segment.json",
+    "9002 (confirmation)": "segment_9002.json",
+    "9003, default size (confirmation)": "segment_default_9003.json",
+}
 
 
 def test_segmentation_iou_table_from_both_sites() -> None:
@@ -496,7 +500,11 @@ def test_segmentation_iou_table_from_both_sites() -> None:
 def test_segmentation_whole_path_table_from_both_sites() -> None:
     t = table("run", "bench/results/segment_9002.json")
     assert_names_source(t, "segment.json", "bench/segment.py")
-    for site, name in (("9001", "segment.json"), ("9002", "segment_9002.json")):
+    for site, name in (
+        ("9001", "segment.json"),
+        ("9002", "segment_9002.json"),
+        ("9003", "segment_default_9003.json"),
+    ):
         for run_label, key in (
             ("generator masks", "generator_masks"),
             ("predicted masks", "predicted_masks"),
