@@ -1,7 +1,8 @@
 """Acceptance benchmark of the VMA proposers on held-out synthetic sites that training never saw.
 
-Held-out sites are BEV-only generator sites of seeds 2000-2004 (layouts drawn from the seed; the shipped
-checkpoints were trained on the default site and seeds 1000-1007, gated on seeds 3000-3002). Proposers: the
+Held-out sites are BEV-only generator sites of seeds 2000-2004 (layouts drawn from the seed, each its own
+location; the shipped v0003 trained on seeds 1000-1011 and was gated on 3000-3002; every checkpoint scored is first
+checked never to have trained on a held-out site, `models.vma.checkpoint.ensure_unseen`). Proposers: the
 rule-based one, the promoted learned checkpoint (`learned`: the anchored hybrid whose instance queries start
 from rule-based candidates, output as the candidates rescored by the model), the same network's own refined
 points (`learned_refined`) and, for comparison, the free-query MapTR checkpoint (`learned_free`, v0001). For each:

@@ -154,8 +154,8 @@ def test_end_to_end_sre_table_at_960x540() -> None:
 
 VMA_ROWS = {
     "rule-based": "rule_based",
-    "learned v0002, rescored (shipped)": "learned",
-    "learned v0002, its own points": "learned_refined",
+    "learned v0003, rescored (shipped)": "learned",
+    "learned v0003, its own points": "learned_refined",
     "free-query MapTR v0001": "learned_free",
 }
 

@@ -39,7 +39,7 @@ def resolve_checkpoint(checkpoint: Path | None) -> Path:
 
 def checkpoint_label(version: Path) -> str:
     """How a checkpoint version folder is named to users: its version, whether it is the shipped model, and
-    where it is, e.g. `v0002 (shipped with the package: /.../models/vma/checkpoints/v0002)`."""
+    where it is, e.g. `v0003 (shipped with the package: /.../models/vma/checkpoints/v0003)`."""
     version = Path(version).resolve()
     try:
         shipped = version.parent == shipped_registry().resolve()

@@ -137,8 +137,9 @@ def test_a_checkpoint_refuses_to_be_scored_on_the_sites_it_trained_on(
         ensure_unseen(child, elsewhere)
 
 
-def test_the_shipped_model_never_saw_the_benchmarks_held_out_or_validation_sites() -> None:
+def test_the_shipped_model_never_saw_the_benchmark_validation_or_demo_sites() -> None:
     shipped = load_checkpoint(shipped_registry())
     locations = {s["location"] for s in shipped.meta["data"]["seen_sites"]}
+    assert "synthetic-default" not in locations and "synthetic-tiny" not in locations
     assert not any(f"synth-vma-{seed}" in locations for seed in range(2000, 2005))
     assert not any(f"synth-vma-{seed}" in locations for seed in range(3000, 3003))
