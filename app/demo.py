@@ -86,7 +86,13 @@ def load_site(
         return site, 0
     annotation_set = read_proposals(proposals)
     elements = [
-        ElementCreate(cls=e.cls, points=list(e.points_2d), confidence=e.confidence, source="proposal")
+        ElementCreate(
+            cls=e.cls,
+            points=list(e.points_2d),
+            confidence=e.confidence,
+            source="proposal",
+            model=e.author or None,
+        )
         for e in annotation_set.elements
     ]
     if elements:

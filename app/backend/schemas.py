@@ -171,11 +171,20 @@ class ElementCreate(BaseModel):
     )
     confidence: float | None = Field(default=None, ge=0.0, le=1.0)
     source: Source = "human"
+    model: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=64,
+        description="The proposer that made a proposal (e.g. `vma-v0003`, `rule-based`); only with source proposal.",
+    )
 
     @model_validator(mode="after")
     def _valid_geometry(self) -> Self:
-        """Reject < 2 points, coincident points, open or self-crossing crosswalks, proposals without confidence."""
+        """Reject < 2 points, coincident points, open or self-crossing crosswalks, proposals without confidence,
+        and a model named for an element a person drew."""
         check_element(cls=self.cls, points=self.points, source=self.source, confidence=self.confidence)
+        if self.model is not None and self.source != "proposal":
+            raise ValueError("model: only a proposal names the model that made it (source is not 'proposal')")
         return self
 
 
@@ -216,6 +225,10 @@ class ElementPublic(BaseModel):
     author: str | None
     created_at: datetime
     updated_at: datetime
+    proposed_by: str | None = Field(
+        default=None,
+        description="The model that proposed this element (its first version), when it was a proposal that named it.",
+    )
     preaccepted: bool = Field(
         default=False,
         description="Entered as accepted by the model (confidence above the calibrated threshold).",

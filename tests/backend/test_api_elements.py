@@ -55,6 +55,25 @@ def test_bulk_proposals(client: TestClient, headers: Headers, site_id: int) -> N
     assert response.status_code == 422 and "confidence" in response.text
 
 
+def test_a_proposal_names_the_model_that_made_it(client: TestClient, headers: Headers, site_id: int) -> None:
+    named = {"elements": [{**divider(5, 5, source="proposal", confidence=0.8), "model": "vma-v0003"}]}
+    response = client.post(f"/api/sites/{site_id}/elements/bulk", json=named, headers=headers["lead"])
+    assert response.status_code == 201, response.text
+    (element,) = response.json()
+    assert element["proposed_by"] == "vma-v0003" and element["author"] == "lead"
+    base = f"/api/sites/{site_id}/elements/{element['id']}"
+    fixed = {"points": [[6.0, 5.0], [20.0, 5.0]], "version": 1}
+    assert client.patch(base, json=fixed, headers=headers["lead"]).status_code == 200
+    assert (
+        client.get(base, headers=headers["lead"]).json()["proposed_by"] == "vma-v0003"
+    )  # kept through edits
+    drawn = {**divider(7, 7), "model": "vma-v0003"}
+    response = client.post(f"/api/sites/{site_id}/elements", json=drawn, headers=headers["lead"])
+    assert response.status_code == 422 and "model: only a proposal" in response.text
+    plain = client.post(f"/api/sites/{site_id}/elements", json=divider(8, 8), headers=headers["lead"])
+    assert plain.json()["proposed_by"] is None
+
+
 @pytest.mark.parametrize(
     "body, needle",
     [

@@ -144,6 +144,7 @@ def test_refresh_replaces_only_untouched_proposals(
         "boundary",
     ]  # the divider is covered by reviewed work
     assert all(e["state"] == "accepted" and e["preaccepted"] and e["source"] == "proposal" for e in new)
+    assert {e["proposed_by"] for e in new} == {"vma-rule-based"}  # the proposer that made them
     assert sorted(round(e["points"][0][1]) for e in new) == [round(ROAD_Y[0] + 0.5), round(ROAD_Y[1] + 0.5)]
     history = client.get(f"/api/sites/{site_id}/elements/{untouched['id']}/history", headers=headers["lead"])
     assert [entry["action"] for entry in history.json()] == ["create", "refresh"]

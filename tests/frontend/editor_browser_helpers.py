@@ -90,6 +90,8 @@ def polyline(x0: float, x1: float, y: float, n: int, wiggle: float = 0.0) -> lis
     return [[float(v), float(y + wiggle * np.sin(v / 3.0))] for v in xs]
 
 
+PROPOSED_BY = "vma-v0003"
+"""The model the seeded proposals name (the review panel shows it)."""
 PROPOSALS: list[dict[str, Any]] = [
     {"class": "divider", "points": polyline(2, 38, 40, 7), "confidence": 0.93},
     {"class": "divider", "points": polyline(52, 118, 40, 9, 0.2), "confidence": 0.41},
@@ -191,7 +193,7 @@ def seed(server: ServerProcess, raster_dir: Path) -> SeededServer:
         response = client.post("/api/sites", json=site, headers=headers["lead"])
         response.raise_for_status()
         site_id = int(response.json()["id"])
-        bulk = {"elements": [{**p, "source": "proposal"} for p in PROPOSALS]}
+        bulk = {"elements": [{**p, "source": "proposal", "model": PROPOSED_BY} for p in PROPOSALS]}
         client.post(
             f"/api/sites/{site_id}/elements/bulk", json=bulk, headers=headers["lead"]
         ).raise_for_status()

@@ -10,6 +10,7 @@ from playwright.sync_api import Page, expect
 
 from tests.frontend.editor_browser_helpers import (
     PROPOSALS,
+    PROPOSED_BY,
     SITE_ORIGIN_XY,
     SeededServer,
     centre_on,
@@ -77,6 +78,7 @@ def test_open_site_loads_tiles_and_elements(page: Page, seeded: SeededServer) ->
     (ax, ay), (bx, by) = low["points"][:2]
     select_at(page, seeded, low["id"], (ax + bx) / 2, (ay + by) / 2)
     expect(page.locator(".selected-element .sel-meta").first).to_contain_text("(low)")
+    expect(page.locator(".selected-element .proposed-by")).to_have_text(PROPOSED_BY)
     page.mouse.move(*page_xy(page, 75.0, 50.0))
     page.wait_for_timeout(400)
     screenshot(page, "editor")

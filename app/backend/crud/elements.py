@@ -46,6 +46,7 @@ def public(element: Element) -> ElementPublic:
         author=element.author,
         created_at=element.created_at,
         updated_at=element.updated_at,
+        proposed_by=(element.proposal or {}).get("model"),
         preaccepted=element.preaccepted,
         qa_sample=element.qa_sample,
     )
@@ -133,7 +134,12 @@ def new_element(site: Site, element_in: ElementCreate, *, username: str) -> Elem
     )
     _set_points(element, element_in.points)
     if element_in.source == "proposal":
-        element.proposal = {"class": element.cls, "points": element.points, "confidence": element.confidence}
+        element.proposal = {
+            "class": element.cls,
+            "points": element.points,
+            "confidence": element.confidence,
+            "model": element_in.model,
+        }
     return element
 
 

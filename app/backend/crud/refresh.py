@@ -141,6 +141,7 @@ def _candidates(site: Site, proposals: AnnotationSet, margin_m: float) -> tuple[
                     "points": points,
                     "confidence": element.confidence,
                     "source": "proposal",
+                    "model": element.author,
                 }
             )
             check_in_site(site=site, points=element_in.points, margin_m=margin_m)

@@ -1,6 +1,6 @@
-// The review panel: what is selected (class, confidence, state, version, author), the review buttons, the
-// annotator queue's "next" item (leased, centred on the map) or next region, the class/confidence key, and each
-// selected element's reprojection figures (on a site with cameras).
+// The review panel: what is selected (class, confidence, state, version, author, the model that proposed it), the
+// review buttons, the annotator queue's "next" item (leased, centred on the map) or next region, the
+// class/confidence key, and each selected element's reprojection figures (on a site with cameras).
 import { h, replaceChildren, toast } from "../dom.js";
 import { RegionWork } from "./region.js";
 import { CLASS_COLORS, CLASS_LABELS, HIGH_CONFIDENCE, LOW_CONFIDENCE, confidenceBucket } from "./styles.js";
@@ -77,6 +77,7 @@ export class ReviewPanel {
         h("div.sel-title", {}, h("span.class-dot", { style: `background: ${CLASS_COLORS[e.class]}` }), `${CLASS_LABELS[e.class]} #${e.id}`, h(`span.state.${e.state}`, {}, e.state)),
         h("div.sel-meta", {}, `confidence ${confidence} (${confidenceBucket(e.confidence)}) · ${e.points.length} vertices · v${e.version}`),
         h("div.sel-meta", {}, "last edit by ", h("span.author", {}, e.author || "?")),
+        e.proposed_by ? h("div.sel-meta", {}, "proposed by ", h("span.proposed-by", {}, e.proposed_by)) : null,
         this.figures ? this.figures.line(e) : null,
       );
     });
