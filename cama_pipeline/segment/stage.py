@@ -162,8 +162,15 @@ def make_ego_bodies(
     for calibration, images in groups.items():
         paths = [mask_root / mask_relpath(SEMANTIC_DIR, image_filename(dataset, im.path)) for im in images]
         vote = EgoVote()
-        for path in paths:
-            vote.add(_read_mask(path))
+        for image, path in zip(images, paths, strict=True):
+            mask = _read_mask(path)
+            size = (image.calibration.height, image.calibration.width)
+            if mask.shape != size:
+                raise DatasetError(
+                    f"predicted mask of shape {mask.shape} for a {size[1]}x{size[0]} {image.channel} image",
+                    path=path,
+                )
+            vote.add(mask)
         body = camera_body(vote, constant_estimates(dataset, calibration, config), config.vote_share)
         channel = images[0].channel
         sizes[channel] = max(sizes.get(channel, 0), int(body.sum()))

@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cama_pipeline.console import EXIT_OK
-from cama_pipeline.data import load_dataset, mask_roots
+from cama_pipeline.data import DatasetError, load_dataset, mask_roots
 from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR, mask_relpath
 from cama_pipeline.keyframes.io import FrameRecord, KeyframesFile, write_keyframes
 from cama_pipeline.segment import stage
@@ -166,3 +166,25 @@ def test_every_mask_of_a_camera_gets_its_one_ego_body(
     off = replace(config(checkpoint), ego_clip=EgoClipConfig(enabled=False))
     plain = stage.run(off, root, ws, workers=1, show_progress=False).items[0]
     assert not plain.skipped and plain.report["ego_body_pixels"] is None  # another ego setting: made again
+
+
+def test_a_mask_of_another_size_in_a_camera_is_named(
+    tiny_site: GeneratedSite, checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = tiny_site.result.dataset_root
+    ws = Workspace(tmp_path / "ws")
+    real = stage.segment_chunk
+
+    def one_shrunk(chunk: stage.Chunk) -> tuple[str, ...]:
+        written = real(chunk)
+        if chunk.filenames[0] == first:  # the first mask comes out at half size
+            path = ws.masks_dir("predicted") / mask_relpath(SEMANTIC_DIR, first)
+            cv2.imwrite(str(path), read_png(path)[::2, ::2])
+        return written
+
+    first = key_frame_images(root)[0]
+    monkeypatch.setattr(stage, "segment_chunk", one_shrunk)
+    with pytest.raises(DatasetError, match=r"shape \(72, 128\) for a 256x144 CAM_\w+ image") as error:
+        stage.run(config(checkpoint), root, ws, workers=1, show_progress=False)
+    assert Path(first).stem in str(error.value)
+    assert not ws.masks_manifest("predicted").exists()
