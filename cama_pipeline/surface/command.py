@@ -45,13 +45,15 @@ def surface_command(
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     table = Table(title=f"surface ({poses} poses)")
-    for column in ("site", "images", "vertices", "cells observed", "seconds"):
+    for column in ("site", "images", "vertices", "cells observed", "weakly observed road", "seconds"):
         table.add_column(column)
     for site in result.items:
         report = site.report
         name = site.name + (" (up to date)" if site.skipped else "")
         seconds = sum(report["seconds"].values())
-        values = (report["images"], report["vertices"], report["cells_observed"], f"{seconds:.1f}")
+        weak = report["weak_observation"]
+        weak_text = f"{100 * weak['road_weak_share']:.1f} % (< {weak['weak_rays']} rays; {weak['weak_regions']} regions)"
+        values = (report["images"], report["vertices"], report["cells_observed"], weak_text, f"{seconds:.1f}")
         table.add_row(name, *map(str, values))
     console.print(table)
     for site in result.items:  # paths on their own lines: a long one would crush the table

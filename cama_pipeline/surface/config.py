@@ -1,7 +1,9 @@
 """Every parameter of road surface reconstruction in one frozen, validated config."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
+
+from cama_pipeline.surface.coverage import CoverageConfig
 
 PoseSource = Literal["ground_truth", "wigo", "sfm"]
 POSE_SOURCES: tuple[str, ...] = ("ground_truth", "wigo", "sfm")
@@ -85,6 +87,8 @@ class SurfaceConfig:
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """`auto`: the GPU when torch sees one, else the CPU with `torch_threads` threads."""
     seed: int = 0
+    coverage: CoverageConfig = field(default_factory=CoverageConfig)
+    """What the report calls weakly observed (`surface.coverage`)."""
 
     def __post_init__(self) -> None:
         positive = (

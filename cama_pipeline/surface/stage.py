@@ -23,6 +23,7 @@ from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
+from cama_pipeline.surface.coverage import weak_observation
 from cama_pipeline.surface.fit import fit_steps, fit_surface
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
 from cama_pipeline.surface.outputs import (
@@ -149,6 +150,12 @@ def reconstruct_site(
         "points": {"strip": points.strip_count, "sfm": points.sfm_count, "sfm_kept": fitted.sfm_kept},
         "vertices": grid.vertex_count,
         "cells_observed": int((rasters.require("observation_count") > 0).sum()),
+        "weak_observation": weak_observation(
+            rasters.require("observation_count"),
+            rasters.require("semantic"),
+            rasters.georeference,
+            config.coverage,
+        ),
         "seconds": dict(phases.seconds),
         "losses": {"elevation": fitted.losses, "epochs": epoch_losses},
     }

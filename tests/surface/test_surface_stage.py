@@ -9,6 +9,7 @@ import pytest
 import trimesh
 from typer.testing import CliRunner
 
+from cama_pipeline.bev import read_layer
 from cama_pipeline.data import load_dataset
 from cama_pipeline.results import ItemResult
 from cama_pipeline.semantics import Semantic
@@ -80,6 +81,11 @@ def test_mesh_and_report(surface: ItemResult) -> None:
     assert set(report["seconds"]) == {"elevation", "observe", "optimise", "export"}
     assert report["points"]["strip"] > 0 and report["points"]["sfm"] == 0
     assert report["losses"]["epochs"] and report["losses"]["elevation"][-1] < report["losses"]["elevation"][0]
+    weak = report["weak_observation"]
+    count = read_layer(surface.path / "bev", "observation_count")
+    assert weak["observed_cells"] == report["cells_observed"] == int((count > 0).sum())
+    assert weak["weak_cells"] == int(((count > 0) & (count < weak["weak_rays"])).sum())
+    assert 0 <= weak["road_weak_share"] <= 1 and weak["weak_regions"] == len(weak["regions"])
 
 
 def test_elevation_matches_the_true_road_under_the_trajectory(
