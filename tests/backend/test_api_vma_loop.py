@@ -179,17 +179,24 @@ def test_confident_proposals_enter_preaccepted_and_a_sample_goes_to_qa(
 
 @pytest.mark.slow  # ~25 s: the child imports torch and the model's first steps warm up
 def test_retrain_runs_the_gate_and_queues_a_refresh_after_promotion(
-    client: TestClient, headers: Headers, site_id: int, settings: Settings
+    client: TestClient, headers: Headers, site_id: int, settings: Settings, tmp_path: Path
 ) -> None:
     drawn = bulk(
         client, headers, site_id, [{"class": "divider", "points": [[5.0, DIVIDER_Y], [95.0, DIVIDER_Y]]}]
     )
     review(client, headers, site_id, drawn[0], "fixed", "annotator")
+    other = register_site(
+        client, headers["lead"], write_site(tmp_path / "other"), "other"
+    )  # corrected elsewhere
+    elsewhere = bulk(client, headers, other, [{"class": "boundary", "points": [[5.0, 30.0], [95.0, 30.0]]}])
+    review(client, headers, other, elsewhere[0], "accepted", "annotator")
     job = submit(client, headers, site_id, "retrain", **TINY_RETRAIN)
     done = wait_for(client, headers, job["id"], {"succeeded", "failed"}, HANG_S)
     assert done["state"] == "succeeded", done["message"]
     outcome = json.loads(client.get(done["download_url"], headers=headers["lead"]).content)
-    assert outcome["labels"] == 1 and outcome["candidate"] == "v0002"
+    assert outcome["labels"] == 2 and outcome["candidate"] == "v0002"  # both sites' corrections
+    corrections = json.loads((Path(settings.vma_registry or "") / "v0002" / "checkpoint.json").read_text())
+    assert len(corrections["data"]["corrections"]) == 2
     assert "validation mAP" in done["message"] and ("promoted" in done["message"]) == outcome["promoted"]
     assert (Path(settings.vma_registry or "") / "v0002" / "checkpoint.json").is_file()
     if outcome["promoted"]:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, Field
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from annotations.lift import DEFAULT_MAX_SPACING_M, DEFAULT_SEARCH_RADIUS_M, lift_points
 from annotations.schema import AnnotationSet, Georeference, MapElement
@@ -60,15 +61,27 @@ def site_annotations(context: JobContext) -> tuple[AnnotationSet, Path, str]:
         site = session.get(Site, context.site_id)
         if site is None:
             raise ValueError(f"site {context.site_id}: not found")
-        rows = session.scalars(
-            select(Element).where(Element.site_id == site.id, Element.deleted.is_(False)).order_by(Element.id)
-        ).all()
-        raster = RasterGeoreference.from_json(site.georeference, source=f"site {site.name}")
-        georef = Georeference.of(raster, site_origin_xy=(site.site_origin_x, site.site_origin_y))
-        annotations = AnnotationSet(
-            site_id=site.name, georeference=georef, elements=[_map_element(row) for row in rows]
-        )
-        return annotations, Path(site.raster_dir), site.name
+        return _annotations_of(session, site)
+
+
+def every_site_annotations(context: JobContext) -> list[tuple[AnnotationSet, Path, str]]:
+    """`site_annotations` of every site in the database, the job's own first (one short session)."""
+    with context.session() as session:
+        sites = session.scalars(select(Site).order_by(Site.id)).all()
+        ordered = sorted(sites, key=lambda site: site.id != context.site_id)
+        return [_annotations_of(session, site) for site in ordered]
+
+
+def _annotations_of(session: Session, site: Site) -> tuple[AnnotationSet, Path, str]:
+    rows = session.scalars(
+        select(Element).where(Element.site_id == site.id, Element.deleted.is_(False)).order_by(Element.id)
+    ).all()
+    raster = RasterGeoreference.from_json(site.georeference, source=f"site {site.name}")
+    georef = Georeference.of(raster, site_origin_xy=(site.site_origin_x, site.site_origin_y))
+    annotations = AnnotationSet(
+        site_id=site.name, georeference=georef, elements=[_map_element(row) for row in rows]
+    )
+    return annotations, Path(site.raster_dir), site.name
 
 
 def read_elevation(raster_dir: Path, georef: Georeference) -> np.ndarray:

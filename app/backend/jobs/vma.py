@@ -1,4 +1,5 @@
-"""The VMA loop's job kinds: `retrain` (fine-tune on the site's corrections behind the evaluation gate) and
+"""The VMA loop's job kinds: `retrain` (fine-tune on the corrections of every site in the database, or of the job's
+site alone, behind the evaluation gate) and
 `refresh_proposals` (re-run the proposer and replace proposals nobody has touched).
 
 Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
@@ -27,7 +28,7 @@ from pydantic import BaseModel, Field
 from annotations.schema import AnnotationSet
 from app.backend.config import Settings
 from app.backend.crud.refresh import refresh_proposals
-from app.backend.jobs.kinds import site_annotations
+from app.backend.jobs.kinds import every_site_annotations, site_annotations
 from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.schemas import STRICT
 from app.backend.vma_loop import preaccept_threshold
@@ -61,6 +62,10 @@ class RetrainParams(BaseModel):
         default=0.0, ge=0.0, le=1.0, description="Gate: promote when mAP >= current - this."
     )
     refresh_after_promotion: bool = Field(default=True, description="Queue a proposal refresh when promoted.")
+    every_site: bool = Field(
+        default=True,
+        description="Learn from the corrections of every site in the database (false: the job's site only).",
+    )
 
 
 class RefreshParams(BaseModel):
@@ -126,7 +131,11 @@ def step_progress(step: dict[str, Any] | None, elapsed_s: float) -> tuple[float,
 
 
 def _retrain_child(
-    registry: Path, corrections: "Corrections", validation: list[Path], config: "RetrainConfig", out: Path
+    registry: Path,
+    corrections: list["Corrections"],
+    validation: list[Path],
+    config: "RetrainConfig",
+    out: Path,
 ) -> None:
     """Child process body: retrain and write the outcome (or the error) to `out`, the steps beside it."""
     from models.vma.retrain import retrain_from_corrections
@@ -134,7 +143,7 @@ def _retrain_child(
     logging.basicConfig(level=logging.INFO)
     logging.getLogger(TRAIN_LOGGER).addHandler(StepReporter(out.parent / PROGRESS_FILE))
     try:
-        result = retrain_from_corrections(registry, [corrections], validation, config, show_progress=False)
+        result = retrain_from_corrections(registry, corrections, validation, config, show_progress=False)
         payload: dict[str, Any] = {
             "candidate": result.candidate.name,
             "promoted": result.promoted,
@@ -188,30 +197,35 @@ def _gate_message(outcome: dict[str, Any]) -> str:
 
 
 def run_retrain(context: JobContext, params: RetrainParams, *, settings: Settings) -> JobResult:
-    """Fine-tune the promoted model on the site's accepted/fixed elements (rejected ones as negatives)."""
+    """Fine-tune the promoted model on the accepted/fixed elements (rejected ones as negatives) of every site in
+    the database that has any (or of the job's site alone)."""
     from models.vma.config import TrainConfig
     from models.vma.retrain import LABEL_STATES, NEGATIVE_STATES, Corrections, RetrainConfig
 
     if settings.vma_registry is None:
         raise ValueError("retrain: no VMA registry configured (CAMA_VMA_REGISTRY)")
-    annotations, raster_dir, name = site_annotations(context)
-    annotations = training_view(annotations)
-    labels, negatives = _count(annotations, LABEL_STATES), _count(annotations, NEGATIVE_STATES)
+    sites = every_site_annotations(context) if params.every_site else [site_annotations(context)]
+    corrections, names, labels, negatives = [], [], 0, 0
+    for annotations, raster_dir, name in sites:
+        view = training_view(annotations)
+        if _count(view, LABEL_STATES) == 0:
+            continue
+        corrections.append(Corrections(raster_dir, view))
+        names.append(name)
+        labels, negatives = labels + _count(view, LABEL_STATES), negatives + _count(view, NEGATIVE_STATES)
     if labels == 0:
-        raise ValueError(f"retrain: site {name} has no accepted, fixed or approved elements to learn from")
-    context.report(0.05, f"retraining on {labels} labels and {negatives} negatives of {name}", force=True)
+        where = "any site in the database" if params.every_site else f"site {sites[0][2]}"
+        raise ValueError(f"retrain: no accepted, fixed or approved elements to learn from on {where}")
+    context.report(
+        0.05, f"retraining on {labels} labels and {negatives} negatives of {', '.join(names)}", force=True
+    )
     config = RetrainConfig(
         train=TrainConfig(
             steps=params.steps, batch_size=params.batch_size, learning_rate=params.learning_rate
         ),
         tolerance=params.tolerance,
     )
-    args = (
-        settings.vma_registry,
-        Corrections(raster_dir, annotations),
-        list(settings.vma_validation_sites),
-        config,
-    )
+    args = (settings.vma_registry, corrections, list(settings.vma_validation_sites), config)
     out = context.workdir / RETRAIN_FILE
     outcome = _run_child(context, args, out)
     message = _gate_message(outcome)
