@@ -142,11 +142,16 @@ def ensure_unseen(checkpoint: Checkpoint, site: Path) -> SiteIdentity | None:
 def refuse_seen(
     site: Path, seen: Sequence[SiteIdentity], folders: Sequence[str], model: str
 ) -> SiteIdentity | None:
-    """SeenSiteError naming `site` and `model` when `site` is one of the `folders` trained on, or a generated
-    site (one with a generator manifest) sharing a seed, layout or location with a `seen` site. Returns the
-    site's identity (None for a folder without a generator manifest)."""
-    if Path(site).absolute() in {Path(folder).absolute() for folder in folders}:
-        raise SeenSiteError(f"{site}: {model} was trained on this folder; measure it on a site it never saw")
+    """SeenSiteError naming `site` and `model` when `site` is one of the `folders` trained on or holds one or lies
+    in one (a site folder and its raster folder are one site), or is a generated site (one with a generator
+    manifest) sharing a seed, layout or location with a `seen` site. Returns the site's identity (None for a
+    folder without a generator manifest)."""
+    here = Path(site).absolute()
+    for folder in (Path(f).absolute() for f in folders):
+        if here == folder or here in folder.parents or folder in here.parents:
+            raise SeenSiteError(
+                f"{site}: {model} was trained on this folder ({folder}); measure it on a site it never saw"
+            )
     if not (Path(site) / "manifest.json").is_file():
         return None
     return ensure_not_among(site_identity(site), seen, model)

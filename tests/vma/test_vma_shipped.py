@@ -17,7 +17,7 @@ from app.backend.vma_loop import with_shipped_registry
 from cama_pipeline.site_identity import SeenSiteError
 from cama_studio.config import PipelineConfig
 from models.vma.bev_sites import write_bev_site
-from models.vma.checkpoint import CURRENT, CheckpointError, ensure_unseen, load_checkpoint
+from models.vma.checkpoint import CURRENT, CheckpointError, ensure_unseen, load_checkpoint, refuse_seen
 from models.vma.config import ModelConfig, TrainConfig
 from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
 from models.vma.train import train
@@ -143,3 +143,11 @@ def test_the_shipped_model_never_saw_the_benchmark_validation_or_demo_sites() ->
     assert "synthetic-default" not in locations and "synthetic-tiny" not in locations
     assert not any(f"synth-vma-{seed}" in locations for seed in range(2000, 2005))
     assert not any(f"synth-vma-{seed}" in locations for seed in range(3000, 3003))
+
+
+def test_a_site_folder_and_its_raster_folder_are_one_site(tmp_path: Path) -> None:
+    site, rasters = tmp_path / "site", tmp_path / "site" / "ground_truth" / "bev"
+    for trained, measured in ((rasters, site), (site, rasters), (site, site)):
+        with pytest.raises(SeenSiteError, match="trained on this folder"):
+            refuse_seen(measured, [], [str(trained)], "the model")
+    assert refuse_seen(tmp_path / "other", [], [str(rasters)], "the model") is None
