@@ -31,7 +31,7 @@ import numpy as np
 from annotations.geometry import densify
 from annotations.schema import AnnotationSet, Georeference, MapElement
 from annotations.transforms import pixel_from_site_points
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 
 KerbVerdict = Literal["observed", "none", "unobserved"]
 KERB_VERDICTS: tuple[KerbVerdict, ...] = ("observed", "none", "unobserved")
@@ -49,7 +49,6 @@ EDGE_MIN_FRACTION = 0.5
 """Road on one side and off-road on the other at this fraction of the observed stations or more (and no kerb):
 a road border (`none`)."""
 
-ROAD_IDS = np.array([Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK], dtype=np.int64)
 OFF_ROAD_ID = int(Semantic.BACKGROUND)
 
 
@@ -130,7 +129,7 @@ def boundary_evidence(element: MapElement, semantic: np.ndarray, georef: Georefe
         reason = f"{observed} of {len(labels)} stations observed"
         return BoundaryEvidence("unobserved", len(labels), observed, 0.0, 0.0, reason)
     curb = (labels == int(Semantic.CURB)).any(axis=1)
-    road = np.isin(labels, ROAD_IDS)
+    road = np.isin(labels, ROAD_SURFACE_IDS)
     off_road = labels == OFF_ROAD_ID
     left, right = slice(half + 1, None), slice(None, half)
     edge = (road[:, left].any(1) & off_road[:, right].any(1)) | (

@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from cama_pipeline.bev import BevRasters, read_bev
 from cama_pipeline.data import load_dataset
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.points import ego_poses
@@ -47,7 +47,6 @@ from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
 BANDS_M = ((0, 2), (2, 4), (4, 6), (6, 8), (8, 10), (10, 14), (14, 100))
-ROAD_CLASSES = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
 IOU_CLASSES = {"road": Semantic.ROAD, "curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING}
 IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
 logger = logging.getLogger("bench.surface")
@@ -102,7 +101,7 @@ def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> d
     true_sem = np.where(inside, true_semantic[tr, tc], 255)
     observed = inside & (semantic != 255)
     both = observed & (true_sem != 255)
-    road = observed & np.isin(true_sem, [int(c) for c in ROAD_CLASSES])
+    road = observed & np.isin(true_sem, ROAD_SURFACE_IDS)
     signed = ours.require("elevation") - truth.require("elevation")[tr, tc]
     error = np.abs(signed[road])
     ious = {}
@@ -110,7 +109,7 @@ def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> d
         a, b = semantic[both] == int(cls), true_sem[both] == int(cls)
         ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
     rgb, true_rgb = ours.require("photometric")[both], truth.require("photometric")[tr[both], tc[both]]
-    true_road = np.isin(true_semantic, [int(c) for c in ROAD_CLASSES]).sum()
+    true_road = np.isin(true_semantic, ROAD_SURFACE_IDS).sum()
     scale = (ours.georeference.resolution / truth.georeference.resolution) ** 2
     return {
         "elevation_rmse_m": float(np.sqrt(np.mean(error**2))),

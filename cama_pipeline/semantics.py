@@ -30,6 +30,9 @@ BEV_CLASSES: tuple[Semantic, ...] = (
     Semantic.CROSSWALK,
 )
 
+ROAD_SURFACE_IDS: tuple[int, ...] = (int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK))
+"""Ids of the road surface vehicles drive on: the road and the paint on it."""
+
 DYNAMIC_CLASSES: tuple[Semantic, ...] = (Semantic.VEHICLE, Semantic.EGO)
 """Classes that features, matching and surface fitting must ignore."""
 

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from cama_pipeline.bev import RasterGeoreference
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS
 
 
 @dataclass(frozen=True)
@@ -49,9 +49,7 @@ def weak_observation(
         )
     observed = count > 0
     weak = observed & (count < config.weak_rays)
-    road = observed & np.isin(
-        semantic, (int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK))
-    )
+    road = observed & np.isin(semantic, ROAD_SURFACE_IDS)
     cell_m2 = georeference.resolution**2
     labels, found = ndimage.label(weak, structure=np.ones((3, 3), bool))
     regions = []

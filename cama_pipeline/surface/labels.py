@@ -12,9 +12,8 @@ cells whose road-level vote is not a road class take the curb-height vote as bef
 
 import torch
 
-from cama_pipeline.semantics import BEV_CLASSES, Semantic
+from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
 
-ROAD_SURFACE = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
 OFF_ROAD = (Semantic.BACKGROUND, Semantic.CURB)
 EPSILON = 1e-3
 """Floor of the class frequencies before the logarithm (logits stay finite)."""
@@ -33,7 +32,7 @@ def fused_logits(ground: torch.Tensor, raised: torch.Tensor | None) -> torch.Ten
     if raised is None:
         return logits
     raised = shares(raised)
-    road_classes = torch.tensor([int(c) for c in ROAD_SURFACE], device=ground.device)
+    road_classes = torch.tensor(ROAD_SURFACE_IDS, device=ground.device)
     off_road_classes = torch.tensor([int(c) for c in OFF_ROAD], device=ground.device)
     columns = [BEV_CLASSES.index(c) for c in OFF_ROAD]
     votes = torch.zeros_like(raised)

@@ -10,14 +10,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from cama_pipeline.cameras import CameraView
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from cama_pipeline.sfm.io import read_points
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
 
-SURFACE_LABELS = (Semantic.ROAD, Semantic.LANE_MARKING, Semantic.CROSSWALK)
 """SfM point labels that lie on the road surface (not curb: a curb stands a kerb height above the road,
 and pulls the surface up along the road edges)."""
 
@@ -61,9 +60,7 @@ def sfm_surface_points(workspace: Workspace, site_id: str, config: SurfaceConfig
     if not config.use_sfm_points or not path.is_file():
         return np.zeros((0, 3))
     points = read_points(path)
-    keep = np.isin(points.label, [int(c) for c in SURFACE_LABELS]) & (
-        points.error_px <= config.sfm_max_error_px
-    )
+    keep = np.isin(points.label, ROAD_SURFACE_IDS) & (points.error_px <= config.sfm_max_error_px)
     return np.asarray(points.xyz[keep], dtype=np.float64)
 
 

@@ -39,7 +39,7 @@ from cama_pipeline.bev import BevRasters, write_bev
 from cama_pipeline.data.schema import GNSS_MESSAGE
 from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from cama_pipeline.synthetic import ground_truth as gt
 from cama_pipeline.synthetic.config import SynthConfig
 from cama_pipeline.synthetic.motion import TrueMotion, matrix_to_quat
@@ -298,8 +298,6 @@ def _write_ground_truth(
                 observation_count=count,
             ),
         )
-        drivable = np.isin(
-            semantic, [int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK)]
-        )
+        drivable = np.isin(semantic, ROAD_SURFACE_IDS)
         atomic_write_image(dataset_root / "maps" / "drivable_area.png", drivable.astype(np.uint8) * 255)
         progress.update(bar, advance=1, description="written")

@@ -157,6 +157,15 @@ def refuse_seen(
     return ensure_not_among(site_identity(site), seen, model)
 
 
+def refuse_seen_validation(
+    records: dict[str, list[Any]], validation_sites: Sequence[Path], model: str
+) -> None:
+    """`refuse_seen` for each validation site against a new version's `seen_records`."""
+    identities = [SiteIdentity.from_json(entry) for entry in records["seen_sites"]]
+    for site in validation_sites:
+        refuse_seen(Path(site), identities, records["seen_folders"], model)
+
+
 def seen_records(sites: Sequence[Path], parent: Checkpoint | None) -> dict[str, list[Any]]:
     """`data.seen_sites` and `data.seen_folders` of a new version trained on `sites` (from `parent`, if any):
     the parent's, plus the identities of those of `sites` that are generated sites and all their folders."""

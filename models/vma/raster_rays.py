@@ -8,13 +8,11 @@ global metres out) and say how far the road goes on.
 
 import numpy as np
 
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.rasters import SiteRasters
 
 ALONG_ROAD_IDS = (int(Semantic.ROAD), int(Semantic.LANE_MARKING))
 """Cells a lane line may run over."""
-ROAD_IDS = (int(Semantic.ROAD), int(Semantic.LANE_MARKING), int(Semantic.CROSSWALK))
-"""Cells of the road surface."""
 OFF_ROAD_IDS = (int(Semantic.CURB), int(Semantic.BACKGROUND))
 """Observed ground beside the road."""
 UNSEEN_RUN_M = 1.0
@@ -82,7 +80,7 @@ def road_left(
     cell that is not road, when that is within `max_m` and observed off-road ground (curb or sidewalk) lies
     within `reach_m` beyond it (a thin unobserved strip at a kerb is bridged); None when unknown."""
     labels = labels_at(rasters, _ray(rasters, start, direction, max_m + reach_m))
-    off = np.flatnonzero(~np.isin(labels, ROAD_IDS))
+    off = np.flatnonzero(~np.isin(labels, ROAD_SURFACE_IDS))
     if off.size == 0 or off[0] * rasters.resolution_m > max_m:
         return None
     beyond = labels[off[0] : off[0] + round(reach_m / rasters.resolution_m) + 1]

@@ -22,12 +22,11 @@ from typing import Any
 import numpy as np
 
 from annotations import AnnotationSet
-from cama_pipeline.site_identity import SiteIdentity
 from models.vma.checkpoint import (
     ensure_unseen,
     load_checkpoint,
     promote,
-    refuse_seen,
+    refuse_seen_validation,
     save_version,
     seen_records,
 )
@@ -150,9 +149,7 @@ def retrain_from_corrections(
     started = time.perf_counter()
     current = load_checkpoint(Path(registry))
     seen = seen_records([c.site for c in corrections], current)
-    identities = [SiteIdentity.from_json(entry) for entry in seen["seen_sites"]]
-    for site in validation_sites:
-        refuse_seen(Path(site), identities, seen["seen_folders"], f"{current.path} with these corrections")
+    refuse_seen_validation(seen, validation_sites, f"{current.path} with these corrections")
     prepared = []
     for item in corrections:
         labels = vectors_from_annotations(item.annotations, LABEL_STATES)

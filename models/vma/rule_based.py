@@ -23,9 +23,9 @@ import cv2
 import numpy as np
 from shapely.geometry import LineString
 
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.merge import join_polylines
-from models.vma.raster_rays import OFF_ROAD_IDS, ROAD_IDS, cells_at, extend_to_unseen, road_left
+from models.vma.raster_rays import OFF_ROAD_IDS, cells_at, extend_to_unseen, road_left
 from models.vma.rasters import SiteRasters
 from models.vma.skeleton_paths import skeleton_paths
 from models.vma.vectors import Vector
@@ -164,7 +164,7 @@ def _boundary_mask(
 
 def _road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
     """Road, marking and crosswalk cells (uint8), with small non-road holes in it (label noise) filled."""
-    road = np.isin(semantic, ROAD_IDS).astype(np.uint8)
+    road = np.isin(semantic, ROAD_SURFACE_IDS).astype(np.uint8)
     holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
     return road | holes
 

@@ -19,9 +19,8 @@ import numpy as np
 import torch
 
 from cama_pipeline.progress import StageProgress
-from cama_pipeline.site_identity import SiteIdentity
 from models.vma.anchors import stack_anchors
-from models.vma.checkpoint import load_checkpoint, promote, refuse_seen, save_version, seen_records
+from models.vma.checkpoint import load_checkpoint, promote, refuse_seen_validation, save_version, seen_records
 from models.vma.config import ModelConfig, TrainConfig, config_dict
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_proposer
@@ -167,9 +166,7 @@ def train(
     started = time.perf_counter()
     parent = load_checkpoint(init, model_config) if init is not None else None
     seen = seen_records(sites, parent)
-    identities = [SiteIdentity.from_json(entry) for entry in seen["seen_sites"]]
-    for site in validation_sites:
-        refuse_seen(Path(site), identities, seen["seen_folders"], "the model being trained")
+    refuse_seen_validation(seen, validation_sites, "the model being trained")
     training_sites = [t for p in sites for t in load_training_sites(Path(p), model_config, damaged_copies)]
     model = parent.model if parent is not None else VmaNet(model_config)
     losses = fit(

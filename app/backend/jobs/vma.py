@@ -208,11 +208,12 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
     corrections, names, labels, negatives = [], [], 0, 0
     for annotations, raster_dir, name in sites:
         view = training_view(annotations)
-        if _count(view, LABEL_STATES) == 0:
+        site_labels = _count(view, LABEL_STATES)
+        if site_labels == 0:
             continue
         corrections.append(Corrections(raster_dir, view))
         names.append(name)
-        labels, negatives = labels + _count(view, LABEL_STATES), negatives + _count(view, NEGATIVE_STATES)
+        labels, negatives = labels + site_labels, negatives + _count(view, NEGATIVE_STATES)
     if labels == 0:
         where = "any site in the database" if params.every_site else f"site {sites[0][2]}"
         raise ValueError(f"retrain: no accepted, fixed or approved elements to learn from on {where}")
