@@ -52,8 +52,8 @@ from cama_pipeline.data.masks import has_masks
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, load_checkpoint
 from cama_pipeline.segment.config import SegmentConfig
 from cama_pipeline.segment.ego_clip import EgoClipConfig
-from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
-from cama_pipeline.segment.predict import confusion, iou_report, resolve_device
+from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES
+from cama_pipeline.segment.predict import confusion, iou_report, resolve_device, score_images
 from cama_pipeline.segment.stage import run as segment_stage
 from cama_pipeline.segment.train import cpu_seconds_per_image
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
@@ -121,18 +121,6 @@ def confused_with(matrix: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
-def network_iou(
-    net: SegmentationNet, images: list[CameraImage], device: torch.device
-) -> dict[str, float | None]:
-    """Per-class IoU of the network's own per-image masks (before the stage's ego step) on `images`."""
-    total = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
-    for k in range(0, len(images), 8):
-        batch = images[k : k + 8]
-        for image, labels in zip(batch, net.predict([im.load_rgb() for im in batch], device), strict=True):
-            total += confusion(labels, image.load_semantic())
-    return iou_report(total, len(images))["per_class_iou"]
-
-
 def segmentation_figures(
     config: SegmentConfig, checkpoint: Checkpoint, site: Path, workspace: Workspace, device: torch.device
 ) -> dict[str, Any]:
@@ -166,7 +154,7 @@ def segmentation_figures(
         "stage_skipped": item.skipped,
         "ego_body_pixels": item.report.get("ego_body_pixels"),
         **report,
-        "network_per_class_iou": network_iou(checkpoint.net.to(device), images, device),
+        "network_per_class_iou": score_images(checkpoint.net.to(device), images, device)["per_class_iou"],
         "targets": {
             name: {"target": t, "met": (report["per_class_iou"].get(name) or 0.0) >= t}
             for name, t in IOU_TARGETS.items()
