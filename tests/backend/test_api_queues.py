@@ -202,8 +202,8 @@ def test_returned_work_goes_first_to_its_annotator(
 def test_concurrent_annotators_never_share_an_item(
     client: TestClient, headers: Headers, site_id: int
 ) -> None:
-    n_workers, per_worker = 8, 3
-    ids = load_proposals(client, headers, site_id, [0.04 * i for i in range(n_workers * per_worker - 2)])
+    n_workers, per_worker = 11, 3
+    ids = load_proposals(client, headers, site_id, [0.01 * i for i in range(n_workers * per_worker - 2)])
     workers = [add_annotator(client, headers, f"w{i}") for i in range(n_workers)]
     barrier = threading.Barrier(n_workers)
     got: list[list[int]] = [[] for _ in workers]

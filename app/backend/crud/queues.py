@@ -15,8 +15,13 @@ Region work items: `next_region` leases, in one transaction, every free `propose
 centre lies in the grid cell (of side `cell_m`, site metres) holding the element `next_work_item` would hand out
 first; each element gets its own lease, so reviews, expiry and release work as for single elements.
 
-The guard against two annotators getting one element is the UNIQUE `leases.active_element_id`: an insert that
-loses a race fails with IntegrityError and the next candidate is tried. Expired leases are reclaimed (their
+Requests for work items of one site take turns: each attempt first locks the site's row (`FOR NO KEY UPDATE` on
+PostgreSQL, which leaves inserts that merely reference the site unblocked; SQLite has a single writer anyway, taken
+by the reclaim below), so a request chooses its candidate after the leases of the requests before it are committed.
+Without that turn, every concurrent request would choose the same first candidate, all but one would lose, and
+under enough annotators at once a request could lose every attempt. The guard against two annotators getting one
+element stays the UNIQUE `leases.active_element_id`: an insert that still loses a race fails with IntegrityError
+and the request looks again. Expired leases are reclaimed (their
 `active_element_id` cleared) at the start of each request, so an abandoned item is free again. While a lease
 holds an element, only its holder (or a lead) may change it: `crud.leases.check_lease`, which every element write
 passes.
@@ -36,7 +41,7 @@ from app.backend.crud import leases as lease_rules
 from app.backend.crud.elements import public
 from app.backend.crud.sites import get_site
 from app.backend.errors import ConflictError, ForbiddenError, NotFoundError
-from app.backend.models import EditLog, Element, User
+from app.backend.models import EditLog, Element, Site, User
 from app.backend.models_review import Lease
 from app.backend.schemas_quality import LintFindingPublic
 from app.backend.schemas_review import LeasePublic
@@ -197,6 +202,11 @@ def _new_lease(site_id: int, element: Element, username: str, now: datetime, lea
     )
 
 
+def _take_turn(session: Session, site_id: int) -> None:
+    """Wait for the work-item requests of this site that are already choosing (see the module docstring)."""
+    session.execute(select(Site.id).where(Site.id == site_id).with_for_update(key_share=True))
+
+
 def _lease_next(
     session: Session,
     *,
@@ -209,6 +219,7 @@ def _lease_next(
     request took one of its elements first; (that candidate, the leases), None when there is no work left."""
     get_site(session=session, site_id=site_id)
     for _attempt in range(MAX_ATTEMPTS):
+        _take_turn(session, site_id)
         now = lease_rules.clock()
         _reclaim_expired(session, site_id=site_id, now=now)
         candidates = _candidates(session, site_id=site_id, username=username, flagged_ids=flagged_ids)
