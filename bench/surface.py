@@ -10,9 +10,14 @@ are compared with the site's `ground_truth/bev/` at each reconstructed cell's ce
   photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
   coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
+  kerbs      the surface standing on its kerb steps (elevation + `kerb_step.npy`) against the truth, whose
+             sidewalks are raised: RMSE over the true curb cells and over road and curb cells together, and the
+             raised cells' precision / recall against the observed off-road cells truly > 6.5 cm above the
+             road-level elevation;
   runtime    seconds per phase from the stage's report.
 Baseline in the same run, ground-truth poses: the surface without the curvature prior, the SfM gate and the
-curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`). Adam on the per-vertex colours
+curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`); and the last pose source again
+without the kerb step (`kerb_step.enabled false`), its ablation. Adam on the per-vertex colours
 and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
 
 Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 1]
@@ -41,6 +46,7 @@ from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
+from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
 from cama_pipeline.workspace import StageFolder, Workspace
@@ -94,8 +100,40 @@ def rmse_by_distance(
     return bands
 
 
-def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> dict[str, Any]:
-    """Elevation, semantic, photometric and coverage figures of `ours` against `truth`."""
+def rmse(values: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(values**2))) if len(values) else None
+
+
+def kerb_figures(
+    signed_road_level: np.ndarray, kerb_step: np.ndarray, observed: np.ndarray, true_sem: np.ndarray
+) -> dict[str, Any]:
+    """The surface with its kerb steps against the truth (raised sidewalks included): elevation RMSE over the
+    true curb cells and over the road and curb cells together, and how the raised cells agree with the cells
+    that truly stand more than half the step above the road-level elevation (observed off-road cells)."""
+    step = np.nan_to_num(kerb_step)
+    signed = signed_road_level + step
+    curb = observed & (true_sem == int(Semantic.CURB))
+    road_or_curb = observed & (np.isin(true_sem, ROAD_SURFACE_IDS) | (true_sem == int(Semantic.CURB)))
+    off_road = observed & ~np.isin(true_sem, ROAD_SURFACE_IDS) & (true_sem != 255)
+    height = float(step.max()) if (step > 0).any() else 0.0
+    truly_raised = -signed_road_level > 0.065  # half of the generator's 0.10-0.15 m curbs
+    raised = step > 0
+    hits = (raised & truly_raised & off_road).sum()
+    return {
+        "step_height_m": height,
+        "elevation_rmse_m_curb_cells": rmse(signed[curb]),
+        "elevation_rmse_m_curb_cells_road_level": rmse(signed_road_level[curb]),
+        "elevation_rmse_m_road_and_curb": rmse(signed[road_or_curb]),
+        "raised_precision": float(hits / max((raised & off_road).sum(), 1)),
+        "raised_recall": float(hits / max((truly_raised & off_road).sum(), 1)),
+    }
+
+
+def compare(
+    ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray, kerb_step: np.ndarray
+) -> dict[str, Any]:
+    """Elevation (road level, and with the kerb steps), semantic, photometric and coverage figures of `ours`
+    against `truth`."""
     inside, tr, tc = truth_at(ours, truth)
     semantic, true_semantic = ours.require("semantic"), truth.require("semantic")
     true_sem = np.where(inside, true_semantic[tr, tc], 255)
@@ -123,6 +161,7 @@ def compare(ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray) -> d
         "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
         "cells_observed": int(observed.sum()),
         "true_road_coverage": float(road.sum() * scale / max(true_road, 1)),
+        "kerb": kerb_figures(signed, kerb_step, observed, true_sem),
     }
 
 
@@ -143,11 +182,13 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     manifest = read_site_manifest(workspace.site_manifest(result.name))
     views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, "ground_truth")
     trajectory_xy = ego_poses(views)[:, :2, 3]
-    bev = workspace.surface_bev(result.name)
-    figures = compare(read_bev(bev), read_bev(site / "ground_truth" / "bev"), trajectory_xy)
+    ours = read_bev(workspace.surface_bev(result.name))
+    kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
+    figures = compare(ours, read_bev(site / "ground_truth" / "bev"), trajectory_xy, kerb_step)
     report = result.report
     return {
         "poses": poses,
+        "kerb_step": config.kerb_step.enabled,
         "epochs": config.epochs,
         "refine_elevation": config.refine_elevation,
         "colour_lr": config.colour_lr,
@@ -163,8 +204,14 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
 
 def print_side_by_side(runs: list[dict[str, Any]]) -> None:
     """One column per pose source: elevation RMSE, IoU per class, PSNR, seconds per phase."""
-    print(f"{'':>22}" + "".join(f"{row['poses']:>14}" for row in runs))
+    print(
+        f"{'':>22}" + "".join(f"{row['poses'] + ('' if row['kerb_step'] else ' flat'):>14}" for row in runs)
+    )
     lines = {"elevation RMSE cm": [row["elevation_rmse_m"] * 100 for row in runs]}
+    lines["RMSE road+curb cm"] = [(row["kerb"]["elevation_rmse_m_road_and_curb"] or 0) * 100 for row in runs]
+    lines["RMSE curb cells cm"] = [(row["kerb"]["elevation_rmse_m_curb_cells"] or 0) * 100 for row in runs]
+    lines["raised precision"] = [row["kerb"]["raised_precision"] for row in runs]
+    lines["raised recall"] = [row["kerb"]["raised_recall"] for row in runs]
     for name in IOU_CLASSES:
         lines[f"IoU {name}"] = [row["iou"][name] for row in runs]
     lines["PSNR dB"] = [row["psnr_db"] for row in runs]
@@ -197,9 +244,11 @@ def main() -> None:
         without = replace(config, smoothness_weight=0.0, sfm_gate_m=1e6, curb_height_m=0.0)
         baseline = run_source(args.site, "ground_truth", without, scratch)
         runs = [run_source(args.site, source, config, scratch) for source in sources]
+        flat = replace(config, kerb_step=replace(config.kerb_step, enabled=False))
+        no_step = run_source(args.site, sources[-1], flat, scratch)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    for row in [baseline, *runs]:
+    for row in [baseline, *runs, no_step]:
         print(
             f"{row['poses']:>12} epochs {row['epochs']}: elevation RMSE {row['elevation_rmse_m'] * 100:.2f} cm "
             f"(p95 {row['elevation_p95_m'] * 100:.1f} cm), IoU "
@@ -211,8 +260,9 @@ def main() -> None:
             "    RMSE by distance from the trajectory (m):",
             row["elevation_rmse_m_by_distance_from_trajectory_m"],
         )
-    print_side_by_side(runs)
+    print_side_by_side([*runs, no_step])
     reference = runs[0]
+    stepped = runs[-1]
     results = {
         "command": " ".join([sys.executable.split("/")[-1], *sys.argv]),
         "site": str(args.site),
@@ -224,11 +274,18 @@ def main() -> None:
         },
         "baseline_no_prior_no_gate_no_curb_height_gt_poses": baseline,
         "runs": runs,
+        "ablation_no_kerb_step": no_step,
         "ratios_vs_baseline": {
             "elevation_rmse": reference["elevation_rmse_m"] / max(baseline["elevation_rmse_m"], 1e-9),
             "psnr_db_gain": reference["psnr_db"] - baseline["psnr_db"],
             "iou": {k: v / max(baseline["iou"][k], 1e-9) for k, v in reference["iou"].items()},
             "seconds": reference["seconds"]["total"] / max(baseline["seconds"]["total"], 1e-9),
+        },
+        "kerb_step_vs_none": {
+            "poses": stepped["poses"],
+            "iou": {k: v / max(no_step["iou"][k], 1e-9) for k, v in stepped["iou"].items()},
+            "psnr_db_gain": stepped["psnr_db"] - no_step["psnr_db"],
+            "seconds": stepped["seconds"]["total"] / max(no_step["seconds"]["total"], 1e-9),
         },
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -207,6 +207,10 @@ class Workspace:
         """`surface/<site_id>/mesh.ply`."""
         return self.surface_dir(site_id) / "mesh.ply"
 
+    def surface_kerb_step(self, site_id: str) -> Path:
+        """`surface/<site_id>/kerb_step.npy`: metres above the BEV elevation, on the BEV grid."""
+        return self.surface_dir(site_id) / "kerb_step.npy"
+
     def surface_report(self, site_id: str) -> Path:
         """`surface/<site_id>/report.json`."""
         return self.surface_dir(site_id) / "report.json"

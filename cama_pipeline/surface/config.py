@@ -4,6 +4,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from cama_pipeline.surface.coverage import CoverageConfig
+from cama_pipeline.surface.steps import KerbStepConfig
 
 PoseSource = Literal["ground_truth", "wigo", "sfm"]
 POSE_SOURCES: tuple[str, ...] = ("ground_truth", "wigo", "sfm")
@@ -89,6 +90,9 @@ class SurfaceConfig:
     seed: int = 0
     coverage: CoverageConfig = field(default_factory=CoverageConfig)
     """What the report calls weakly observed (`surface.coverage`)."""
+    kerb_step: KerbStepConfig = field(default_factory=KerbStepConfig)
+    """Which off-road cells stand `curb_height_m` above the road (`surface.kerb_step`; needs
+    `curb_height_m` > 0)."""
 
     def __post_init__(self) -> None:
         positive = (

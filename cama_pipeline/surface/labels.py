@@ -34,14 +34,25 @@ def fused_logits(ground: torch.Tensor, raised: torch.Tensor | None) -> torch.Ten
     raised = shares(raised)
     road_classes = torch.tensor(ROAD_SURFACE_IDS, device=ground.device)
     off_road_classes = torch.tensor([int(c) for c in OFF_ROAD], device=ground.device)
-    columns = [BEV_CLASSES.index(c) for c in OFF_ROAD]
-    votes = torch.zeros_like(raised)
-    votes[:, columns] = raised[:, columns]
-    has_votes = votes.sum(dim=1) > 0
+    has_votes = _off_road_votes(raised).sum(dim=1) > 0
     ground_off_road = ~torch.isin(ground.argmax(dim=1), road_classes)
     raised_agrees_more = torch.isin(raised.argmax(dim=1), off_road_classes) & (
         raised.max(dim=1).values > ground.max(dim=1).values
     )
     off_road = (ground_off_road | raised_agrees_more) & has_votes
-    logits[off_road] = torch.log(votes[off_road] + EPSILON)
+    logits[off_road] = curb_height_logits(raised[off_road])
     return logits
+
+
+def _off_road_votes(raised: torch.Tensor) -> torch.Tensor:
+    """(V, 5) the curb-height shares of the off-road classes, 0 for the road classes."""
+    columns = [BEV_CLASSES.index(c) for c in OFF_ROAD]
+    votes = torch.zeros_like(raised)
+    votes[:, columns] = raised[:, columns]
+    return votes
+
+
+def curb_height_logits(raised: torch.Tensor) -> torch.Tensor:
+    """(V, 5) logits of cells seen at curb height from their (V, 5) class votes there: off-road classes only
+    (curb height may only give curb or background)."""
+    return torch.log(_off_road_votes(shares(raised)) + EPSILON)

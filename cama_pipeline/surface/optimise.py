@@ -2,7 +2,9 @@
 
 First pass (`observe`): every keyframe image sees its visible vertices; their weighted mean colour and
 class frequencies initialise the mesh (every cell voted again at curb height, where a curb top is seen in
-place; see `labels`) and the pixels that hit each cell make the observation count.
+place; see `labels`) and the pixels that hit each cell make the observation count. The off-road cells whose
+colours agree better across the views at curb height stand on a kerb step (`steps`) and take their colour
+from that height.
 Then `epochs` of Adam over image batches minimise the L1 colour error and the semantic cross-entropy of
 the vertices projected with the current elevation (differentiable `grid_sample`), weighted by the pixels
 each vertex covers and by the ground mask, with the surface-point loss (and the curvature prior) holding
@@ -19,11 +21,11 @@ import torch.nn.functional as F
 
 from cama_pipeline.cameras import CameraView
 from cama_pipeline.data import Dataset
-from cama_pipeline.semantics import BEV_CLASSES
+from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, surface_loss
 from cama_pipeline.surface.grid import SurfaceGrid
-from cama_pipeline.surface.labels import fused_logits
+from cama_pipeline.surface.labels import curb_height_logits, fused_logits
 from cama_pipeline.surface.observe import (
     GROUND,
     Camera,
@@ -33,6 +35,7 @@ from cama_pipeline.surface.observe import (
     sample_images,
     visible_vertices,
 )
+from cama_pipeline.surface.steps import ColourMoments, raised_vertices
 
 Advance = Callable[[int, float], None]
 """Progress callback: images done in this call, current loss."""
@@ -53,6 +56,9 @@ class Mesh:
     """(V, 5) semantic logits of the BEV classes."""
     count: torch.Tensor
     """(V,) camera rays (pixels) that hit each vertex's cell."""
+    step: torch.Tensor
+    """(V,) metres above the elevation MLP: `curb_height_m` on the cells standing at curb height (`steps`),
+    else 0."""
 
     def heights(self, control_z: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
         return self.control.at_vertices(control_z, ids)
@@ -63,7 +69,7 @@ def new_mesh(grid: SurfaceGrid, mlp: ElevationMLP, config: SurfaceConfig, device
     empty = torch.zeros(0, device=device)
     vertex_xy = torch.as_tensor(grid.vertex_xy(), device=device)
     return Mesh(
-        grid, ControlGrid(grid, config.control_spacing_m, device), mlp, vertex_xy, empty, empty, empty
+        grid, ControlGrid(grid, config.control_spacing_m, device), mlp, vertex_xy, empty, empty, empty, empty
     )
 
 
@@ -127,12 +133,12 @@ def visible_ids(mesh: Mesh, heights: torch.Tensor, camera: Camera, config: Surfa
 def observe(
     mesh: Mesh, dataset: Dataset, views: list[CameraView], config: SurfaceConfig, advance: Advance
 ) -> list[torch.Tensor]:
-    """The averaging pass: sets colour, logits and count; returns each view's visible vertex ids (int32)."""
+    """The averaging pass: sets colour, logits, count and step; returns each view's visible vertex ids (int32)."""
     device = mesh.vertex_xy.device
     vertices = len(mesh.vertex_xy)
-    sums = torch.zeros((vertices, 3 + len(BEV_CLASSES)), device=device)
-    weights = torch.zeros(vertices, device=device)
+    class_sums = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
     raised_sums = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
+    road_level, curb_level = ColourMoments(vertices, device), ColourMoments(vertices, device)
     visible: list[torch.Tensor] = [torch.zeros(0, dtype=torch.int32)] * len(views)
     with torch.no_grad():
         control_z = mesh.control.heights(mesh.mlp)
@@ -141,45 +147,50 @@ def observe(
         for indices in batches(views, config.images_per_batch):
             cameras = [Camera.of(views[i], device) for i in indices]
             id_lists = [visible_ids(mesh, heights, camera, config) for camera in cameras]
-            batch = project_batch(mesh, control_z, normals, cameras, id_lists)
             images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
-            samples = sample_images(images, batch.uv)
-            weight = (batch.weight * samples[..., GROUND]).reshape(-1)
-            flat_ids = batch.ids.reshape(-1)
-            sums.index_add_(0, flat_ids, samples[..., :GROUND].reshape(-1, GROUND) * weight[:, None])
-            weights.index_add_(0, flat_ids, weight)
+            _add_votes(class_sums, road_level, mesh, control_z, normals, cameras, id_lists, images)
             if config.curb_height_m > 0:
-                _add_raised_votes(raised_sums, mesh, control_z, normals, cameras, id_lists, images, config)
+                raised_z = control_z + config.curb_height_m
+                _add_votes(raised_sums, curb_level, mesh, raised_z, normals, cameras, id_lists, images)
             for i, ids in zip(indices, id_lists, strict=True):
                 visible[i] = ids.to(torch.int32).cpu()
             advance(len(indices), 0.0)
-    seen = weights > 0
-    mean = sums[seen] / weights[seen, None]
-    mesh.count = weights
-    mesh.colour = torch.zeros((vertices, 3), device=device)
-    mesh.colour[seen] = mean[:, :3]
-    raised = raised_sums[seen] / weights[seen, None] if config.curb_height_m > 0 else None
+    seen = road_level.weight > 0
+    mesh.count = road_level.weight
+    at_curb_height = raised_sums[seen] if config.curb_height_m > 0 else None
     mesh.logits = torch.zeros((vertices, len(BEV_CLASSES)), device=device)
-    mesh.logits[seen] = fused_logits(mean[:, 3:], raised)
+    mesh.logits[seen] = fused_logits(class_sums[seen], at_curb_height)
+    mesh.colour = road_level.mean()
+    mesh.step = torch.zeros(vertices, device=device)
+    if config.curb_height_m > 0 and config.kerb_step.enabled:
+        road_ids = torch.tensor(ROAD_SURFACE_IDS, device=device)
+        off_road = (seen & ~torch.isin(mesh.logits.argmax(dim=1), road_ids)).cpu().numpy()
+        raised, foot = raised_vertices(mesh.grid, road_level, curb_level, off_road, config.kerb_step)
+        on_step, kerb = torch.as_tensor(raised, device=device), torch.as_tensor(foot, device=device)
+        mesh.step[on_step] = config.curb_height_m
+        mesh.colour[on_step] = curb_level.mean()[on_step]
+        mesh.logits[kerb] = curb_height_logits(raised_sums[kerb])
     return visible
 
 
-def _add_raised_votes(
-    sums: torch.Tensor,
+def _add_votes(
+    class_sums: torch.Tensor,
+    moments: ColourMoments,
     mesh: Mesh,
     control_z: torch.Tensor,
     normals: torch.Tensor,
     cameras: list[Camera],
     id_lists: list[torch.Tensor],
     images: torch.Tensor,
-    config: SurfaceConfig,
 ) -> None:
-    """Add to `sums` the weighted class votes of the batch's vertices sampled at curb height (`labels`)."""
-    batch = project_batch(mesh, control_z + config.curb_height_m, normals, cameras, id_lists)
-    samples = sample_images(images[:, 3:], batch.uv)
-    weight = (batch.weight * samples[..., -1]).reshape(-1)
-    classes = samples[..., :-1].reshape(-1, len(BEV_CLASSES))
-    sums.index_add_(0, batch.ids.reshape(-1), classes * weight[:, None])
+    """Add the batch's vertices, sampled on the surface `control_z`, to the class votes and colour moments,
+    each sample weighted by the pixels its cell covers on ground."""
+    batch = project_batch(mesh, control_z, normals, cameras, id_lists)
+    samples = sample_images(images, batch.uv)
+    weight = (batch.weight * samples[..., GROUND]).reshape(-1)
+    ids = batch.ids.reshape(-1)
+    class_sums.index_add_(0, ids, samples[..., 3:GROUND].reshape(-1, len(BEV_CLASSES)) * weight[:, None])
+    moments.add(ids, samples[..., :3].reshape(-1, 3), weight)
 
 
 def _batch_loss(

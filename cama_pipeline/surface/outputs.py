@@ -7,11 +7,16 @@ module is the only one that writes or reads them.
                                              ground_truth/bev/: every layer; cells no camera ray hit are
                                              unobserved, observation_count counts the rays (keyframe pixels)
                                              that hit each cell, clipped at 65535
+<workspace>/surface/<site_id>/kerb_step.npy float32 (rows, cols) on the BEV grid: metres the surface stands above
+                                             the BEV elevation (the road surface vectors are lifted onto): the
+                                             curb height on kerbs and raised sidewalks (`steps`), 0 elsewhere,
+                                             NaN on unobserved cells; the mesh's heights include it
 <workspace>/surface/<site_id>/report.json   schema "cama.surface/1", written last (marks completion):
     {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images",
      "points": {"strip", "sfm", "sfm_kept" (SfM points past the gate, see `fit`)}, "vertices",
      "cells_observed", "seconds": {phase: s}, "losses": {"elevation": [huber + prior every 50 steps],
-     "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}}
+     "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}, "kerb_step": {"height_m", "cells_raised",
+     "off_road_share_raised"}, "weak_observation": {...} (`coverage`)}
 """
 
 from pathlib import Path
@@ -22,7 +27,7 @@ import trimesh
 from trimesh.exchange.ply import export_ply
 
 from cama_pipeline.bev import BevRasters
-from cama_pipeline.io import atomic_write_bytes, atomic_write_json, read_json
+from cama_pipeline.io import atomic_write_bytes, atomic_write_json, atomic_write_npy, read_json
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.surface.grid import SurfaceGrid
 from cama_pipeline.workspace import Workspace
@@ -67,15 +72,38 @@ def rasters_from_vertices(
     return BevRasters(grid.georeference(), semantic, photometric, elevation, observation)
 
 
-def grid_mesh(grid: SurfaceGrid, rasters: BevRasters) -> trimesh.Trimesh:
-    """The observed cells as a triangle mesh: two upward-facing triangles per square of observed cells."""
+def kerb_step_raster(grid: SurfaceGrid, step: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(rows, cols) float32 from the (V,) per-vertex step: NaN where unobserved, as `rasters_from_vertices`."""
+    rows, cols = grid.vertex_cells()
+    seen = np.round(count) > 0
+    raster = np.full((grid.rows, grid.cols), np.nan, np.float32)
+    raster[rows[seen], cols[seen]] = step[seen]
+    return raster
+
+
+def write_kerb_step(path: Path, raster: np.ndarray) -> None:
+    """kerb_step.npy, atomically."""
+    atomic_write_npy(path, raster.astype(np.float32))
+
+
+def read_kerb_step(path: Path, shape: tuple[int, int]) -> np.ndarray:
+    """A stored kerb step raster; ValueError naming the file when it does not fit a (rows, cols) grid."""
+    raster = np.load(path)
+    if raster.shape != shape or raster.dtype != np.float32:
+        raise ValueError(f"{path}: kerb step raster {raster.dtype} {raster.shape}, expected float32 {shape}")
+    return raster
+
+
+def grid_mesh(grid: SurfaceGrid, rasters: BevRasters, kerb_step: np.ndarray) -> trimesh.Trimesh:
+    """The observed cells as a triangle mesh, standing on the kerb steps (`kerb_step`, metres above the
+    elevation layer): two upward-facing triangles per square of observed cells."""
     semantic, rgb = rasters.require("semantic"), rasters.require("photometric")
     observed = semantic != int(Semantic.UNOBSERVED)
     index = np.full(observed.shape, -1, np.int64)
     index[observed] = np.arange(int(observed.sum()))
     rows, cols = np.nonzero(observed)
     xy = grid.xy_of_cells(rows, cols)
-    vertices = np.column_stack([xy, rasters.require("elevation")[rows, cols]])
+    vertices = np.column_stack([xy, rasters.require("elevation")[rows, cols] + kerb_step[rows, cols]])
     a, b = index[:-1, :-1], index[:-1, 1:]
     c, d = index[1:, :-1], index[1:, 1:]
     full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)

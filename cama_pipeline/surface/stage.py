@@ -1,7 +1,8 @@
 """The surface stage: for every site of the workspace, the RoMe-style road mesh and its BEV rasters.
 
 Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit (`fit`), observation
-(visibility, mean colour and class, ray counts), mesh optimisation, export (see `outputs` for the files).
+(visibility, mean colour and class, ray counts, kerb steps), mesh optimisation, export (see `outputs` for the
+files).
 """
 
 import logging
@@ -28,13 +29,16 @@ from cama_pipeline.surface.fit import fit_steps, fit_surface
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
 from cama_pipeline.surface.outputs import (
     grid_mesh,
+    kerb_step_raster,
     rasters_from_vertices,
     read_report,
+    write_kerb_step,
     write_mesh,
     write_report,
 )
 from cama_pipeline.surface.points import NoRoadPointsError, sfm_surface_points, surface_points
 from cama_pipeline.surface.poses import pose_inputs, posed_views
+from cama_pipeline.surface.steps import step_summary
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -135,11 +139,12 @@ def reconstruct_site(
     with phases.phase("export", 1) as advance, torch.no_grad():
         heights = mesh.control.at_vertices(mesh.control.heights(mlp)).cpu().numpy()
         labels = mesh.logits.argmax(dim=1).cpu().numpy().astype("uint8")
-        rasters = rasters_from_vertices(
-            grid, heights, mesh.colour.cpu().numpy(), labels, mesh.count.cpu().numpy()
-        )
+        count, step = mesh.count.cpu().numpy(), mesh.step.cpu().numpy()
+        rasters = rasters_from_vertices(grid, heights, mesh.colour.cpu().numpy(), labels, count)
+        kerb_step = kerb_step_raster(grid, step, count)
         write_bev(workspace.surface_bev(site_id), rasters)
-        write_mesh(workspace.surface_mesh(site_id), grid_mesh(grid, rasters))
+        write_kerb_step(workspace.surface_kerb_step(site_id), kerb_step)
+        write_mesh(workspace.surface_mesh(site_id), grid_mesh(grid, rasters, kerb_step))
         advance(1, 0.0)
     return {
         "site_id": site_id,
@@ -150,6 +155,7 @@ def reconstruct_site(
         "points": {"strip": points.strip_count, "sfm": points.sfm_count, "sfm_kept": fitted.sfm_kept},
         "vertices": grid.vertex_count,
         "cells_observed": int((rasters.require("observation_count") > 0).sum()),
+        "kerb_step": step_summary(rasters.require("semantic"), kerb_step, config.curb_height_m),
         "weak_observation": weak_observation(
             rasters.require("observation_count"),
             rasters.require("semantic"),

@@ -1,0 +1,135 @@
+"""Kerb steps: which off-road cells stand at curb height, decided by photo-consistency at two heights.
+
+The elevation MLP is smooth by design (a few encoding octaves), so it cannot hold the 10-15 cm step where the
+road meets a raised kerb and sidewalk. The observation pass samples every visible cell in every image twice: at
+the MLP's height and `curb_height_m` above it. A cell really at one of the two heights is seen in the same place
+by every camera at that height, so its colour agrees across the views; at the other height each camera sees
+another patch of ground (the parallax grows with the camera's distance), so the colours disagree. The cell is
+raised when its views agree better at curb height: the log ratio of the two weighted colour variances, averaged
+over the neighbouring off-road cells (a sidewalk or a kerb is a region, not a cell) and above `threshold`.
+
+Road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits. The BEV
+`elevation` layer stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the
+step goes to its own raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour
+and classes are taken from.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from scipy import ndimage
+
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.surface.grid import SurfaceGrid
+
+VARIANCE_FLOOR = 1e-4
+"""Added to both colour variances before their ratio (RGB in [0, 1]): flat cells get a ratio near 1."""
+
+
+@dataclass(frozen=True)
+class KerbStepConfig:
+    """Parameters of the kerb step (`surface.kerb_step` in a run configuration)."""
+
+    enabled: bool = True
+    """Raise the off-road cells whose views agree better at curb height (see the module docstring)."""
+    threshold: float = 0.2
+    """Smoothed log ratio (road-level variance over curb-height variance) above which a cell is raised."""
+    smoothing_m: float = 0.3
+    """Gaussian sigma of the averaging over neighbouring off-road cells."""
+    min_area_m2: float = 0.5
+    """Raised regions smaller than this are dropped (a kerb or sidewalk is larger)."""
+    kerb_band_m: float = 0.3
+    """Road-labelled cells this close to a raised region are raised too (and labelled curb) when their own
+    views agree better at curb height: the road-level vote labels the lower part of a kerb road."""
+
+    def __post_init__(self) -> None:
+        for name in ("smoothing_m", "min_area_m2", "kerb_band_m"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"KerbStepConfig.{name} must be >= 0, got {getattr(self, name)}")
+
+
+class ColourMoments:
+    """Per-vertex weighted sums of RGB and RGB squared, for the weighted colour variance across views."""
+
+    def __init__(self, vertices: int, device: torch.device):
+        self.weight = torch.zeros(vertices, device=device)
+        self.sum = torch.zeros((vertices, 3), device=device)
+        self.square = torch.zeros((vertices, 3), device=device)
+
+    def add(self, ids: torch.Tensor, rgb: torch.Tensor, weight: torch.Tensor) -> None:
+        """Add (N,) vertex ids' (N, 3) samples with (N,) weights."""
+        self.weight.index_add_(0, ids, weight)
+        self.sum.index_add_(0, ids, rgb * weight[:, None])
+        self.square.index_add_(0, ids, rgb.square() * weight[:, None])
+
+    def mean(self) -> torch.Tensor:
+        """(V, 3) weighted mean colour (0 where unseen)."""
+        return self.sum / self.weight.clamp(min=1e-12)[:, None]
+
+    def variance(self) -> torch.Tensor:
+        """(V,) weighted colour variance summed over the channels (0 where unseen)."""
+        mean = self.mean()
+        second = self.square / self.weight.clamp(min=1e-12)[:, None]
+        return (second - mean.square()).clamp(min=0).sum(dim=1)
+
+
+def _local_mean(grid: SurfaceGrid, values: np.ndarray, where: np.ndarray, sigma_m: float) -> np.ndarray:
+    """(rows, cols) Gaussian-weighted mean of the (V,) `values` over the vertices in `where` near each cell."""
+    rows, cols = grid.vertex_cells()
+    total = np.zeros((grid.rows, grid.cols))
+    support = np.zeros((grid.rows, grid.cols))
+    total[rows[where], cols[where]] = values[where]
+    support[rows[where], cols[where]] = 1.0
+    sigma = sigma_m / grid.resolution_m
+    if sigma > 0:
+        total = ndimage.gaussian_filter(total, sigma, mode="constant")
+        support = ndimage.gaussian_filter(support, sigma, mode="constant")
+    return np.divide(total, support, out=np.zeros_like(total), where=support > 1e-6)
+
+
+def _drop_small(raised: np.ndarray, min_area_m2: float, resolution_m: float) -> np.ndarray:
+    """`raised` without its 8-connected regions smaller than `min_area_m2`."""
+    labelled, count = ndimage.label(raised, structure=np.ones((3, 3)))
+    if not count:
+        return raised
+    areas = ndimage.sum(raised, labelled, index=np.arange(1, count + 1)) * resolution_m**2
+    return raised & ~np.isin(labelled, np.flatnonzero(areas < min_area_m2) + 1)
+
+
+def raised_vertices(
+    grid: SurfaceGrid,
+    road_level: ColourMoments,
+    curb_level: ColourMoments,
+    off_road: np.ndarray,
+    config: KerbStepConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) bool twice: the vertices standing at curb height, and those of them labelled with a road class
+    (`off_road` (V,) False), which are kerb cells the road-level vote smeared (see the module docstring)."""
+    both = ((road_level.weight > 0) & (curb_level.weight > 0)).cpu().numpy()
+    ratio = (road_level.variance() + VARIANCE_FLOOR) / (curb_level.variance() + VARIANCE_FLOOR)
+    score = torch.log(ratio).cpu().numpy()
+    rows, cols = grid.vertex_cells()
+    candidates = both & off_road
+    mean = _local_mean(grid, score, candidates, config.smoothing_m)
+    raised = np.zeros((grid.rows, grid.cols), bool)
+    raised[rows[candidates], cols[candidates]] = mean[rows[candidates], cols[candidates]] > config.threshold
+    raised = _drop_small(raised, config.min_area_m2, grid.resolution_m)
+    near = ndimage.distance_transform_edt(~raised, sampling=grid.resolution_m)[rows, cols] <= config.kerb_band_m
+    band = both & ~off_road & near
+    band_mean = _local_mean(grid, score, band, grid.resolution_m)
+    foot = np.zeros((grid.rows, grid.cols), bool)
+    foot[rows[band], cols[band]] = band_mean[rows[band], cols[band]] > config.threshold
+    return (raised | foot)[rows, cols], foot[rows, cols]
+
+
+def step_summary(semantic: np.ndarray, kerb_step: np.ndarray, height_m: float) -> dict[str, float | int]:
+    """The report's account of the step rasters: its height, the raised cells and their share of the observed
+    off-road cells (curb and background)."""
+    raised = np.nan_to_num(kerb_step) > 0
+    off_road = np.isin(semantic, [int(Semantic.BACKGROUND), int(Semantic.CURB)])
+    return {
+        "height_m": height_m,
+        "cells_raised": int(raised.sum()),
+        "off_road_share_raised": float(raised[off_road].mean()) if off_road.any() else 0.0,
+    }

@@ -1,0 +1,94 @@
+"""Kerb steps (`cama_pipeline.surface.steps`): colour moments, the raise decision on hand-made votes, the report."""
+
+import numpy as np
+import pytest
+import torch
+
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.surface.grid import SurfaceGrid
+from cama_pipeline.surface.steps import ColourMoments, KerbStepConfig, raised_vertices, step_summary
+
+ROWS, COLS = 20, 30
+GRID = SurfaceGrid((0.0, 0.0), 0.1, ROWS, COLS, np.arange(ROWS * COLS).reshape(ROWS, COLS))
+
+
+def moments(spread: np.ndarray) -> ColourMoments:
+    """Per-vertex moments of two equally weighted views whose colours differ by `spread` (V,) per channel."""
+    result = ColourMoments(len(spread), torch.device("cpu"))
+    ids = torch.arange(len(spread))
+    base = torch.full((len(spread), 3), 0.5)
+    offset = torch.as_tensor(spread, dtype=torch.float32)[:, None].expand(-1, 3) / 2
+    result.add(ids, base + offset, torch.ones(len(spread)))
+    result.add(ids, base - offset, torch.ones(len(spread)))
+    return result
+
+
+def test_colour_moments_give_the_weighted_mean_and_variance() -> None:
+    found = ColourMoments(2, torch.device("cpu"))
+    found.add(
+        torch.tensor([0, 0, 1]),
+        torch.tensor([[0.2] * 3, [0.6] * 3, [0.3] * 3]),
+        torch.tensor([3.0, 1.0, 2.0]),
+    )
+    assert torch.allclose(found.mean(), torch.tensor([[0.3] * 3, [0.3] * 3]))
+    # vertex 0: values 0.2 (weight 3) and 0.6 (weight 1): variance 0.03 per channel, summed over three
+    assert torch.allclose(found.variance(), torch.tensor([0.09, 0.0]), atol=1e-6)
+
+
+def layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Columns 0-14 road, 15-29 sidewalk: road cells agree at road level, sidewalk cells at curb height; the
+    two road columns next to the sidewalk (13, 14) are a kerb the road-level vote labelled road."""
+    cols = np.tile(np.arange(COLS), ROWS)
+    sidewalk = cols >= 15
+    kerb_foot = (cols == 13) | (cols == 14)
+    at_curb_height = sidewalk | kerb_foot
+    road_spread = np.where(at_curb_height, 0.4, 0.02)
+    curb_spread = np.where(at_curb_height, 0.02, 0.4)
+    return road_spread, curb_spread, sidewalk
+
+
+def test_off_road_cells_agreeing_at_curb_height_are_raised_and_the_kerb_foot_with_them() -> None:
+    road_spread, curb_spread, sidewalk = layout()
+    raised, foot = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig()
+    )
+    cols = np.tile(np.arange(COLS), ROWS)
+    assert raised[sidewalk].all()
+    assert foot[(cols == 13) | (cols == 14)].all() and raised[foot].all()
+    assert not raised[cols < 13].any() and not foot[sidewalk].any()
+
+
+def test_road_far_from_a_raised_region_is_never_raised() -> None:
+    road_spread, curb_spread, sidewalk = layout()
+    cols = np.tile(np.arange(COLS), ROWS)
+    curb_spread = np.where(cols < 5, 0.0, curb_spread)  # road that happens to agree better at curb height
+    road_spread = np.where(cols < 5, 0.4, road_spread)
+    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig())
+    assert not raised[cols < 5].any()
+
+
+def test_small_raised_patches_and_unseen_cells_stay_down() -> None:
+    cols, rows = np.tile(np.arange(COLS), ROWS), np.repeat(np.arange(ROWS), COLS)
+    off_road = np.ones(ROWS * COLS, bool)
+    patch = (rows < 3) & (cols < 3)  # 0.09 m2, under the 0.5 m2 minimum
+    road_spread, curb_spread = np.where(patch, 0.4, 0.02), np.where(patch, 0.02, 0.4)
+    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), off_road, KerbStepConfig())
+    assert not raised.any()
+    unseen = ColourMoments(ROWS * COLS, torch.device("cpu"))
+    raised, _ = raised_vertices(GRID, unseen, moments(curb_spread), off_road, KerbStepConfig())
+    assert not raised.any()
+
+
+def test_step_summary_counts_the_raised_share_of_off_road_cells() -> None:
+    semantic = np.array([[int(Semantic.ROAD), int(Semantic.CURB), int(Semantic.BACKGROUND), 255]], np.uint8)
+    step = np.array([[0.0, 0.13, 0.0, np.nan]], np.float32)
+    assert step_summary(semantic, step, 0.13) == {
+        "height_m": 0.13,
+        "cells_raised": 1,
+        "off_road_share_raised": 0.5,
+    }
+
+
+def test_bad_config_names_the_field() -> None:
+    with pytest.raises(ValueError, match="kerb_band_m"):
+        KerbStepConfig(kerb_band_m=-1)
