@@ -115,7 +115,9 @@ def raised_vertices(
     raised = np.zeros((grid.rows, grid.cols), bool)
     raised[rows[candidates], cols[candidates]] = mean[rows[candidates], cols[candidates]] > config.threshold
     raised = _drop_small(raised, config.min_area_m2, grid.resolution_m)
-    near = ndimage.distance_transform_edt(~raised, sampling=grid.resolution_m)[rows, cols] <= config.kerb_band_m
+    near = (
+        ndimage.distance_transform_edt(~raised, sampling=grid.resolution_m)[rows, cols] <= config.kerb_band_m
+    )
     band = both & ~off_road & near
     band_mean = _local_mean(grid, score, band, grid.resolution_m)
     foot = np.zeros((grid.rows, grid.cols), bool)
