@@ -179,13 +179,20 @@ SURFACE_ROWS = {
     "true": "ground_truth",
     "SfM": "sfm",
     "WIGO": "wigo",
+    "SfM, flat (no kerb step)": "ablation_no_kerb_step",
+    "SfM, kerb foot relabelled": "variant_kerb_foot",
+    "true, without the curvature prior, SfM gate and curb-height vote": (
+        "baseline_no_prior_no_gate_no_curb_height_gt_poses"
+    ),
 }
 
 
 def _surface_figures(run: dict[str, Any]) -> list[Expected]:
-    iou = run["iou"]
+    iou, kerb = run["iou"], run["kerb"]
     return [
         run["elevation_rmse_m"] * 100,
+        kerb["elevation_rmse_m_road_and_curb"] * 100,
+        kerb["elevation_rmse_m_curb_cells"] * 100,
         iou["road"],
         iou["curb"],
         iou["lane_marking"],
@@ -196,18 +203,26 @@ def _surface_figures(run: dict[str, Any]) -> list[Expected]:
     ]
 
 
-def test_surface_table() -> None:
-    t = table("poses", "bench/surface.py")
-    assert_names_source(t, "surface.json", "bench/surface.py")
-    recorded = results("surface.json")
+def _surface_run(recorded: dict[str, Any], key: str) -> dict[str, Any]:
+    """A run of bench/surface.py's results: a pose source of `runs`, or a top-level variant."""
     by_poses = {run["poses"]: run for run in recorded["runs"]}
-    for label, poses in SURFACE_ROWS.items():
-        assert_shows(
-            " | ".join(row(t, label)[1:]), _surface_figures(by_poses[poses]), f"surface row {label!r}"
-        )
-    baseline = recorded["baseline_no_prior_no_gate_no_curb_height_gt_poses"]
-    label = "true, without the curvature prior, SfM gate and curb-height vote"
-    assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(baseline), f"surface row {label!r}")
+    return by_poses[key] if key in by_poses else recorded[key]
+
+
+@pytest.mark.parametrize(
+    ("first_header", "results_file", "labels"),
+    [
+        ("poses", "surface.json", list(SURFACE_ROWS)),
+        ("poses, site 9001", "surface_9001.json", list(SURFACE_ROWS)[:2] + list(SURFACE_ROWS)[3:5]),
+    ],
+)
+def test_surface_tables(first_header: str, results_file: str, labels: list[str]) -> None:
+    t = table(first_header, "bench/surface.py")
+    assert_names_source(t, results_file, "bench/surface.py")
+    recorded = results(results_file)
+    for label in labels:
+        run = _surface_run(recorded, SURFACE_ROWS[label])
+        assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(run), f"surface row {label!r}")
 
 
 SFM_ROWS = {

@@ -49,13 +49,16 @@ def layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_off_road_cells_agreeing_at_curb_height_are_raised_and_the_kerb_foot_with_them() -> None:
     road_spread, curb_spread, sidewalk = layout()
-    raised, foot = raised_vertices(
-        GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig()
-    )
+    with_foot = KerbStepConfig(kerb_band_m=0.3)
+    raised, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, with_foot)
     cols = np.tile(np.arange(COLS), ROWS)
     assert raised[sidewalk].all()
     assert foot[(cols == 13) | (cols == 14)].all() and raised[foot].all()
     assert not raised[cols < 13].any() and not foot[sidewalk].any()
+    raised, foot = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig()
+    )
+    assert np.array_equal(raised, sidewalk) and not foot.any()  # no foot by default
 
 
 def test_road_far_from_a_raised_region_is_never_raised() -> None:
@@ -63,7 +66,8 @@ def test_road_far_from_a_raised_region_is_never_raised() -> None:
     cols = np.tile(np.arange(COLS), ROWS)
     curb_spread = np.where(cols < 5, 0.0, curb_spread)  # road that happens to agree better at curb height
     road_spread = np.where(cols < 5, 0.4, road_spread)
-    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig())
+    with_foot = KerbStepConfig(kerb_band_m=0.3)
+    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, with_foot)
     assert not raised[cols < 5].any()
 
 
