@@ -22,6 +22,7 @@ from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -41,6 +42,9 @@ class Surface:
     folder: Path
     reconstructed: bool
     """False when these are the generator's ground-truth rasters (the surface stage has not run)."""
+    kerb_step: np.ndarray | None = None
+    """Metres the ground stands above `elevation` (the surface stage's kerb steps), for the road mesh only:
+    vectors lie on the road and are lifted through `elevation` alone. None: no steps known."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,7 +89,23 @@ def load_surface(folder: Path, *, reconstructed: bool) -> Surface:
     georeference = Georeference.of(bev.georeference, site_origin_xy=(0.0, 0.0))
     elevation = bev.require("elevation").astype(np.float64)
     unobserved = (bev.require("semantic") == int(Semantic.UNOBSERVED)) | ~np.isfinite(elevation)
-    return Surface(elevation, unobserved, georeference, folder, reconstructed)
+    kerb_step = _kerb_step(folder, elevation.shape) if reconstructed else None
+    return Surface(elevation, unobserved, georeference, folder, reconstructed, kerb_step)
+
+
+def _kerb_step(folder: Path, shape: tuple[int, int]) -> np.ndarray | None:
+    """The kerb steps beside a surface stage's raster folder, None when it has none (an older workspace)."""
+    try:
+        workspace, site_id = Workspace.locate(folder)
+    except ValueError:
+        return None
+    path = workspace.surface_kerb_step(site_id)
+    if not path.is_file():
+        return None
+    try:
+        return read_kerb_step(path, shape)
+    except (OSError, ValueError) as err:
+        raise ViewInputError(str(err)) from None
 
 
 def local_frame_of(surface: Surface) -> LocalFrame:
@@ -100,7 +120,8 @@ def local_frame_of(surface: Surface) -> LocalFrame:
 def raster_mesh(
     surface: Surface, photometric: np.ndarray, frame: LocalFrame, *, max_faces: int
 ) -> trimesh.Trimesh:
-    """A coloured grid mesh of the observed cells, subsampled so it has at most `max_faces` triangles."""
+    """A coloured grid mesh of the observed cells standing on their kerb steps, subsampled so it has at most
+    `max_faces` triangles."""
     valid = ~surface.unobserved
     stride = max(1, int(np.ceil(np.sqrt(2 * valid.sum() / max(max_faces, 1)))))
     rows, cols = np.arange(0, valid.shape[0], stride), np.arange(0, valid.shape[1], stride)
@@ -109,7 +130,10 @@ def raster_mesh(
     index[grid_valid] = np.arange(int(grid_valid.sum()))
     rr, cc = np.nonzero(grid_valid)
     xy = surface.georeference.global_from_pixel(np.column_stack([cols[cc], rows[rr]]))
-    vertices = frame.from_global(np.column_stack([xy, surface.elevation[rows[rr], cols[cc]]]))
+    ground = surface.elevation
+    if surface.kerb_step is not None:
+        ground = ground + np.nan_to_num(surface.kerb_step)
+    vertices = frame.from_global(np.column_stack([xy, ground[rows[rr], cols[cc]]]))
     a, b, c, d = index[:-1, :-1], index[:-1, 1:], index[1:, :-1], index[1:, 1:]
     quad = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
     faces = np.concatenate(

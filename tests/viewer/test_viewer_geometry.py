@@ -1,9 +1,12 @@
 """Pure geometry of the 3D view: frustums, polyline segments, picking by click ray."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from app.viewer.geometry import LocalFrame, frustum_segments, pick_element, polyline_segments
+from cama_pipeline.semantics import Semantic
 
 
 def test_frustum_has_its_apex_at_the_camera_centre_and_far_corners_at_depth() -> None:
@@ -60,3 +63,32 @@ def test_raster_mesh_keeps_to_its_face_budget(faces: int) -> None:
     assert 0 < len(mesh.faces) <= faces
     assert mesh.vertices[:, 0].min() >= 10 * 0.5 - 1e-9  # unobserved columns are not meshed
     np.testing.assert_allclose(mesh.vertices[:, 2], 0.01 * mesh.vertices[:, 0] / 0.5, atol=1e-9)
+
+
+def test_raster_mesh_stands_on_the_kerb_steps_and_vectors_stay_on_the_road(tmp_path: Path) -> None:
+    from annotations.schema import Georeference
+    from app.viewer.content import load_surface, raster_mesh
+    from cama_pipeline.bev import BevRasters, RasterGeoreference, write_bev
+    from cama_pipeline.surface.outputs import write_kerb_step
+    from cama_pipeline.workspace import Workspace
+
+    raster_geo = RasterGeoreference(origin_xy=(0.0, 40.0), resolution=0.5, width=40, height=30)
+    semantic = np.full((30, 40), int(Semantic.ROAD), np.uint8)
+    semantic[:, 20:] = int(Semantic.BACKGROUND)
+    step = np.where(semantic == int(Semantic.BACKGROUND), 0.13, 0.0).astype(np.float32)
+    step[0, 0] = np.nan  # an unobserved cell has no step
+    elevation = np.full((30, 40), 2.0, np.float32)
+    photometric = np.zeros((30, 40, 3), np.uint8)
+    workspace = Workspace(tmp_path / "ws")
+    write_bev(
+        workspace.surface_bev("site-001"),
+        BevRasters(raster_geo, semantic, photometric, elevation, np.ones((30, 40), np.uint16)),
+    )
+    write_kerb_step(workspace.surface_kerb_step("site-001"), step)
+    surface = load_surface(workspace.surface_bev("site-001"), reconstructed=True)
+    assert np.array_equal(surface.elevation, elevation)  # what vectors are lifted through: the road alone
+    mesh = raster_mesh(surface, photometric, LocalFrame(np.zeros(3)), max_faces=10_000)
+    sidewalk = mesh.vertices[:, 0] >= 20 * 0.5 - 1e-9
+    np.testing.assert_allclose(mesh.vertices[sidewalk, 2], 2.13, atol=1e-6)
+    np.testing.assert_allclose(mesh.vertices[~sidewalk, 2], 2.0, atol=1e-6)
+    assert Georeference.of(raster_geo, site_origin_xy=(0.0, 0.0)) == surface.georeference
