@@ -4,7 +4,7 @@ A scripted annotator (`app/simulation`) works the backend's annotator queue over
 backend (fresh SQLite database): it accepts proposals that match the ground truth, fixes the others towards it
 (counting vertex drags, inserts, deletes and relabels), rejects the ones that match nothing, and draws what no
 proposal covered. A second, empty copy of the site is drawn from scratch. Every action is priced with the
-keystroke-level model (`app/simulation/costs.py`); both workflows pay the same road-scanning time.
+keystroke-level model (`app/review_effort/costs.py`); both workflows pay the same road-scanning time.
 
 With `--rasters FOLDER` (a reconstruction's BEV rasters) the truth is cut to the cells they observed, as
 `bench/end_to_end.py` does; without it the whole generated truth is the target.
@@ -23,14 +23,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from app.review_effort.truth import observed_true_polylines, true_polylines
 from app.simulation.annotator import correct_proposals, draw_from_scratch
-from app.simulation.workbench import (
-    load_proposals,
-    local_backend,
-    observed_true_polylines,
-    register_synthetic_site,
-    true_polylines,
-)
+from app.simulation.workbench import load_proposals, local_backend, register_synthetic_site
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
 

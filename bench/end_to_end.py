@@ -42,14 +42,9 @@ from surface import truth_at  # bench/surface.py: this script's folder is on sys
 
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
+from app.review_effort.truth import observed_true_polylines
 from app.simulation.annotator import correct_proposals, draw_from_scratch
-from app.simulation.workbench import (
-    kept_map,
-    load_proposals,
-    local_backend,
-    observed_true_polylines,
-    register_synthetic_site,
-)
+from app.simulation.workbench import kept_map, load_proposals, local_backend, register_synthetic_site
 from cama_pipeline.bev import read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Dataset, Pose, load_dataset

@@ -57,6 +57,9 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     # job kinds and auth < API routes < the app and its server
     # (the camera panel's machinery, `app.backend.cameras`, is a foundation: routes and crud import it)
     ("app.backend", ("app", "app.backend", "app.backend.cameras")),
+    # what a careful annotator does with proposals and what it costs, pure of the backend: the retrain job's
+    # second gate and the scripted annotator over HTTP both use it
+    ("app.review_effort", ("app.review_effort",)),
     ("app.backend.jobs.runner", ("app.backend.jobs.runner",)),
     ("app.backend.crud", ("app.backend.crud",)),
     ("app.backend.jobs", ("app.backend.jobs", "app.backend.auth_cache", "app.backend.loop")),

@@ -1,5 +1,6 @@
-"""The scripted annotator: leases items from the backend's annotator queue over HTTP, accepts, fixes or rejects
-each proposal as `plan.decide` says, draws what nobody proposed, and books the time every action would take.
+"""The scripted annotator over HTTP: leases items from the backend's annotator queue, accepts, fixes or rejects
+each proposal as `app.review_effort.plan.decide` says, draws what nobody proposed, and books the time every action
+would take (`app.review_effort.session.work_queue`, on the backend's queue).
 
 Two workflows are measured on the same site and truth: correcting proposals (`correct_proposals`) and drawing
 everything from an empty site (`draw_from_scratch`). Time per km of road compares them (the paper's claim that
@@ -7,56 +8,22 @@ correcting VMA proposals is more than twice as fast as drawing).
 """
 
 import logging
-from collections import Counter, defaultdict
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
 import numpy as np
 
-from app.simulation.costs import ActionCosts
-from app.simulation.plan import (
-    Decision,
-    Polyline,
-    SimulationConfig,
-    clicked_vertices,
-    decide,
-    drawing_seconds,
-    road_length_km,
-)
+from app.review_effort import session as review
+from app.review_effort.costs import ActionCosts
+from app.review_effort.plan import Decision, Polyline, SimulationConfig, clicked_vertices
+from app.review_effort.session import SessionLog
 
 logger = logging.getLogger(__name__)
 
 
 class SimulationError(RuntimeError):
     """The backend refused a request the annotator needs; names the request and the answer."""
-
-
-@dataclass
-class SessionLog:
-    """What one simulated session did and the time it would have taken a person."""
-
-    seconds: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
-    counts: Counter[str] = field(default_factory=Counter)
-    road_km: float = 0.0
-
-    @property
-    def total_s(self) -> float:
-        return float(sum(self.seconds.values()))
-
-    def hours_per_km(self) -> float:
-        """Person-hours per km of road."""
-        return self.total_s / 3600 / self.road_km if self.road_km > 0 else float("nan")
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "seconds": dict(self.seconds),
-            "counts": dict(self.counts),
-            "total_s": self.total_s,
-            "road_km": self.road_km,
-            "hours_per_km": self.hours_per_km(),
-        }
 
 
 class ApiSession:
@@ -86,62 +53,54 @@ def _site_truths(session: ApiSession, site_id: int, truths_global: Sequence[Poly
     return [Polyline(t.cls, np.asarray(t.points, dtype=np.float64)[:, :2] - origin) for t in truths_global]
 
 
-def _pending(session: ApiSession, site_id: int, leased: dict[str, Any]) -> list[dict[str, Any]]:
-    """The other proposals still waiting for a verdict: what the annotator sees around the leased one."""
-    elements = session.call("GET", f"/api/sites/{site_id}/elements", params={"state": "proposed"})
-    return [e for e in elements if e["id"] != leased["id"]]
+class HttpQueue:
+    """A backend site's annotator queue as a `review_effort.session.ReviewQueue`: items are element dicts."""
 
+    def __init__(self, session: ApiSession, site_id: int) -> None:
+        self.session = session
+        self.site_id = site_id
 
-def _as_polyline(element: dict[str, Any]) -> Polyline:
-    return Polyline(element["class"], np.asarray(element["points"], float))
+    def next(self) -> dict[str, Any] | None:
+        lease = self.session.call("POST", f"/api/sites/{self.site_id}/queue/next")
+        return None if lease is None else dict(lease["element"])
 
+    def polyline(self, item: dict[str, Any]) -> Polyline:
+        return Polyline(item["class"], np.asarray(item["points"], float))
 
-def _apply(
-    session: ApiSession,
-    site_id: int,
-    element: dict[str, Any],
-    decision: Decision,
-    pending: Sequence[dict[str, Any]],
-) -> None:
-    """Send one decision: a fix deletes the pieces merged into it (as the editor's merge does), PATCHes the
-    points and gives the `fixed` verdict; accept and reject are verdicts."""
-    base = f"/api/sites/{site_id}/elements/{element['id']}"
-    version = int(element["version"])
-    for k in decision.merged:
-        piece = pending[k]
-        session.call(
-            "DELETE", f"/api/sites/{site_id}/elements/{piece['id']}", params={"version": piece["version"]}
+    def pending(self, item: dict[str, Any]) -> list[dict[str, Any]]:
+        """The other proposals still waiting for a verdict: what the annotator sees around the leased one."""
+        elements = self.session.call(
+            "GET", f"/api/sites/{self.site_id}/elements", params={"state": "proposed"}
         )
-    if decision.kind == "fix":
-        body: dict[str, Any] = {"version": version, "points": np.asarray(decision.points).tolist()}
-        if decision.relabel:
-            body["class"] = decision.relabel
-        version = int(session.call("PATCH", base, json=body)["version"])
-    verdict = {"accept": "accepted", "fix": "fixed", "reject": "rejected"}[decision.kind]
-    session.call("POST", f"{base}/review", json={"state": verdict, "version": version})
+        return [e for e in elements if e["id"] != item["id"]]
 
+    def apply(self, item: dict[str, Any], decision: Decision, pending: Sequence[dict[str, Any]]) -> None:
+        """A fix deletes the pieces merged into it (as the editor's merge does), PATCHes the points and gives the
+        `fixed` verdict; accept and reject are verdicts."""
+        base = f"/api/sites/{self.site_id}/elements/{item['id']}"
+        version = int(item["version"])
+        for k in decision.merged:
+            piece = pending[k]
+            self.session.call(
+                "DELETE",
+                f"/api/sites/{self.site_id}/elements/{piece['id']}",
+                params={"version": piece["version"]},
+            )
+        if decision.kind == "fix":
+            body: dict[str, Any] = {"version": version, "points": np.asarray(decision.points).tolist()}
+            if decision.relabel:
+                body["class"] = decision.relabel
+            version = int(self.session.call("PATCH", base, json=body)["version"])
+        verdict = {"accept": "accepted", "fix": "fixed", "reject": "rejected"}[decision.kind]
+        self.session.call("POST", f"{base}/review", json={"state": verdict, "version": version})
 
-def _draw(session: ApiSession, site_id: int, truth: Polyline, config: SimulationConfig) -> None:
-    """Draw a new element and give it the `accepted` verdict, as the editor's draw-then-accept does."""
-    points = clicked_vertices(truth, config).tolist()
-    body = {"class": truth.cls, "points": points, "source": "human"}
-    element = session.call("POST", f"/api/sites/{site_id}/elements", json=body)
-    review = {"state": "accepted", "version": int(element["version"])}
-    session.call("POST", f"/api/sites/{site_id}/elements/{element['id']}/review", json=review)
-
-
-def _book_drawing(
-    log: SessionLog,
-    session: ApiSession,
-    site_id: int,
-    truths: Sequence[Polyline],
-    config: SimulationConfig,
-    costs: ActionCosts,
-) -> None:
-    for truth in truths:
-        _draw(session, site_id, truth, config)
-        log.seconds["draw"] += drawing_seconds(truth, config, costs) + costs.verdict_s
-        log.counts["drawn"] += 1
+    def draw(self, truth: Polyline, config: SimulationConfig) -> None:
+        """Draw a new element and give it the `accepted` verdict, as the editor's draw-then-accept does."""
+        points = clicked_vertices(truth, config).tolist()
+        body = {"class": truth.cls, "points": points, "source": "human"}
+        element = self.session.call("POST", f"/api/sites/{self.site_id}/elements", json=body)
+        verdict = {"state": "accepted", "version": int(element["version"])}
+        self.session.call("POST", f"/api/sites/{self.site_id}/elements/{element['id']}/review", json=verdict)
 
 
 def correct_proposals(
@@ -156,30 +115,10 @@ def correct_proposals(
     """Work the annotator queue until it is empty, then draw the true elements no proposal covered."""
     config, costs = config or SimulationConfig(), costs or ActionCosts()
     truths = _site_truths(session, site_id, truths_global)
-    log = SessionLog(road_km=road_length_km(truths))
-    used: set[int] = set()
-    for _ in range(max_items):
-        lease = session.call("POST", f"/api/sites/{site_id}/queue/next")
-        if lease is None:
-            break
-        element = lease["element"]
-        pending = _pending(session, site_id, element)
-        decision = decide(
-            _as_polyline(element), truths, used, config, [_as_polyline(e) for e in pending], costs
-        )
-        if decision.target is not None:
-            used.add(decision.target)
-        _apply(session, site_id, element, decision, pending)
-        log.seconds[decision.kind] += decision.seconds(costs)
-        log.counts[decision.kind] += 1
-        log.counts["vertices_moved"] += decision.moved
-        log.counts["pieces_merged"] += len(decision.merged)
-        log.counts["gaps_drawn"] += decision.gaps
-    else:
-        raise SimulationError(f"site {site_id}: queue not empty after {max_items} items")
-    _book_drawing(log, session, site_id, [t for i, t in enumerate(truths) if i not in used], config, costs)
-    log.seconds["scan"] += log.road_km * 10 * costs.scan_per_100m_s
-    return log
+    try:
+        return review.work_queue(HttpQueue(session, site_id), truths, config, costs, max_items=max_items)
+    except review.UnfinishedQueue as error:
+        raise SimulationError(f"site {site_id}: {error}") from None
 
 
 def draw_from_scratch(
@@ -193,7 +132,4 @@ def draw_from_scratch(
     """Draw every true element on a site that has no proposals."""
     config, costs = config or SimulationConfig(), costs or ActionCosts()
     truths = _site_truths(session, site_id, truths_global)
-    log = SessionLog(road_km=road_length_km(truths))
-    _book_drawing(log, session, site_id, truths, config, costs)
-    log.seconds["scan"] += log.road_km * 10 * costs.scan_per_100m_s
-    return log
+    return review.draw_from_scratch(HttpQueue(session, site_id), truths, config, costs)

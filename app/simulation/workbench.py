@@ -1,8 +1,9 @@
 """A throwaway in-process backend for the simulated annotator's benchmarks: an admin and an annotator session
-on a fresh SQLite database, synthetic sites registered, proposal files loaded, ground truth read."""
+on a fresh SQLite database, synthetic sites registered, proposal files loaded (the ground truth they work
+towards: `app.review_effort.truth`)."""
 
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -13,10 +14,6 @@ from annotations.schema import AnnotationSet
 from app.backend.config import Settings
 from app.backend.main import create_app
 from app.simulation.annotator import ApiSession
-from app.simulation.plan import Polyline
-from cama_pipeline.evaluate.inputs import load_vector_map
-from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
-from models.vma.rasters import load_site_rasters
 
 _PASSWORD = "simulated-annotator"
 
@@ -41,24 +38,6 @@ def local_backend(*data_roots: Path) -> Iterator[tuple[ApiSession, ApiSession]]:
             client.app.state.engine.dispose()  # type: ignore[attr-defined]
 
 
-def true_polylines(site: Path) -> list[Polyline]:
-    """The generator's true vectors of a synthetic site (global metres, 2D)."""
-    elements = load_vector_map(Path(site) / "ground_truth" / "vector_map.json")
-    return [Polyline(e.cls, np.asarray(e.points)[:, :2]) for e in elements]
-
-
-def observed_true_polylines(site: Path, rasters_folder: Path) -> list[Polyline]:
-    """The site's true vectors cut to the cells a reconstruction's rasters observed (nobody draws road that no
-    camera saw)."""
-    rasters = load_site_rasters(rasters_folder)
-    mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
-    return [
-        Polyline(t.cls, part)
-        for t in true_polylines(site)
-        for part in observed_parts(t.points, t.closed, mask)
-    ]
-
-
 def register_synthetic_site(admin: ApiSession, site: Path, name: str) -> int:
     """Register a synthetic site folder; its backend id."""
     body = {"name": name, "synthetic_dir": str(Path(site).resolve())}
@@ -72,15 +51,21 @@ def site_origin(session: ApiSession, site_id: int) -> np.ndarray:
 def load_proposals(admin: ApiSession, site_id: int, path: Path) -> int:
     """Bulk-load a proposals file, moving its points from the file's site frame to the backend site's."""
     proposals = AnnotationSet.read_json(path)
-    shift = np.asarray(proposals.georeference.site_origin_xy, float) - site_origin(admin, site_id)
+    file_origin = np.asarray(proposals.georeference.site_origin_xy, float)
+    global_proposals = [
+        (e.cls, np.asarray(e.points_2d, float) + file_origin, e.confidence) for e in proposals.elements
+    ]
+    return post_proposals(admin, site_id, global_proposals)
+
+
+def post_proposals(
+    admin: ApiSession, site_id: int, proposals: Sequence[tuple[str, np.ndarray, float | None]]
+) -> int:
+    """Bulk-load (class, global 2D points, confidence) proposals into a backend site; how many."""
+    origin = site_origin(admin, site_id)
     elements = [
-        {
-            "class": e.cls,
-            "points": (np.asarray(e.points_2d) + shift).tolist(),
-            "confidence": e.confidence,
-            "source": "proposal",
-        }
-        for e in proposals.elements
+        {"class": cls, "points": (points - origin).tolist(), "confidence": confidence, "source": "proposal"}
+        for cls, points, confidence in proposals
     ]
     if elements:
         admin.call("POST", f"/api/sites/{site_id}/elements/bulk", json={"elements": elements})

@@ -5,6 +5,10 @@ around them too, where the labels say nothing is there). The promoted checkpoint
 around corrected elements mixed with procedural patches (against forgetting), then both it and the candidate
 are evaluated with Chamfer-AP on held-out validation sites; the candidate is saved as a new version with
 its metrics and data either way, and promoted only if its mAP does not drop (by more than `tolerance`).
+A caller may give a second gate, `review` (the backend's job gives the simulated annotator's time,
+`app.review_effort.review_time`, which this layer cannot import): it scores each model's proposer on the same
+sites, and the candidate is promoted only if the annotator's correction time does not grow (by more than
+`time_tolerance`, a share) either.
 
 Patches are cut wherever corrections are; unreviewed elements inside such a patch count as background,
 so correction batches should cover whole regions (the lead view retrains after regions are reviewed).
@@ -14,7 +18,7 @@ candidate records the pre-accept threshold calibrated on its validation proposal
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,7 +40,7 @@ from models.vma.infer import InferenceConfig, predict_site
 from models.vma.loop import THRESHOLD_KEY
 from models.vma.model import VmaNet
 from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, site_grid, site_sample
-from models.vma.rasters import load_site_rasters
+from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.rule_based import propose_rule_based
 from models.vma.train import Sampler, fit
 from models.vma.vectors import Vector, vectors_from_annotations
@@ -68,12 +72,21 @@ class RetrainConfig:
     min_labels: int = 1
     """Fewer labelled elements than this: nothing to learn from, a ValueError."""
     inference: InferenceConfig = field(default_factory=InferenceConfig)
+    time_tolerance: float = 0.0
+    """With a `review` gate: promoted only when its correction time <= current time * (1 + time_tolerance)."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.replay_share < 1.0 or self.tolerance < 0 or self.min_labels < 1:
             raise ValueError(
                 "RetrainConfig: replay_share in [0, 1), tolerance >= 0, min_labels >= 1 required"
             )
+        if self.time_tolerance < 0:
+            raise ValueError(f"RetrainConfig: time_tolerance must be >= 0, got {self.time_tolerance}")
+
+
+Proposer = Callable[[SiteRasters], list[Vector]]
+ReviewGate = Callable[[Proposer, Sequence[Path]], dict[str, Any]]
+"""Scores a proposer on validation sites by review effort: {"correction_s": seconds, ...} at least."""
 
 
 @dataclass(frozen=True)
@@ -94,6 +107,12 @@ def passes_gate(current_map: float | None, candidate_map: float | None, toleranc
     if candidate_map is None:
         return False
     return current_map is None or candidate_map >= current_map - tolerance
+
+
+def passes_time_gate(current_s: float, candidate_s: float, tolerance: float) -> bool:
+    """The review gate: the candidate's proposals take the annotator no longer than the current model's (plus a
+    `tolerance` share)."""
+    return candidate_s <= current_s * (1.0 + tolerance)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,10 +148,30 @@ def correction_sampler(
     return draw
 
 
-def evaluate_model(model: VmaNet, sites: Sequence[Path], inference: InferenceConfig) -> dict[str, Any]:
-    """Chamfer-AP of a model's site proposals on validation sites."""
-    return evaluate_proposer(
-        lambda rasters: predict_site(model, rasters, inference, show_progress=False), sites
+def model_proposer(model: VmaNet, inference: InferenceConfig) -> Proposer:
+    """A site's proposals by `model`."""
+    return lambda rasters: predict_site(model, rasters, inference, show_progress=False)
+
+
+def evaluate_model(
+    model: VmaNet, sites: Sequence[Path], inference: InferenceConfig, review: ReviewGate | None = None
+) -> dict[str, Any]:
+    """Chamfer-AP of a model's site proposals on validation sites, and their `review` figures (key "review")
+    when a review gate is given."""
+    metrics = evaluate_proposer(model_proposer(model, inference), sites)
+    if review is not None:
+        metrics["review"] = review(model_proposer(model, inference), sites)
+    return metrics
+
+
+def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: RetrainConfig) -> bool:
+    """Both gates on two models' `evaluate_model` metrics: mAP, and the review time when both have one."""
+    if not passes_gate(current["mean_ap"], candidate["mean_ap"], config.tolerance):
+        return False
+    if "review" not in current or "review" not in candidate:
+        return True
+    return passes_time_gate(
+        current["review"]["correction_s"], candidate["review"]["correction_s"], config.time_tolerance
     )
 
 
@@ -142,9 +181,11 @@ def retrain_from_corrections(
     validation_sites: Sequence[Path],
     config: RetrainConfig | None = None,
     *,
+    review: ReviewGate | None = None,
     show_progress: bool = False,
 ) -> RetrainResult:
-    """Fine-tune the promoted model of `registry` on corrections; save the candidate; promote it if the gate passes."""
+    """Fine-tune the promoted model of `registry` on corrections; save the candidate; promote it if the gates
+    pass (mAP, and `review` when given)."""
     config = config or RetrainConfig()
     started = time.perf_counter()
     current = load_checkpoint(Path(registry))
@@ -166,7 +207,7 @@ def retrain_from_corrections(
         raise ValueError(
             f"retrain: {num_labels} accepted/fixed annotations, need at least {config.min_labels}"
         )
-    current_metrics = evaluate_model(current.model, validation_sites, config.inference)
+    current_metrics = evaluate_model(current.model, validation_sites, config.inference, review)
     candidate = load_checkpoint(current.path).model  # a fresh copy to fine-tune
     fit(
         candidate,
@@ -175,8 +216,8 @@ def retrain_from_corrections(
         show_progress=show_progress,
     )
     candidate.cpu()
-    candidate_metrics = evaluate_model(candidate, validation_sites, config.inference)
-    promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)
+    candidate_metrics = evaluate_model(candidate, validation_sites, config.inference, review)
+    promoted = gate_passes(current_metrics, candidate_metrics, config)
     meta = {
         "parent": current.path.name,
         "train_config": config_dict(config.train),
@@ -222,12 +263,14 @@ def gate_checkpoint(
     config: RetrainConfig | None = None,
     *,
     allow_new_config: bool = False,
+    review: ReviewGate | None = None,
 ) -> tuple[bool, dict[str, Any], dict[str, Any]]:
     """Evaluate a candidate version of `registry` against the promoted one; promote it if the gate passes.
 
     Returns (promoted, current metrics, candidate metrics). A candidate for another model config is refused
     with a CheckpointError before any evaluation, unless `allow_new_config` (a newly trained architecture
-    competing with the promoted one on the same validation sites).
+    competing with the promoted one on the same validation sites). `review`: the second gate, as in
+    `retrain_from_corrections`.
     """
     config = config or RetrainConfig()
     current = load_checkpoint(Path(registry))
@@ -235,9 +278,9 @@ def gate_checkpoint(
     for site in validation_sites:
         ensure_unseen(current, Path(site))
         ensure_unseen(challenger, Path(site))
-    current_metrics = evaluate_model(current.model, validation_sites, config.inference)
-    candidate_metrics = evaluate_model(challenger.model, validation_sites, config.inference)
-    promoted = passes_gate(current_metrics["mean_ap"], candidate_metrics["mean_ap"], config.tolerance)
+    current_metrics = evaluate_model(current.model, validation_sites, config.inference, review)
+    candidate_metrics = evaluate_model(challenger.model, validation_sites, config.inference, review)
+    promoted = gate_passes(current_metrics, candidate_metrics, config)
     if promoted:
         promote(Path(registry), challenger.path.name)
     logger.info(

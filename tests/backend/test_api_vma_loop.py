@@ -198,6 +198,11 @@ def test_retrain_runs_the_gate_and_queues_a_refresh_after_promotion(
     corrections = json.loads((Path(settings.vma_registry or "") / "v0002" / "checkpoint.json").read_text())
     assert len(corrections["data"]["corrections"]) == 2
     assert "validation mAP" in done["message"] and ("promoted" in done["message"]) == outcome["promoted"]
+    reviewed = outcome["current_metrics"]["review"], outcome["candidate_metrics"]["review"]
+    assert all(r["drawing_s"] > 0 and r["correction_s"] > 0 for r in reviewed)  # the annotator gate ran
+    assert "simulated annotator" in done["message"] and "faster than drawing" in done["message"]
+    if outcome["promoted"]:  # both gates passed
+        assert reviewed[1]["correction_s"] <= reviewed[0]["correction_s"]
     assert (Path(settings.vma_registry or "") / "v0002" / "checkpoint.json").is_file()
     if outcome["promoted"]:
         jobs = client.get(f"/api/sites/{site_id}/jobs", headers=headers["lead"]).json()

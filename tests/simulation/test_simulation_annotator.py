@@ -9,8 +9,10 @@ from fastapi.testclient import TestClient
 
 from app.backend.config import Settings
 from app.backend.main import create_app
+from app.review_effort.costs import ActionCosts
+from app.review_effort.plan import Polyline, SimulationConfig
+from app.review_effort.session import MemoryQueue, work_queue
 from app.simulation.annotator import ApiSession, SimulationError, correct_proposals, draw_from_scratch
-from app.simulation.plan import Polyline
 from tests.backend.backend_helpers import GEOREFERENCE, ORIGIN_XY, PASSWORD
 
 TRUTH = [
@@ -133,3 +135,29 @@ def test_good_proposals_cost_less_than_drawing_from_scratch(client: TestClient, 
 def test_a_refused_request_names_the_request(client: TestClient) -> None:
     with pytest.raises(SimulationError, match="POST /api/auth/login: HTTP 401"):
         ApiSession(client, "nobody", PASSWORD)
+
+
+def test_the_in_memory_queue_books_what_the_backend_queue_books(client: TestClient, tmp_path: Path) -> None:
+    proposals = [
+        ("boundary", TRUTH[0].points + [0.0, 0.05]),
+        ("divider", TRUTH[1].points + [[0.0, 0.0], [0.0, 0.7]]),
+        ("divider", TRUTH[2].points + [[0.0, 0.0], [0.0, 1.2], [0.0, 0.0]]),
+        ("divider", np.array([[1010.0, 2050.0], [1090.0, 2050.0]])),
+        ("boundary", np.array([[1055.0, 2029.9], [1090.0, 2029.9]])),  # a second piece of TRUTH[1]
+    ]
+    confidences = [0.9, 0.2, 0.5, 0.3, 0.4]
+    admin_site = _site(client, tmp_path, [])
+    admin = ApiSession(client, "root", PASSWORD)
+    elements = [
+        {"class": cls, "points": (pts - ORIGIN_XY).tolist(), "confidence": c, "source": "proposal"}
+        for (cls, pts), c in zip(proposals, confidences, strict=True)
+    ]
+    admin.call("POST", f"/api/sites/{admin_site}/elements/bulk", json={"elements": elements})
+    over_http = correct_proposals(ApiSession(client, "ann", PASSWORD), admin_site, TRUTH)
+    queue = MemoryQueue(
+        [(Polyline(cls, pts), c) for (cls, pts), c in zip(proposals, confidences, strict=True)]
+    )
+    in_memory = work_queue(queue, TRUTH, SimulationConfig(), ActionCosts())
+    assert in_memory.counts == over_http.counts
+    assert in_memory.seconds == pytest.approx(over_http.seconds)
+    assert in_memory.counts["pieces_merged"] == 1 and len(queue.drawn) == in_memory.counts["drawn"] == 1

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from app.simulation.costs import ActionCosts
-from app.simulation.plan import Polyline, SimulationConfig, decide, drawing_seconds, road_length_km
+from app.review_effort.costs import ActionCosts
+from app.review_effort.plan import Polyline, SimulationConfig, decide, drawing_seconds, road_length_km
 
 CONFIG = SimulationConfig()
 LINE = Polyline("divider", np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]]))

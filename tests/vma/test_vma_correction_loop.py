@@ -16,6 +16,7 @@ from models.vma.retrain import (
     Corrections,
     RetrainConfig,
     gate_checkpoint,
+    gate_passes,
     passes_gate,
     retrain_from_corrections,
 )
@@ -103,6 +104,44 @@ def test_gate_refuses_a_deliberately_bad_checkpoint(bev_sites: dict[str, Path], 
 def test_gate_rule() -> None:
     assert passes_gate(0.5, 0.5, 0.0) and passes_gate(None, 0.1, 0.0) and passes_gate(0.5, 0.48, 0.05)
     assert not passes_gate(0.5, 0.49, 0.0) and not passes_gate(0.5, None, 0.0)
+
+
+def test_the_review_gate_refuses_a_model_that_costs_the_annotator_more_time() -> None:
+    config = RetrainConfig(tolerance=0.0, time_tolerance=0.1)
+    current = {"mean_ap": 0.5, "review": {"correction_s": 100.0}}
+    assert gate_passes(current, {"mean_ap": 0.6, "review": {"correction_s": 109.0}}, config)
+    assert not gate_passes(current, {"mean_ap": 0.6, "review": {"correction_s": 111.0}}, config)
+    assert not gate_passes(current, {"mean_ap": 0.4, "review": {"correction_s": 50.0}}, config)
+    assert gate_passes({"mean_ap": 0.5}, {"mean_ap": 0.5}, config)  # no review gate: mAP alone
+    with pytest.raises(ValueError, match="time_tolerance"):
+        RetrainConfig(time_tolerance=-0.1)
+
+
+@pytest.mark.parametrize(("candidate_s", "promoted"), [(150.0, False), (80.0, True)])
+def test_retraining_promotes_only_past_the_review_gate(
+    drawn_site: Path, tmp_path: Path, candidate_s: float, promoted: bool
+) -> None:
+    registry = tmp_path / "registry"
+    promote(registry, save_version(registry, VmaNet(LOOP), {"metrics": {}, "data": NOTHING_SEEN}).name)
+    truth = read_vectors(vector_map_of(drawn_site))
+    annotations, _, _ = simulated_review(drawn_site, truth, 1.0, np.random.default_rng(0))
+    seconds = iter([100.0, candidate_s])  # the current model is reviewed first, then the candidate
+
+    def review(propose, sites):  # type: ignore[no-untyped-def]
+        propose(load_site_rasters(sites[0]))  # the gate hands over a working proposer
+        return {"correction_s": next(seconds)}
+
+    config = RetrainConfig(train=TrainConfig(steps=2, batch_size=2), tolerance=1.0)
+    result = retrain_from_corrections(
+        registry,
+        [Corrections(drawn_site, annotations)],
+        [hand_drawn_site(tmp_path / "val")],
+        config,
+        review=review,
+    )
+    assert result.current_metrics["review"] == {"correction_s": 100.0}
+    assert result.candidate_metrics["review"] == {"correction_s": candidate_s}
+    assert result.promoted is promoted and (current_version(registry) == result.candidate) is promoted
 
 
 def test_retrain_needs_labels(drawn_site: Path, tmp_path: Path) -> None:

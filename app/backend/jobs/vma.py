@@ -1,5 +1,6 @@
 """The VMA loop's job kinds: `retrain` (fine-tune on the corrections of every site in the database, or of the job's
-site alone, behind the evaluation gate) and
+site alone, behind the evaluation gates: validation mAP, and the simulated annotator's correction time on the
+validation sites, `app.review_effort.review_time`) and
 `refresh_proposals` (re-run the proposer and replace proposals nobody has touched).
 
 Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
@@ -65,6 +66,16 @@ class RetrainParams(BaseModel):
     every_site: bool = Field(
         default=True,
         description="Learn from the corrections of every site in the database (false: the job's site only).",
+    )
+    annotator_gate: bool = Field(
+        default=True,
+        description="Second gate: the simulated annotator's correction time on the validation sites.",
+    )
+    time_tolerance: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="Annotator gate: promote when the correction time <= current * (1 + this).",
     )
 
 
@@ -135,15 +146,24 @@ def _retrain_child(
     corrections: list["Corrections"],
     validation: list[Path],
     config: "RetrainConfig",
+    annotator_gate: bool,
     out: Path,
 ) -> None:
     """Child process body: retrain and write the outcome (or the error) to `out`, the steps beside it."""
+    from app.review_effort.review_time import review_time
     from models.vma.retrain import retrain_from_corrections
 
     logging.basicConfig(level=logging.INFO)
     logging.getLogger(TRAIN_LOGGER).addHandler(StepReporter(out.parent / PROGRESS_FILE))
     try:
-        result = retrain_from_corrections(registry, corrections, validation, config, show_progress=False)
+        result = retrain_from_corrections(
+            registry,
+            corrections,
+            validation,
+            config,
+            review=review_time if annotator_gate else None,
+            show_progress=False,
+        )
         payload: dict[str, Any] = {
             "candidate": result.candidate.name,
             "promoted": result.promoted,
@@ -187,13 +207,24 @@ def _count(annotations: AnnotationSet, states: tuple[str, ...]) -> int:
 
 
 def _gate_message(outcome: dict[str, Any]) -> str:
-    """One line: the gate decision with both validation mAPs."""
-    new, old = outcome["candidate_metrics"].get("mean_ap"), outcome["current_metrics"].get("mean_ap")
+    """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured)."""
+    candidate, current = outcome["candidate_metrics"], outcome["current_metrics"]
     verdict = "promoted" if outcome["promoted"] else "kept out by the gate"
+    review = ""
+    if "review" in candidate and "review" in current:
+        new_s, old_s = candidate["review"]["correction_s"], current["review"]["correction_s"]
+        review = (
+            f"; simulated annotator {new_s:.0f} s vs {old_s:.0f} s before "
+            f"({_speed_up(candidate['review'])} vs {_speed_up(current['review'])} faster than drawing)"
+        )
     return (
-        f"{outcome['candidate']} {verdict}: validation mAP {new} vs {old} before; "
-        f"{outcome['labels']} labels, {outcome['negatives']} negatives"
+        f"{outcome['candidate']} {verdict}: validation mAP {candidate.get('mean_ap')} vs "
+        f"{current.get('mean_ap')} before{review}; {outcome['labels']} labels, {outcome['negatives']} negatives"
     )
+
+
+def _speed_up(review: dict[str, Any]) -> str:
+    return "n/a" if review.get("speed_up") is None else f"{review['speed_up']:.2f}x"
 
 
 def run_retrain(context: JobContext, params: RetrainParams, *, settings: Settings) -> JobResult:
@@ -225,8 +256,10 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
             steps=params.steps, batch_size=params.batch_size, learning_rate=params.learning_rate
         ),
         tolerance=params.tolerance,
+        time_tolerance=params.time_tolerance,
     )
-    args = (settings.vma_registry, corrections, list(settings.vma_validation_sites), config)
+    validation = list(settings.vma_validation_sites)
+    args = (settings.vma_registry, corrections, validation, config, params.annotator_gate)
     out = context.workdir / RETRAIN_FILE
     outcome = _run_child(context, args, out)
     message = _gate_message(outcome)

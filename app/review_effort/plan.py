@@ -2,7 +2,7 @@
 element (counting the vertex edits that takes, merging the other proposals lying on the same element and
 drawing the stretches none of them covers), or reject it; and what drawing a missed element costs.
 
-Pure functions over polylines in one frame (site metres); the HTTP loop in `annotator.py` applies them.
+Pure functions over polylines in one frame (metres); `session.work_queue` applies them to a queue of proposals.
 """
 
 from collections.abc import Sequence
@@ -13,7 +13,7 @@ import numpy as np
 from shapely.geometry import LineString, Point
 
 from annotations.geometry import resample_fixed, simplify
-from app.simulation.costs import ActionCosts
+from app.review_effort.costs import ActionCosts
 from cama_pipeline.evaluate.chamfer_ap import chamfer_distance
 
 _SAMPLES = 50

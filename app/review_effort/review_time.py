@@ -1,0 +1,50 @@
+"""The simulated annotator's time on a proposer's output over validation sites: the second gate of VMA retraining.
+
+Chamfer mAP says how close proposals are; what the loop is for is the annotators' time. For each validation site
+(a synthetic site folder, or a BEV-only VMA site, with its true vectors), the proposer's vectors at or above
+`min_confidence` (as `cama propose` keeps them, made simple as in a proposals file) go into an in-memory queue
+(`session.MemoryQueue`, the backend's queue order) and the scripted annotator corrects them towards the true
+vectors cut to the observed cells, then draws the same truth from scratch. The figures are the seconds of both
+workflows summed over the sites, and their ratio (the speed-up over drawing). `bench/end_to_end.py` measures the
+same annotator through the real backend.
+"""
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from app.review_effort.costs import ActionCosts
+from app.review_effort.plan import Polyline, SimulationConfig
+from app.review_effort.session import MemoryQueue, draw_from_scratch, work_queue
+from app.review_effort.truth import observed_true_polylines
+from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
+from models.vma.vectors import Vector, simple_geometry
+
+MIN_CONFIDENCE = 0.1
+"""Proposals below this are dropped before review, as `cama propose` and the refresh job do by default."""
+
+
+def review_time(
+    propose: Callable[[SiteRasters], list[Vector]],
+    sites: Sequence[Path],
+    *,
+    min_confidence: float = MIN_CONFIDENCE,
+) -> dict[str, Any]:
+    """{"correction_s", "drawing_s", "speed_up", "sites"} of the scripted annotator on `propose`'s output."""
+    if not sites:
+        raise ValueError("review_time: no validation sites given")
+    config, costs = SimulationConfig(), ActionCosts()
+    correction_s = drawing_s = 0.0
+    for site in sites:
+        truths = observed_true_polylines(Path(site), raster_dir_of(Path(site)))
+        kept = [v for v in propose(load_site_rasters(Path(site))) if v.score >= min_confidence]
+        vectors = [v for v in (simple_geometry(v) for v in kept) if v is not None]
+        queue = MemoryQueue([(Polyline(v.cls, v.points), min(v.score, 1.0)) for v in vectors])
+        correction_s += work_queue(queue, truths, config, costs).total_s
+        drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
+    return {
+        "correction_s": correction_s,
+        "drawing_s": drawing_s,
+        "speed_up": drawing_s / correction_s if correction_s > 0 else None,
+        "sites": [str(site) for site in sites],
+    }

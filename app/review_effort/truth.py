@@ -1,0 +1,28 @@
+"""The truth a simulated annotator works towards: a synthetic site's true vectors, as 2D polylines."""
+
+from pathlib import Path
+
+import numpy as np
+
+from app.review_effort.plan import Polyline
+from cama_pipeline.evaluate.inputs import load_vector_map
+from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from models.vma.rasters import load_site_rasters, vector_map_of
+
+
+def true_polylines(site: Path) -> list[Polyline]:
+    """The generator's true vectors of a synthetic site or a BEV-only VMA site (global metres, 2D)."""
+    elements = load_vector_map(vector_map_of(Path(site)))
+    return [Polyline(e.cls, np.asarray(e.points)[:, :2]) for e in elements]
+
+
+def observed_true_polylines(site: Path, rasters_folder: Path) -> list[Polyline]:
+    """The site's true vectors cut to the cells a reconstruction's rasters observed (nobody draws road that no
+    camera saw)."""
+    rasters = load_site_rasters(rasters_folder)
+    mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
+    return [
+        Polyline(t.cls, part)
+        for t in true_polylines(site)
+        for part in observed_parts(t.points, t.closed, mask)
+    ]
