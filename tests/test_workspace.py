@@ -34,6 +34,7 @@ EXPECTED = {
     "surface_dir": ("site-001", "surface/site-001"),
     "surface_bev": ("site-001", "surface/site-001/bev"),
     "surface_mesh": ("site-001", "surface/site-001/mesh.ply"),
+    "surface_kerb_step": ("site-001", "surface/site-001/kerb_step.npy"),
     "surface_report": ("site-001", "surface/site-001/report.json"),
     "proposals": ("site-001", "proposals/site-001.json"),
 }
