@@ -136,6 +136,8 @@ class MemoryQueue:
     proposals: list[tuple[Polyline, float | None]]
     """(polyline, confidence) in the frame of the truths."""
     waiting: list[int] = field(default_factory=list)
+    verdicts: dict[int, Decision] = field(default_factory=dict)
+    """The decision on each reviewed proposal (merged pieces have none: they were deleted)."""
     drawn: list[Polyline] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -157,6 +159,7 @@ class MemoryQueue:
     def apply(self, item: int, decision: Decision, pending: Sequence[int]) -> None:
         merged = {pending[k] for k in decision.merged}
         self.waiting = [i for i in self.waiting if i not in merged]
+        self.verdicts[item] = decision
 
     def draw(self, truth: Polyline, config: SimulationConfig) -> None:
         self.drawn.append(truth)

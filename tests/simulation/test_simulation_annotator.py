@@ -161,3 +161,5 @@ def test_the_in_memory_queue_books_what_the_backend_queue_books(client: TestClie
     assert in_memory.counts == over_http.counts
     assert in_memory.seconds == pytest.approx(over_http.seconds)
     assert in_memory.counts["pieces_merged"] == 1 and len(queue.drawn) == in_memory.counts["drawn"] == 1
+    kinds = sorted(decision.kind for decision in queue.verdicts.values())  # the merged piece has no verdict
+    assert kinds == ["accept", "fix", "fix", "reject"] and not queue.waiting
