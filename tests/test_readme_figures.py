@@ -535,3 +535,23 @@ def test_segmentation_whole_path_table_from_both_sites() -> None:
             ]
             cells = row(t, f"{site}, {run_label}")
             assert_shows(" | ".join(cells[1:]), expected, f"segmentation whole path {site} {run_label}")
+
+
+def _loop_figures(figures: dict[str, Any]) -> list[Expected]:
+    return [figures["map_clean"], figures["map_damaged"], figures["annotator"]["speed_up"]]
+
+
+def test_vma_loop_rounds_table() -> None:
+    t = table("round", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop.json", "bench/vma_loop.py")
+    recorded = results("vma_loop.json")
+    for entry in recorded["rounds"]:
+        label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
+        cells = row(t, label)
+        heldout = entry["heldout"]
+        assert heldout["version"] in cells[1], f"round {entry['round']}: promoted {heldout['version']}"
+        if "retrain_seconds" in entry:
+            assert_shows(cells[2], [entry["retrain_seconds"]], f"round {entry['round']} seconds")
+        assert_shows(cells[3], _loop_figures(heldout), f"round {entry['round']} rescored")
+        assert_shows(cells[4], _loop_figures(heldout["own_points"]), f"round {entry['round']} own points")
+    assert_shows(row(t, "rule-based")[3], _loop_figures(recorded["rule_based"]), "rule-based")

@@ -1,0 +1,223 @@
+"""The human-in-the-loop rounds measured (issue 26.4): propose, let the simulated annotator correct, retrain, gate.
+
+Round 0 is the promoted model of `--checkpoint` (the shipped v0003: trained on the generator's truth of BEV sites
+1000-1011), copied into a scratch registry. Round k (1..N) takes a new BEV site (seed `--new-seeds`, one per
+round, never seen by any model here): the current model proposes on it, the scripted annotator
+(`app.review_effort`, in-memory queue) accepts, fixes or rejects each proposal and draws what is missing; its
+verdicts become the corrections (accepted / fixed / drawn as labels, rejected as negatives) that
+`models.vma.retrain.retrain_from_corrections` fine-tunes on, behind both gates (validation mAP and the annotator's
+correction time on the validation sites, `--val-seeds`). After every round, the promoted model is measured on the
+held-out sites (`--heldout-seeds`, never proposed on, corrected or validated on): Chamfer mAP on clean and on
+reconstruction-like damaged rasters (`models.vma.degrade`), the same for the model's own refined points, and the
+annotator's speed-up over drawing on clean rasters; the rule-based proposer is measured beside it once.
+A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
+
+Usage: .venv/bin/python bench/vma_loop.py [--rounds 3] [--steps 300] [--threads 2] [--plot-only]
+Writes bench/results/vma_loop.json and bench/results/vma_loop.png (`--plot-only`: the plot from the JSON).
+"""
+
+import argparse
+import json
+import platform
+import shutil
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+import numpy as np
+import torch
+
+from annotations import Georeference
+from app.review_effort.costs import ActionCosts
+from app.review_effort.plan import Polyline, SimulationConfig
+from app.review_effort.review_time import MIN_CONFIDENCE, review_time
+from app.review_effort.session import MemoryQueue, work_queue
+from app.review_effort.truth import true_polylines
+from models.vma.bev_sites import ensure_bev_sites
+from models.vma.checkpoint import current_version, ensure_unseen, load_checkpoint, promote
+from models.vma.commands import seed_range
+from models.vma.config import TrainConfig
+from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.evaluate import evaluate_proposer
+from models.vma.infer import InferenceConfig
+from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.retrain import Corrections, RetrainConfig, model_proposer, retrain_from_corrections
+from models.vma.rule_based import propose_rule_based
+from models.vma.vectors import Vector, proposals_as_annotations, simple_geometry
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+Proposer = Callable[[SiteRasters], list[Vector]]
+
+
+def on_damaged(propose: Proposer) -> Proposer:
+    """The proposer run on the site's rasters with reconstruction-like damage, seeded by the site's name."""
+    return lambda rasters: propose(degrade_rasters(rasters, DegradeConfig(seed=sum(rasters.name.encode()))))
+
+
+def corrections_of(site: Path, propose: Proposer) -> tuple[Corrections, dict[str, int]]:
+    """The scripted annotator's review of `propose`'s output on `site`, as retraining's corrections."""
+    rasters = load_site_rasters(site)
+    kept = [v for v in propose(rasters) if v.score >= MIN_CONFIDENCE]
+    vectors = [v for v in (simple_geometry(v) for v in kept) if v is not None]
+    queue = MemoryQueue([(Polyline(v.cls, v.points), min(v.score, 1.0)) for v in vectors])
+    log = work_queue(queue, true_polylines(site), SimulationConfig(), ActionCosts())
+    reviewed: list[tuple[Vector, str]] = []
+    for index, decision in queue.verdicts.items():
+        proposal = vectors[index]
+        if decision.kind == "fix" and decision.points is not None:
+            cls = decision.relabel or proposal.cls
+            reviewed.append((Vector(cls, np.asarray(decision.points), 1.0), "fixed"))
+        else:
+            reviewed.append((proposal, {"accept": "accepted", "reject": "rejected"}[decision.kind]))
+    reviewed += [(Vector(t.cls, t.points, 1.0), "accepted") for t in queue.drawn]
+    georeference = Georeference.of(rasters.georeference, site_origin_xy=rasters.origin_xy)
+    labelled = proposals_as_annotations([v for v, _ in reviewed], georeference, site.name, "annotator")
+    states = [state for v, state in reviewed if simple_geometry(v) is not None]
+    elements = [e.with_changes(review_state=s) for e, s in zip(labelled.elements, states, strict=True)]
+    counts = {k: int(v) for k, v in log.counts.items()}
+    return Corrections(site, labelled.model_copy(update={"elements": elements})), counts
+
+
+def measure(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
+    """Held-out figures of one proposer: mAP clean and damaged, annotator time on clean rasters."""
+    clean = evaluate_proposer(propose, sites)
+    damaged = evaluate_proposer(on_damaged(propose), sites)
+    review = review_time(propose, sites)
+    return {
+        "map_clean": clean["mean_ap"],
+        "map_damaged": damaged["mean_ap"],
+        "class_ap_clean": clean["class_ap"],
+        "class_ap_damaged": damaged["class_ap"],
+        "annotator": review,
+    }
+
+
+def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
+    """The promoted model as the product proposes with it (rescored candidates), and its own refined points."""
+    loaded = load_checkpoint(registry)
+    for site in sites:
+        ensure_unseen(loaded, site)
+    figures = {"version": loaded.path.name, **measure(model_proposer(loaded.model, InferenceConfig()), sites)}
+    if loaded.config.anchored:
+        own = model_proposer(loaded.model, InferenceConfig(anchored_output="refined"))
+        figures["own_points"] = measure(own, sites)
+    return figures
+
+
+def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None:
+    """mAP (clean, damaged) and the annotator's speed-up per round, the rule-based proposer dashed."""
+    ks = [r["round"] for r in rounds]
+    own = [r["heldout"].get("own_points") for r in rounds]
+    fig, (ax_map, ax_speed) = plt.subplots(1, 2, figsize=(10, 4))
+    for key, colour in (("map_clean", "tab:blue"), ("map_damaged", "tab:orange")):
+        ax_map.plot(ks, [r["heldout"][key] for r in rounds], "o-", color=colour, label=f"rescored {key[4:]}")
+        if all(own):
+            ax_map.plot(ks, [o[key] for o in own], "s:", color=colour, label=f"own points {key[4:]}")
+        ax_map.axhline(rule[key], color=colour, linestyle="--", label=f"rule-based {key[4:]}")
+    ax_map.set(xlabel="round", ylabel="held-out Chamfer mAP", title="proposal quality")
+    ax_map.legend(fontsize=7)
+    ax_speed.plot(ks, [r["heldout"]["annotator"]["speed_up"] for r in rounds], "o-", label="rescored")
+    if all(own):
+        ax_speed.plot(ks, [o["annotator"]["speed_up"] for o in own], "s:", label="own points")
+    ax_speed.axhline(rule["annotator"]["speed_up"], linestyle="--", label="rule-based")
+    ax_speed.set(xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out")
+    ax_speed.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/checkpoints"))
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--steps", type=int, default=300, help="fine-tuning batches per round (the job's default)"
+    )
+    parser.add_argument("--new-seeds", default="4000-4002", help="one new site per round ('A-B')")
+    parser.add_argument("--val-seeds", default="3000-3002", help="the gate's validation sites")
+    parser.add_argument("--heldout-seeds", default="2000-2004", help="measured after every round")
+    parser.add_argument("--site-root", type=Path, default=Path("data/vma/loop"))
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=RESULTS / "vma_loop.json")
+    parser.add_argument(
+        "--plot-only", action="store_true", help="redraw the plot from the results file, measuring nothing"
+    )
+    args = parser.parse_args()
+    if args.plot_only:
+        recorded = json.loads(args.out.read_text(encoding="utf-8"))
+        plot(recorded["rounds"], recorded["rule_based"], args.out.with_suffix(".png"))
+        return
+    torch.set_num_threads(args.threads)
+    new_sites = ensure_bev_sites(seed_range(args.new_seeds), args.site_root)[: args.rounds]
+    if len(new_sites) < args.rounds:
+        raise SystemExit(
+            f"--new-seeds {args.new_seeds} gives {len(new_sites)} sites for {args.rounds} rounds"
+        )
+    validation = ensure_bev_sites(seed_range(args.val_seeds), args.site_root)
+    heldout = ensure_bev_sites(seed_range(args.heldout_seeds), args.site_root)
+    scratch = Path(tempfile.mkdtemp(prefix="bench-vma-loop-"))
+    registry = scratch / "registry"
+    shipped = current_version(args.checkpoint)
+    shutil.copytree(shipped, registry / shipped.name)
+    promote(registry, shipped.name)
+    started = time.perf_counter()
+    rule = measure(propose_rule_based, heldout)
+    print(
+        f"rule-based: {rule['map_clean']:.3f} / {rule['map_damaged']:.3f}, {rule['annotator']['speed_up']:.2f}x"
+    )
+    rounds: list[dict[str, Any]] = [{"round": 0, "heldout": measure_model(registry, heldout)}]
+    try:
+        for k, site in enumerate(new_sites, start=1):
+            round_started = time.perf_counter()
+            current = load_checkpoint(registry)
+            corrections, review_counts = corrections_of(
+                site, model_proposer(current.model, InferenceConfig())
+            )
+            config = RetrainConfig(train=TrainConfig(steps=args.steps, learning_rate=2e-4))
+            result = retrain_from_corrections(registry, [corrections], validation, config, review=review_time)
+            retrain_s = time.perf_counter() - round_started
+            rounds.append(
+                {
+                    "round": k,
+                    "corrected_site": str(site),
+                    "review_counts": review_counts,
+                    "candidate": result.candidate.name,
+                    "promoted": result.promoted,
+                    "gate": {"current": result.current_metrics, "candidate": result.candidate_metrics},
+                    "retrain_seconds": round(retrain_s, 1),
+                    "heldout": measure_model(registry, heldout),
+                }
+            )
+            last: dict[str, Any] = rounds[-1]["heldout"]
+            print(
+                f"round {k}: {result.candidate.name} {'promoted' if result.promoted else 'kept out'} "
+                f"({retrain_s:.0f} s); held-out {last['map_clean']:.3f} / {last['map_damaged']:.3f}, "
+                f"{last['annotator']['speed_up']:.2f}x"
+            )
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    plot(rounds, rule, args.out.with_suffix(".png"))
+    report = {
+        "command": "python bench/vma_loop.py "
+        + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
+        + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} --threads {args.threads}",
+        "start": shipped.name,
+        "rule_based": rule,
+        "rounds": rounds,
+        "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {args.out} and {args.out.with_suffix('.png')}")
+
+
+if __name__ == "__main__":
+    main()
