@@ -135,10 +135,11 @@ class MemoryQueue:
 
     proposals: list[tuple[Polyline, float | None]]
     """(polyline, confidence) in the frame of the truths."""
-    waiting: list[int] = field(default_factory=list)
-    verdicts: dict[int, Decision] = field(default_factory=dict)
+    waiting: list[int] = field(init=False)
+    """Proposal indices not yet reviewed, in queue order."""
+    verdicts: dict[int, Decision] = field(init=False, default_factory=dict)
     """The decision on each reviewed proposal (merged pieces have none: they were deleted)."""
-    drawn: list[Polyline] = field(default_factory=list)
+    drawn: list[Polyline] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
         order = sorted(
