@@ -13,7 +13,8 @@ annotator's speed-up over drawing on clean rasters; the rule-based proposer is m
 A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--rounds 3] [--steps 300] [--threads 2] [--plot-only]
-Writes bench/results/vma_loop.json and bench/results/vma_loop.png (`--plot-only`: the plot from the JSON).
+Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
+`--plot-only`: the plot from the JSON).
 """
 
 import argparse
@@ -110,6 +111,11 @@ def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
     return figures
 
 
+def plot_path(out: Path) -> Path:
+    """The plot beside the figures: X.json -> X/rounds.png."""
+    return out.with_suffix("") / "rounds.png"
+
+
 def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None:
     """mAP (clean, damaged) and the annotator's speed-up per round, the rule-based proposer dashed."""
     ks = [r["round"] for r in rounds]
@@ -129,6 +135,7 @@ def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None
     ax_speed.set(xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out")
     ax_speed.legend(fontsize=8)
     fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -152,7 +159,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.plot_only:
         recorded = json.loads(args.out.read_text(encoding="utf-8"))
-        plot(recorded["rounds"], recorded["rule_based"], args.out.with_suffix(".png"))
+        plot(recorded["rounds"], recorded["rule_based"], plot_path(args.out))
         return
     torch.set_num_threads(args.threads)
     new_sites = ensure_bev_sites(seed_range(args.new_seeds), args.site_root)[: args.rounds]
@@ -204,7 +211,7 @@ def main() -> None:
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    plot(rounds, rule, args.out.with_suffix(".png"))
+    plot(rounds, rule, plot_path(args.out))
     report = {
         "command": "python bench/vma_loop.py "
         + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
@@ -216,7 +223,7 @@ def main() -> None:
         "seconds": round(time.perf_counter() - started, 1),
     }
     args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {args.out} and {args.out.with_suffix('.png')}")
+    print(f"wrote {args.out} and {plot_path(args.out)}")
 
 
 if __name__ == "__main__":
