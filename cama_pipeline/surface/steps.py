@@ -119,15 +119,25 @@ def raised_vertices(
     mean = _local_mean(grid, score, candidates, config.smoothing_m)
     raised = np.zeros((grid.rows, grid.cols), bool)
     raised[rows[candidates], cols[candidates]] = mean[rows[candidates], cols[candidates]] > config.threshold
-    raised = _drop_small(raised, config.min_area_m2, grid.resolution_m)
-    near = (
-        ndimage.distance_transform_edt(~raised, sampling=grid.resolution_m)[rows, cols] <= config.kerb_band_m
-    )
-    band = both & ~off_road & near
-    band_mean = _local_mean(grid, score, band, grid.resolution_m)
-    foot = np.zeros((grid.rows, grid.cols), bool)
-    foot[rows[band], cols[band]] = band_mean[rows[band], cols[band]] > config.threshold
-    return (raised | foot)[rows, cols], foot[rows, cols]
+    raised = _drop_small(raised, config.min_area_m2, grid.resolution_m)[rows, cols]
+    if config.kerb_band_m <= 0:
+        return raised, np.zeros_like(raised)
+    foot = _kerb_foot(grid, score, both & ~off_road, raised, config)
+    return raised | foot, foot
+
+
+def _kerb_foot(
+    grid: SurfaceGrid, score: np.ndarray, road: np.ndarray, raised: np.ndarray, config: KerbStepConfig
+) -> np.ndarray:
+    """(V,) the `road` vertices within `kerb_band_m` of a `raised` one whose own views (averaged over their
+    immediate road neighbours in the band) agree better at curb height."""
+    rows, cols = grid.vertex_cells()
+    raised_cells = np.zeros((grid.rows, grid.cols), bool)
+    raised_cells[rows[raised], cols[raised]] = True
+    distance = ndimage.distance_transform_edt(~raised_cells, sampling=grid.resolution_m)[rows, cols]
+    band = road & (distance <= config.kerb_band_m)
+    band_mean = _local_mean(grid, score, band, grid.resolution_m)[rows, cols]
+    return band & (band_mean > config.threshold)
 
 
 def step_summary(semantic: np.ndarray, kerb_step: np.ndarray, height_m: float) -> dict[str, float | int]:
