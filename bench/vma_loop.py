@@ -33,9 +33,9 @@ import torch
 
 from annotations import Georeference
 from app.review_effort.costs import ActionCosts
-from app.review_effort.plan import Polyline, SimulationConfig
-from app.review_effort.review_time import MIN_CONFIDENCE, review_time
-from app.review_effort.session import MemoryQueue, work_queue
+from app.review_effort.plan import SimulationConfig
+from app.review_effort.review_time import MIN_CONFIDENCE, review_queue, review_time
+from app.review_effort.session import work_queue
 from app.review_effort.truth import true_polylines
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import current_version, ensure_unseen, load_checkpoint, promote
@@ -64,9 +64,7 @@ def on_damaged(propose: Proposer) -> Proposer:
 def corrections_of(site: Path, propose: Proposer) -> tuple[Corrections, dict[str, int]]:
     """The scripted annotator's review of `propose`'s output on `site`, as retraining's corrections."""
     rasters = load_site_rasters(site)
-    kept = [v for v in propose(rasters) if v.score >= MIN_CONFIDENCE]
-    vectors = [v for v in (simple_geometry(v) for v in kept) if v is not None]
-    queue = MemoryQueue([(Polyline(v.cls, v.points), min(v.score, 1.0)) for v in vectors])
+    vectors, queue = review_queue(propose(rasters), MIN_CONFIDENCE)
     log = work_queue(queue, true_polylines(site), SimulationConfig(), ActionCosts())
     reviewed: list[tuple[Vector, str]] = []
     for index, decision in queue.verdicts.items():

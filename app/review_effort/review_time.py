@@ -24,6 +24,14 @@ MIN_CONFIDENCE = 0.1
 """Proposals below this are dropped before review, as `cama propose` and the refresh job do by default."""
 
 
+def review_queue(vectors: Sequence[Vector], min_confidence: float) -> tuple[list[Vector], MemoryQueue]:
+    """The proposals an annotator gets from a proposer's `vectors` (at or above `min_confidence`, made simple as
+    in a proposals file) and an in-memory queue of them, indexed as that list."""
+    kept = [v for v in vectors if v.score >= min_confidence]
+    simple = [v for v in (simple_geometry(v) for v in kept) if v is not None]
+    return simple, MemoryQueue([(Polyline(v.cls, v.points), min(v.score, 1.0)) for v in simple])
+
+
 def review_time(
     propose: Callable[[SiteRasters], list[Vector]],
     sites: Sequence[Path],
@@ -37,9 +45,7 @@ def review_time(
     correction_s = drawing_s = 0.0
     for site in sites:
         truths = observed_true_polylines(Path(site), raster_dir_of(Path(site)))
-        kept = [v for v in propose(load_site_rasters(Path(site))) if v.score >= min_confidence]
-        vectors = [v for v in (simple_geometry(v) for v in kept) if v is not None]
-        queue = MemoryQueue([(Polyline(v.cls, v.points), min(v.score, 1.0)) for v in vectors])
+        _, queue = review_queue(propose(load_site_rasters(Path(site))), min_confidence)
         correction_s += work_queue(queue, truths, config, costs).total_s
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
     return {

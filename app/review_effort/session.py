@@ -142,11 +142,10 @@ class MemoryQueue:
     drawn: list[Polyline] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
-        order = sorted(
+        self.waiting = sorted(
             range(len(self.proposals)),
             key=lambda i: (self.proposals[i][1] is None, self.proposals[i][1] or 0.0, i),
         )
-        self.waiting = list(order)
 
     def next(self) -> int | None:
         return self.waiting.pop(0) if self.waiting else None

@@ -3,7 +3,7 @@ on a fresh SQLite database, synthetic sites registered, proposal files loaded (t
 towards: `app.review_effort.truth`)."""
 
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -51,21 +51,15 @@ def site_origin(session: ApiSession, site_id: int) -> np.ndarray:
 def load_proposals(admin: ApiSession, site_id: int, path: Path) -> int:
     """Bulk-load a proposals file, moving its points from the file's site frame to the backend site's."""
     proposals = AnnotationSet.read_json(path)
-    file_origin = np.asarray(proposals.georeference.site_origin_xy, float)
-    global_proposals = [
-        (e.cls, np.asarray(e.points_2d, float) + file_origin, e.confidence) for e in proposals.elements
-    ]
-    return post_proposals(admin, site_id, global_proposals)
-
-
-def post_proposals(
-    admin: ApiSession, site_id: int, proposals: Sequence[tuple[str, np.ndarray, float | None]]
-) -> int:
-    """Bulk-load (class, global 2D points, confidence) proposals into a backend site; how many."""
-    origin = site_origin(admin, site_id)
+    shift = np.asarray(proposals.georeference.site_origin_xy, float) - site_origin(admin, site_id)
     elements = [
-        {"class": cls, "points": (points - origin).tolist(), "confidence": confidence, "source": "proposal"}
-        for cls, points, confidence in proposals
+        {
+            "class": e.cls,
+            "points": (np.asarray(e.points_2d) + shift).tolist(),
+            "confidence": e.confidence,
+            "source": "proposal",
+        }
+        for e in proposals.elements
     ]
     if elements:
         admin.call("POST", f"/api/sites/{site_id}/elements/bulk", json={"elements": elements})
