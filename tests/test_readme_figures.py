@@ -555,3 +555,18 @@ def test_vma_loop_rounds_table() -> None:
         assert_shows(cells[3], _loop_figures(heldout), f"round {entry['round']} rescored")
         assert_shows(cells[4], _loop_figures(heldout["own_points"]), f"round {entry['round']} own points")
     assert_shows(row(t, "rule-based")[3], _loop_figures(recorded["rule_based"]), "rule-based")
+
+
+def test_kerb_step_annotator_figures() -> None:
+    text = " ".join(readme_text().split())
+    speed = {
+        name: results(f"end_to_end_kerb_{name}.json")["annotator"]["speed_up"] for name in ("step", "foot")
+    }
+    assert f"went from {speed['step']:.2f}x to {speed['foot']:.2f}x with it" in text
+    flat = results("end_to_end_kerb_flat.json")["annotator"]["speed_up"]
+    assert f"({flat:.2f}x with and without;" in text and f"{flat:.2f}" == f"{speed['step']:.2f}"
+    maps = {
+        f"{results(f'end_to_end_kerb_{n}.json')['proposals_ap']['observed_truth']['mean_ap']:.2f}"
+        for n in ("step", "foot", "flat")
+    }
+    assert maps == {"0.91"} and "proposal mAP 0.91 in all three" in text
