@@ -1,7 +1,8 @@
 """The human-in-the-loop rounds measured (issue 26.4): propose, let the simulated annotator correct, retrain, gate.
 
 Round 0 is the promoted model of `--checkpoint` (the shipped v0003: trained on the generator's truth of BEV sites
-1000-1011), copied into a scratch registry. Round k (1..N) takes a new BEV site (seed `--new-seeds`, one per
+1000-1011; or an element-mask registry, `models/vma/element_masks/checkpoints`, whose network draws its own
+geometry), copied into a scratch registry. Round k (1..N) takes a new BEV site (seed `--new-seeds`, one per
 round, never seen by any model here): the current model proposes on it, the scripted annotator
 (`app.review_effort`, in-memory queue) accepts, fixes or rejects each proposal and draws what is missing; its
 verdicts become the corrections (accepted / fixed / drawn as labels, rejected as negatives) that
@@ -12,7 +13,8 @@ reconstruction-like damaged rasters (`models.vma.degrade`), the same for the mod
 annotator's speed-up over drawing on clean rasters; the rule-based proposer is measured beside it once.
 A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
-Usage: .venv/bin/python bench/vma_loop.py [--rounds 3] [--steps 300] [--threads 2] [--plot-only]
+Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY] [--rounds 3] [--steps 300] [--threads 2]
+       [--out bench/results/vma_loop.json] [--plot-only]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON).
 """
@@ -38,14 +40,26 @@ from app.review_effort.review_time import MIN_CONFIDENCE, review_queue, review_t
 from app.review_effort.session import work_queue
 from app.review_effort.truth import true_polylines
 from models.vma.bev_sites import ensure_bev_sites
-from models.vma.checkpoint import current_version, ensure_unseen, load_checkpoint, promote
+from models.vma.checkpoint import checkpoint_kind, current_version, ensure_unseen, load_checkpoint, promote
 from models.vma.commands import seed_range
 from models.vma.config import TrainConfig
 from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.element_masks.checkpoint import KIND as MASK_KIND
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.config import MaskTrainConfig
+from models.vma.element_masks.net import ElementMaskNet
+from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig
 from models.vma.rasters import SiteRasters, load_site_rasters
-from models.vma.retrain import Corrections, RetrainConfig, model_proposer, retrain_from_corrections
+from models.vma.retrain import (
+    Corrections,
+    RetrainConfig,
+    RetrainResult,
+    model_proposer,
+    retrain_from_corrections,
+)
 from models.vma.rule_based import propose_rule_based
 from models.vma.vectors import Vector, proposals_as_annotations, simple_geometry
 
@@ -98,7 +112,13 @@ def measure(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
 
 
 def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
-    """The promoted model as the product proposes with it (rescored candidates), and its own refined points."""
+    """The promoted model as the product proposes with it (rescored candidates, or the element-mask network's own
+    traced masks), and an anchored model's own refined points."""
+    if checkpoint_kind(registry) == MASK_KIND:
+        masks = load_mask_checkpoint(registry)
+        for site in sites:
+            ensure_unseen(masks, site)
+        return {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
     loaded = load_checkpoint(registry)
     for site in sites:
         ensure_unseen(loaded, site)
@@ -107,6 +127,29 @@ def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
         own = model_proposer(loaded.model, InferenceConfig(anchored_output="refined"))
         figures["own_points"] = measure(own, sites)
     return figures
+
+
+def mask_proposer(model: ElementMaskNet) -> Proposer:
+    """A site's proposals by the element-mask network."""
+    return lambda rasters: predict_site_masks(model, rasters)
+
+
+def promoted_proposer(registry: Path) -> Proposer:
+    """The registry's promoted model as the product proposes with it."""
+    if checkpoint_kind(registry) == MASK_KIND:
+        return mask_proposer(load_mask_checkpoint(registry).model)
+    return model_proposer(load_checkpoint(registry).model, InferenceConfig())
+
+
+def retrain_round(
+    registry: Path, corrections: Corrections, validation: list[Path], steps: int
+) -> RetrainResult:
+    """One retraining of the registry's network on a round's corrections, behind both gates."""
+    if checkpoint_kind(registry) == MASK_KIND:
+        config = MaskRetrainConfig(train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2))
+        return retrain_masks_from_corrections(registry, [corrections], validation, config, review=review_time)
+    retrain = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4))
+    return retrain_from_corrections(registry, [corrections], validation, retrain, review=review_time)
 
 
 def plot_path(out: Path) -> Path:
@@ -181,12 +224,8 @@ def main() -> None:
     try:
         for k, site in enumerate(new_sites, start=1):
             round_started = time.perf_counter()
-            current = load_checkpoint(registry)
-            corrections, review_counts = corrections_of(
-                site, model_proposer(current.model, InferenceConfig())
-            )
-            config = RetrainConfig(train=TrainConfig(steps=args.steps, learning_rate=2e-4))
-            result = retrain_from_corrections(registry, [corrections], validation, config, review=review_time)
+            corrections, review_counts = corrections_of(site, promoted_proposer(registry))
+            result = retrain_round(registry, corrections, validation, args.steps)
             retrain_s = time.perf_counter() - round_started
             rounds.append(
                 {
@@ -211,7 +250,7 @@ def main() -> None:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     plot(rounds, rule, plot_path(args.out))
     report = {
-        "command": "python bench/vma_loop.py "
+        "command": f"python bench/vma_loop.py --checkpoint {args.checkpoint} "
         + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
         + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} --threads {args.threads}",
         "start": shipped.name,

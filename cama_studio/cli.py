@@ -170,6 +170,7 @@ def _register_stage_commands() -> None:
         vma_eval_command,
         vma_split_command,
     )
+    from models.vma.element_masks.commands import train_masks_command
 
     app.command("eval")(eval_command)
     app.command("export")(export_command)
@@ -190,6 +191,7 @@ def _register_stage_commands() -> None:
     app.command("run")(run_command)
     app.command("train")(train_command)
     app.command("retrain")(retrain_command)
+    app.command("train-masks")(train_masks_command)
     app.command("vma-eval")(vma_eval_command)
     app.command("vma-split")(vma_split_command)
     app.command("train-segmenter")(train_segmenter_command)

@@ -97,10 +97,11 @@ class PipelineConfig:
     """Where SfM clips run."""
     workers: int = 2
     """SfM processes (or Ray tasks) at once."""
-    proposer: Literal["learned", "rule"] = "learned"
+    proposer: Literal["learned", "rule", "masks"] = "learned"
+    """The learned MapTR-style model, the rule-based proposer, or the element-mask network."""
     checkpoint: Path | None = None
-    """VMA checkpoint registry or version folder for the learned proposer; None: the model shipped with the
-    package (`models.vma.shipped`), found from any working directory."""
+    """Checkpoint registry or version folder for the learned or element-mask proposer (of that kind); None: the
+    one shipped with the package (`models.vma.shipped`), found from any working directory."""
     surface_poses: Literal["sfm", "wigo"] = "sfm"
     """Poses the surface stage projects the images with."""
     masks: str = "auto"
@@ -123,8 +124,8 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.executor not in ("local", "ray"):
             raise ValueError(f"executor must be local or ray, got {self.executor!r}")
-        if self.proposer not in ("learned", "rule"):
-            raise ValueError(f"proposer must be learned or rule, got {self.proposer!r}")
+        if self.proposer not in ("learned", "rule", "masks"):
+            raise ValueError(f"proposer must be learned, rule or masks, got {self.proposer!r}")
         if self.surface_poses not in ("sfm", "wigo"):
             raise ValueError(f"surface_poses must be sfm or wigo, got {self.surface_poses!r}")
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:

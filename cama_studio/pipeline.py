@@ -139,7 +139,7 @@ def _propose_sites(workspace: Path, config: PipelineConfig, overwrite: bool, res
             ws.surface_bev(site_id),
             ws.proposals(site_id),
             proposer=config.proposer,
-            checkpoint=config.checkpoint if config.proposer == "learned" else None,
+            checkpoint=config.checkpoint if config.proposer != "rule" else None,
             min_confidence=config.propose.min_confidence,
             inference=config.propose.inference,
             rule=config.propose.rule_for(Workspace(workspace).surface_bev(site_id)),

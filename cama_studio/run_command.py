@@ -37,7 +37,9 @@ def run_command(
     max_features: Annotated[
         int | None, typer.Option(help="SIFT keypoints per image (sets features.max_num_features).")
     ] = None,
-    proposer: Annotated[str | None, typer.Option(help="learned (the checkpoint) or rule.")] = None,
+    proposer: Annotated[
+        str | None, typer.Option(help="learned (the checkpoint), masks (the element-mask network) or rule.")
+    ] = None,
     checkpoint: Annotated[
         Path | None,
         typer.Option(
@@ -113,9 +115,7 @@ def effective_config(
             raise ValueError(f"--executor must be local or ray, got {executor!r}")
         config = replace(config, executor="ray" if executor == "ray" else "local")
     if proposer is not None:
-        if proposer not in ("learned", "rule"):
-            raise ValueError(f"--proposer must be learned or rule, got {proposer!r}")
-        config = replace(config, proposer="rule" if proposer == "rule" else "learned")
+        config = replace(config, proposer=proposer)  # type: ignore[arg-type]  # PipelineConfig checks it
     if workers is not None:
         config = replace(config, workers=workers)
     if checkpoint is not None:

@@ -37,15 +37,18 @@ def review_time(
     sites: Sequence[Path],
     *,
     min_confidence: float = MIN_CONFIDENCE,
+    rasters_of: Callable[[Path], Path] = raster_dir_of,
 ) -> dict[str, Any]:
-    """{"correction_s", "drawing_s", "speed_up", "sites"} of the scripted annotator on `propose`'s output."""
+    """{"correction_s", "drawing_s", "speed_up", "sites"} of the scripted annotator on `propose`'s output over
+    the rasters `rasters_of(site)` (default: the site's own; a reconstruction's for a reconstructed site)."""
     if not sites:
         raise ValueError("review_time: no validation sites given")
     config, costs = SimulationConfig(), ActionCosts()
     correction_s = drawing_s = 0.0
     for site in sites:
-        truths = observed_true_polylines(Path(site), raster_dir_of(Path(site)))
-        _, queue = review_queue(propose(load_site_rasters(Path(site))), min_confidence)
+        rasters = rasters_of(Path(site))
+        truths = observed_true_polylines(Path(site), rasters)
+        _, queue = review_queue(propose(load_site_rasters(rasters)), min_confidence)
         correction_s += work_queue(queue, truths, config, costs).total_s
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
     return {

@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import torch
 
@@ -31,9 +31,24 @@ CURRENT = "current.json"
 WEIGHTS = "model.pt"
 META = "checkpoint.json"
 
+MAPTR_KIND = "maptr"
+"""`kind` of the MapTR-style model's versions (their `checkpoint.json` has no `kind` field)."""
+
+ModuleT = TypeVar("ModuleT", bound=torch.nn.Module)
+
 
 class CheckpointError(ValueError):
     """A checkpoint that cannot be used (missing, unreadable, or made for another model config)."""
+
+
+class VersionRecord(Protocol):
+    """What the seen-site checks read of a loaded version, whichever network it holds."""
+
+    @property
+    def meta(self) -> dict[str, Any]: ...
+
+    @property
+    def path(self) -> Path: ...
 
 
 @dataclass(frozen=True)
@@ -46,8 +61,9 @@ class Checkpoint:
     path: Path
 
 
-def save_version(registry: Path, model: VmaNet, meta: dict[str, Any]) -> Path:
-    """Write the model as the next version of `registry`; returns its folder (not promoted yet)."""
+def save_version(registry: Path, model: torch.nn.Module, meta: dict[str, Any]) -> Path:
+    """Write the model (a VMA network with its frozen `config`) as the next version of `registry`; returns its
+    folder (not promoted yet)."""
     registry = Path(registry)
     registry.mkdir(parents=True, exist_ok=True)
     existing = sorted(p.name for p in registry.glob("v[0-9][0-9][0-9][0-9]") if p.is_dir())
@@ -68,6 +84,16 @@ def save_version(registry: Path, model: VmaNet, meta: dict[str, Any]) -> Path:
     staging.rename(registry / version)
     logger.info("saved checkpoint %s", registry / version)
     return registry / version
+
+
+def checkpoint_kind(path: Path) -> str:
+    """Which network a registry's promoted version (or a version folder) holds: its `kind` field,
+    'maptr' for versions without one (the MapTR-style model's, saved before kinds existed)."""
+    meta_path = current_version(Path(path)) / META
+    try:
+        return str(json.loads(meta_path.read_text(encoding="utf-8")).get("kind", MAPTR_KIND))
+    except (OSError, json.JSONDecodeError, AttributeError) as err:
+        raise CheckpointError(f"{meta_path}: unreadable checkpoint metadata: {err!r}") from None
 
 
 def promote(registry: Path, version: str) -> None:
@@ -109,17 +135,23 @@ def load_checkpoint(path: Path, expected: ModelConfig | None = None, device: str
             f"{meta_path}: checkpoint was trained for another model config "
             f"({config_fingerprint(config)} != expected {config_fingerprint(expected)})"
         )
-    model = VmaNet(config)
+    model = load_weights(VmaNet(config), folder, device)
+    return Checkpoint(model, config, meta, folder)
+
+
+def load_weights(model: ModuleT, folder: Path, device: str) -> ModuleT:
+    """`model` with the (float16-saved) weights of a version folder, on `device` in eval mode; CheckpointError
+    naming the file when they do not fit."""
     try:
         state = torch.load(folder / WEIGHTS, map_location=device, weights_only=True)
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
     except (OSError, RuntimeError) as err:
         raise CheckpointError(f"{folder / WEIGHTS}: weights do not fit the model config: {err}") from None
     model.to(device).eval()
-    return Checkpoint(model, config, meta, folder)
+    return model
 
 
-def seen_sites(checkpoint: Checkpoint) -> tuple[SiteIdentity, ...]:
+def seen_sites(checkpoint: VersionRecord) -> tuple[SiteIdentity, ...]:
     """The generated sites a version (and its parents) trained on; CheckpointError for a version that does not
     record them (it could not be kept off its own training sites)."""
     data = checkpoint.meta.get("data", {})
@@ -133,7 +165,7 @@ def seen_sites(checkpoint: Checkpoint) -> tuple[SiteIdentity, ...]:
         raise CheckpointError(f"{checkpoint.path / META}: field 'data.seen_sites': {err!r}") from None
 
 
-def ensure_unseen(checkpoint: Checkpoint, site: Path) -> SiteIdentity | None:
+def ensure_unseen(checkpoint: VersionRecord, site: Path) -> SiteIdentity | None:
     """Refuse (SeenSiteError) to let a version be scored on a site it trained on (`refuse_seen`)."""
     folders = checkpoint.meta.get("data", {}).get("seen_folders", [])
     return refuse_seen(site, seen_sites(checkpoint), folders, f"VMA checkpoint {checkpoint.path}")
@@ -166,7 +198,7 @@ def refuse_seen_validation(
         refuse_seen(Path(site), identities, records["seen_folders"], model)
 
 
-def seen_records(sites: Sequence[Path], parent: Checkpoint | None) -> dict[str, list[Any]]:
+def seen_records(sites: Sequence[Path], parent: VersionRecord | None) -> dict[str, list[Any]]:
     """`data.seen_sites` and `data.seen_folders` of a new version trained on `sites` (from `parent`, if any):
     the parent's, plus the identities of those of `sites` that are generated sites and all their folders."""
     seen = [s.to_json() for s in seen_sites(parent)] if parent is not None else []

@@ -17,7 +17,7 @@ from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoin
 from models.vma.config import ANCHORED_MODEL, ModelConfig, TrainConfig
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
-from models.vma.propose import propose
+from models.vma.propose import PROPOSERS, propose
 from models.vma.retrain import Corrections, RetrainConfig, gate_checkpoint, retrain_from_corrections
 from models.vma.rule_based import RuleConfig, propose_rule_based
 from models.vma.shipped import checkpoint_label, resolve_checkpoint, seed_registry
@@ -46,7 +46,11 @@ def propose_command(
         "proposals.json"
     ),
     proposer: Annotated[
-        str, typer.Option(help="learned (the shipped model unless --checkpoint) or rule.")
+        str,
+        typer.Option(
+            help="learned (the shipped MapTR-style model unless --checkpoint), masks (the shipped element-mask "
+            "network unless --checkpoint) or rule."
+        ),
     ] = "learned",
     checkpoint: Annotated[
         Path | None,
@@ -66,8 +70,8 @@ def propose_command(
 ) -> None:
     """Propose map vectors with confidence for a whole site from its BEV rasters."""
     try:
-        if proposer not in ("learned", "rule"):
-            raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
+        if proposer not in PROPOSERS:
+            raise ValueError(f"--proposer must be one of {', '.join(PROPOSERS)}, got {proposer!r}")
         if boundary_source not in ("auto", "curb", "road_edge"):
             raise ValueError(
                 f"--boundary-source must be 'auto', 'curb' or 'road_edge', got {boundary_source!r}"
@@ -75,7 +79,7 @@ def propose_command(
         result = propose(
             site,
             out,
-            proposer="rule" if proposer == "rule" else "learned",
+            proposer=proposer,  # type: ignore[arg-type]  # checked against PROPOSERS above
             checkpoint=checkpoint,
             min_confidence=min_confidence,
             rule=None

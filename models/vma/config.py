@@ -93,7 +93,7 @@ _ADDED_FIELDS: dict[str, Any] = {"anchored": False}
 checkpoints keep their fingerprint."""
 
 
-def config_fingerprint(config: ModelConfig) -> str:
-    """Hash of a model config: checkpoints record it and refuse to load into another."""
+def config_fingerprint(config: Any) -> str:
+    """Hash of a model config (a frozen dataclass): checkpoints record it and refuse to load into another."""
     fields = {k: v for k, v in config_dict(config).items() if k not in _ADDED_FIELDS or v != _ADDED_FIELDS[k]}
     return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]

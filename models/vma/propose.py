@@ -19,16 +19,20 @@ from cama_pipeline.code_version import code_version
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date, mark_done
 from cama_pipeline.surface.outputs import is_surface_bev
 from models.vma.checkpoint import META, load_checkpoint
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.propose import predict_site_masks
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, raster_dir_of
 from models.vma.rule_based import BoundarySource, RuleConfig, propose_rule_based
-from models.vma.shipped import checkpoint_label, resolve_checkpoint
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, checkpoint_label, resolve_checkpoint
 from models.vma.train import device_for
 from models.vma.vectors import Vector, proposals_as_annotations
 
 logger = logging.getLogger(__name__)
 
-Proposer = Literal["learned", "rule"]
+Proposer = Literal["learned", "rule", "masks"]
+PROPOSERS: tuple[str, ...] = ("learned", "rule", "masks")
+"""The learned MapTR-style model, the rule-based proposer, the element-mask network (`models.vma.element_masks`)."""
 
 
 @dataclass(frozen=True)
@@ -40,7 +44,7 @@ class ProposeResult:
     seconds: float
     skipped: bool
     checkpoint: Path | None
-    """The checkpoint version folder the learned proposer used; None for the rule-based one."""
+    """The checkpoint version folder the learned or element-mask proposer used; None for the rule-based one."""
 
 
 def site_origin_of(site: Path, rasters: SiteRasters) -> tuple[float, float]:
@@ -74,12 +78,19 @@ def propose(
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> ProposeResult:
-    """Propose vectors for a site with the learned model (`checkpoint`: a registry or version folder, None for
-    the shipped model) or the rule-based proposer; `rule` sets the rule-based proposer, and the learned model's
-    candidates when it is anchored."""
+    """Propose vectors for a site with the learned model or the element-mask network (`checkpoint`: a registry or
+    version folder of that kind, None for the one shipped) or the rule-based proposer; `rule` sets the rule-based
+    proposer, and the learned model's candidates when it is anchored (the element-mask network traces its own
+    masks, whatever `rule` says)."""
     site, out = Path(site), Path(out)
+    if proposer not in PROPOSERS:
+        raise ValueError(f"proposer must be one of {PROPOSERS}, got {proposer!r}")
     rule = rule or RuleConfig(boundary_source=boundary_source_for(site))
-    version = resolve_checkpoint(checkpoint) if proposer == "learned" else None
+    version = None
+    if proposer == "learned":
+        version = resolve_checkpoint(checkpoint)
+    elif proposer == "masks":
+        version = resolve_checkpoint(checkpoint, SHIPPED_MASK_REGISTRY)
     raster_dir = raster_dir_of(site)
     inputs = [
         layer_path(raster_dir, "semantic"),
@@ -102,7 +113,11 @@ def propose(
     started = time.perf_counter()
     rasters = load_site_rasters(site)
     vectors: list[Vector]
-    if version is not None:
+    if proposer == "masks" and version is not None:
+        masks = load_mask_checkpoint(version, device=str(device_for()))
+        vectors = predict_site_masks(masks.model, rasters, show_progress=show_progress)
+        author = f"vma-masks-{masks.path.name}"
+    elif version is not None:
         loaded = load_checkpoint(version, device=str(device_for()))
         inference = replace(inference or InferenceConfig(), rule=rule)
         vectors = predict_site(loaded.model, rasters, inference, show_progress=show_progress)

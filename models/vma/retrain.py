@@ -21,9 +21,10 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
+import torch
 
 from annotations import AnnotationSet
 from models.vma.checkpoint import (
@@ -164,7 +165,17 @@ def evaluate_model(
     return metrics
 
 
-def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: RetrainConfig) -> bool:
+class GateTolerances(Protocol):
+    """The gate's tolerances, as every retraining config carries them."""
+
+    @property
+    def tolerance(self) -> float: ...
+
+    @property
+    def time_tolerance(self) -> float: ...
+
+
+def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: GateTolerances) -> bool:
     """Both gates on two models' `evaluate_model` metrics: mAP, and the review time when both have one."""
     if not passes_gate(current["mean_ap"], candidate["mean_ap"], config.tolerance):
         return False
@@ -218,13 +229,60 @@ def retrain_from_corrections(
     candidate.cpu()
     candidate_metrics = evaluate_model(candidate, validation_sites, config.inference, review)
     promoted = gate_passes(current_metrics, candidate_metrics, config)
+    return save_candidate(
+        Path(registry),
+        candidate,
+        CandidateRecord(
+            current.path.name,
+            config_dict(config.train),
+            corrections,
+            validation_sites,
+            seen,
+            (num_labels, num_negatives),
+            time.perf_counter() - started,
+        ),
+        current_metrics,
+        candidate_metrics,
+        promoted,
+        {THRESHOLD_KEY: candidate_metrics.get(THRESHOLD_KEY)},
+    )
+
+
+@dataclass(frozen=True)
+class CandidateRecord:
+    """What a retrained candidate's `checkpoint.json` says it came from."""
+
+    parent: str
+    """The version it was fine-tuned from."""
+    train_config: dict[str, Any]
+    corrections: Sequence[Corrections]
+    validation_sites: Sequence[Path]
+    seen: dict[str, list[Any]]
+    """`seen_records` of the parent and the corrected sites."""
+    counts: tuple[int, int]
+    """Labels and negatives it learned from."""
+    seconds: float
+
+
+def save_candidate(
+    registry: Path,
+    candidate: torch.nn.Module,
+    record: CandidateRecord,
+    current_metrics: dict[str, Any],
+    candidate_metrics: dict[str, Any],
+    promoted: bool,
+    extra_meta: dict[str, Any],
+) -> RetrainResult:
+    """Save a retrained candidate as the next version of `registry` with its figures and data (and
+    `extra_meta`), promote it when the gates passed, and say so in the log."""
+    labels, negatives = record.counts
     meta = {
-        "parent": current.path.name,
-        "train_config": config_dict(config.train),
+        "parent": record.parent,
+        "train_config": record.train_config,
         "metrics": {
             "validation": candidate_metrics,
             "parent_validation": current_metrics,
-            "seconds": round(time.perf_counter() - started, 1),
+            "seconds": round(record.seconds, 1),
         },
         "data": {
             "corrections": [
@@ -233,19 +291,19 @@ def retrain_from_corrections(
                     "site_id": c.annotations.site_id,
                     "elements": len(c.annotations.elements),
                 }
-                for c in corrections
+                for c in record.corrections
             ],
-            "labels": num_labels,
-            "negatives": num_negatives,
-            "validation_sites": [str(s) for s in validation_sites],
-            **seen,
+            "labels": labels,
+            "negatives": negatives,
+            "validation_sites": [str(s) for s in record.validation_sites],
+            **record.seen,
         },
         "promoted": promoted,
-        THRESHOLD_KEY: candidate_metrics.get(THRESHOLD_KEY),
+        **extra_meta,
     }
-    folder = save_version(Path(registry), candidate, meta)
+    folder = save_version(registry, candidate, meta)
     if promoted:
-        promote(Path(registry), folder.name)
+        promote(registry, folder.name)
     logger.info(
         "retrain: candidate %s mAP %s vs current %s -> %s",
         folder.name,
@@ -253,7 +311,7 @@ def retrain_from_corrections(
         current_metrics["mean_ap"],
         "promoted" if promoted else "kept out",
     )
-    return RetrainResult(folder, promoted, current_metrics, candidate_metrics, num_labels, num_negatives)
+    return RetrainResult(folder, promoted, current_metrics, candidate_metrics, labels, negatives)
 
 
 def gate_checkpoint(

@@ -114,7 +114,7 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
             config.join_boundary_gap_m,
             road,
         ),
-        *_crosswalks(rasters, semantic == int(Semantic.CROSSWALK), config),
+        *crosswalk_vectors(rasters, semantic == int(Semantic.CROSSWALK), config),
     ]
     logger.info("rule-based proposer: %d vectors on %s", len(vectors), rasters.name)
     return vectors
@@ -266,8 +266,9 @@ def _confidence(rasters: SiteRasters, support: np.ndarray, points: np.ndarray, c
     return float(hits.mean() * damping)
 
 
-def _crosswalks(rasters: SiteRasters, mask: np.ndarray, config: RuleConfig) -> list[Vector]:
-    """Rotated rectangles around crosswalk stripe blocks; confidence = stripe fill within the closed block."""
+def crosswalk_vectors(rasters: SiteRasters, mask: np.ndarray, config: RuleConfig) -> list[Vector]:
+    """Rotated rectangles around the crosswalk stripe blocks of `mask`; confidence = stripe fill within the
+    closed block."""
     res = rasters.resolution_m
     mask = remove_small_blobs(mask.astype(np.uint8), round(config.min_blob_m2 / res**2)) > 0
     closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(config.close_crosswalk_m / res))

@@ -17,11 +17,14 @@ logger = logging.getLogger(__name__)
 
 SHIPPED_REGISTRY_NAME = "checkpoints"
 """The registry folder inside the `models.vma` package."""
+SHIPPED_MASK_REGISTRY = ("element_masks", "checkpoints")
+"""The element-mask network's registry inside the `models.vma` package."""
 
 
-def shipped_registry() -> Path:
-    """The registry of checkpoints installed with the package; CheckpointError when the install lacks it."""
-    resource = files("models.vma") / SHIPPED_REGISTRY_NAME
+def shipped_registry(*parts: str) -> Path:
+    """The registry of checkpoints installed with the package (the MapTR-style model's, or the one under `parts`,
+    e.g. `SHIPPED_MASK_REGISTRY`); CheckpointError when the install lacks it."""
+    resource = files("models.vma").joinpath(*(parts or (SHIPPED_REGISTRY_NAME,)))
     registry = Path(str(resource))
     if not (registry / CURRENT).is_file():
         raise CheckpointError(
@@ -31,20 +34,23 @@ def shipped_registry() -> Path:
     return registry
 
 
-def resolve_checkpoint(checkpoint: Path | None) -> Path:
-    """The checkpoint folder to load: the given registry or version folder, else the shipped registry's promoted
-    version. The result is a version folder, so callers can say exactly which weights they use."""
-    return current_version(shipped_registry() if checkpoint is None else Path(checkpoint))
+def resolve_checkpoint(checkpoint: Path | None, shipped: tuple[str, ...] = ()) -> Path:
+    """The checkpoint folder to load: the given registry or version folder, else the promoted version of the
+    shipped registry (`shipped`: its parts, as `shipped_registry` takes them). The result is a version folder, so
+    callers can say exactly which weights they use."""
+    return current_version(shipped_registry(*shipped) if checkpoint is None else Path(checkpoint))
 
 
 def checkpoint_label(version: Path) -> str:
     """How a checkpoint version folder is named to users: its version, whether it is the shipped model, and
     where it is, e.g. `v0003 (shipped with the package: /.../models/vma/checkpoints/v0003)`."""
     version = Path(version).resolve()
-    try:
-        shipped = version.parent == shipped_registry().resolve()
-    except CheckpointError:
-        shipped = False
+    shipped = False
+    for parts in ((), SHIPPED_MASK_REGISTRY):
+        try:
+            shipped = shipped or version.parent == shipped_registry(*parts).resolve()
+        except CheckpointError:
+            pass
     return f"{version.name} ({'shipped with the package: ' if shipped else ''}{version})"
 
 

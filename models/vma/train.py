@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -102,12 +102,41 @@ def learning_rate_at(progress: float, peak: float, warmup: float = 0.05) -> floa
     return peak * (0.05 + 0.95 * 0.5 * (1.0 + np.cos(np.pi * t)))
 
 
-def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: bool = True) -> list[float]:
-    """Train `model` in place for `config.steps` batches or `config.max_seconds`, whichever ends first.
+class Schedule(Protocol):
+    """The optimisation settings every training config carries (`TrainConfig`, the element-mask network's)."""
+
+    @property
+    def steps(self) -> int: ...
+    @property
+    def learning_rate(self) -> float: ...
+    @property
+    def weight_decay(self) -> float: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def max_seconds(self) -> float: ...
+
+
+BatchLoss = Callable[[np.random.Generator, torch.device], tuple[torch.Tensor, Any]]
+"""One batch drawn with the generator, its loss on the device, and loss parts to log."""
+
+
+def optimise(
+    model: torch.nn.Module,
+    batch_loss: BatchLoss,
+    config: Schedule,
+    *,
+    label: str = "training",
+    clip_norm: float | None = None,
+    show_progress: bool = True,
+) -> list[float]:
+    """Train `model` in place with AdamW for `config.steps` batches or `config.max_seconds`, whichever ends first.
 
     The learning-rate schedule follows progress (the larger of the step and time fractions), so a run cut
-    by its time budget still ends with a decayed rate. Returns the loss of each step.
-    """
+    by its time budget still ends with a decayed rate. Every 50 steps a `step i/n loss x` record goes to this
+    module's logger (the backend's retrain job reports them). Returns the loss of each step."""
     device = device_for()
     if device.type == "cpu":
         torch.set_num_threads(config.threads)
@@ -118,20 +147,15 @@ def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: 
         model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay
     )
     started = time.perf_counter()
-    losses = []
-    with StageProgress("training", logger=logger, enabled=show_progress) as progress:
+    losses: list[float] = []
+    with StageProgress(label, logger=logger, enabled=show_progress) as progress:
         bar = progress.add_task(total=config.steps)
         for step in range(config.steps):
-            batch = [sampler(rng) for _ in range(config.batch_size)]
-            images = torch.as_tensor(np.stack([s.image for s in batch]), device=device)
-            labels, points = batch_targets([s.labels for s in batch], [s.points for s in batch], device)
-            logits, layer_points = model(images, stack_anchors([s.anchors for s in batch], device))
-            loss, parts = match_and_loss(
-                logits, layer_points, labels, points, config.class_weight, config.point_weight
-            )
+            loss, parts = batch_loss(rng, device)
             optimiser.zero_grad()
             loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            if clip_norm is not None:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), clip_norm)
             done = max((step + 1) / config.steps, (time.perf_counter() - started) / config.max_seconds)
             for group in optimiser.param_groups:
                 group["lr"] = learning_rate_at(done, config.learning_rate)
@@ -144,6 +168,19 @@ def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: 
                 break
     model.eval()
     return losses
+
+
+def fit(model: VmaNet, sampler: Sampler, config: TrainConfig, *, show_progress: bool = True) -> list[float]:
+    """Train the MapTR-style `model` in place on `sampler`'s patches (`optimise`; gradients clipped at 1)."""
+
+    def batch_loss(rng: np.random.Generator, device: torch.device) -> tuple[torch.Tensor, Any]:
+        batch = [sampler(rng) for _ in range(config.batch_size)]
+        images = torch.as_tensor(np.stack([s.image for s in batch]), device=device)
+        labels, points = batch_targets([s.labels for s in batch], [s.points for s in batch], device)
+        logits, layer_points = model(images, stack_anchors([s.anchors for s in batch], device))
+        return match_and_loss(logits, layer_points, labels, points, config.class_weight, config.point_weight)
+
+    return optimise(model, batch_loss, config, clip_norm=1.0, show_progress=show_progress)
 
 
 def train(

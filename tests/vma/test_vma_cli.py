@@ -1,5 +1,6 @@
 """The VMA commands of the `cama` CLI: propose, train, retrain, vma-eval, vma-split."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -141,3 +142,48 @@ def test_split_of_a_one_location_data_set_is_refused(site_root: Path, tmp_path: 
         app, ["vma-split", str(site_root / "nuscenes"), "--out", str(tmp_path / "split.json")]
     )
     assert result.exit_code == 2 and "one location" in result.output
+
+
+def test_propose_with_the_shipped_element_mask_network_from_any_directory(
+    drawn_site: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "masks.json"
+    result = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "masks", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "shipped with the package" in result.output and "element_masks" in result.output
+    proposals = AnnotationSet.read_json(out)
+    assert {e.cls for e in proposals.elements} >= {"divider", "boundary"}
+    assert {e.author for e in proposals.elements} == {f"vma-masks-{current_mask_version()}"}
+    wrong_kind = Path(__file__).parents[2] / "models" / "vma" / "checkpoints"
+    args = [
+        "propose",
+        str(drawn_site),
+        "--proposer",
+        "masks",
+        "--checkpoint",
+        str(wrong_kind),
+        "--out",
+        str(out),
+    ]
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "not an 'element_masks' checkpoint" in refused.output
+    unknown = runner.invoke(app, ["propose", str(drawn_site), "--proposer", "maptr", "--out", str(out)])
+    assert unknown.exit_code == 2 and "learned, rule, masks" in unknown.output
+
+
+def current_mask_version() -> str:
+    """The promoted version of the shipped element-mask registry."""
+    current = Path(__file__).parents[2] / "models" / "vma" / "element_masks" / "checkpoints" / "current.json"
+    return str(json.loads(current.read_text())["version"])
+
+
+def test_train_masks_names_a_site_without_vectors(tmp_path: Path) -> None:
+    semantic, _ = drawn_semantic()
+    site = write_raster_site(tmp_path / "novectors", semantic, [])
+    (site / "ground_truth" / "vector_map.json").unlink()
+    result = runner.invoke(
+        app, ["train-masks", "--registry", str(tmp_path / "r"), "--site", str(site), "--steps", "1"]
+    )
+    assert result.exit_code == 2 and "vector_map.json" in result.output
+    assert not (tmp_path / "r").exists()  # nothing half-written

@@ -43,7 +43,7 @@ logger = logging.getLogger(__name__)
 RETRAIN_FILE = "retrain.json"
 PROGRESS_FILE = "retrain_progress.json"
 TRAIN_LOGGER = "models.vma.train"
-"""The logger whose `step %d/%d loss %.4f ...` records report the training steps."""
+"""The logger whose `step %d/%d loss %.4f ...` records report the training steps (of either network)."""
 FIT_SPAN = (0.1, 0.9)
 """Job progress at the first and the last training step."""
 PROPOSALS_FILE = "proposals.json"
@@ -149,21 +149,32 @@ def _retrain_child(
     annotator_gate: bool,
     out: Path,
 ) -> None:
-    """Child process body: retrain and write the outcome (or the error) to `out`, the steps beside it."""
+    """Child process body: retrain the registry's network (the MapTR-style model or the element-mask network,
+    whichever its promoted version is) and write the outcome (or the error) to `out`, the steps beside it."""
     from app.review_effort.review_time import review_time
+    from models.vma.checkpoint import checkpoint_kind
+    from models.vma.element_masks.checkpoint import KIND as MASK_KIND
+    from models.vma.element_masks.config import MaskTrainConfig
+    from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
     from models.vma.retrain import retrain_from_corrections
 
     logging.basicConfig(level=logging.INFO)
     logging.getLogger(TRAIN_LOGGER).addHandler(StepReporter(out.parent / PROGRESS_FILE))
+    review = review_time if annotator_gate else None
     try:
-        result = retrain_from_corrections(
-            registry,
-            corrections,
-            validation,
-            config,
-            review=review_time if annotator_gate else None,
-            show_progress=False,
-        )
+        if checkpoint_kind(registry) == MASK_KIND:
+            train = MaskTrainConfig(
+                steps=config.train.steps,
+                batch_size=config.train.batch_size,
+                learning_rate=config.train.learning_rate,
+                damaged_copies=2,
+            )
+            mask_config = MaskRetrainConfig(train, config.tolerance, config.time_tolerance, config.min_labels)
+            result = retrain_masks_from_corrections(
+                registry, corrections, validation, mask_config, review=review
+            )
+        else:
+            result = retrain_from_corrections(registry, corrections, validation, config, review=review)
         payload: dict[str, Any] = {
             "candidate": result.candidate.name,
             "promoted": result.promoted,
@@ -270,6 +281,8 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
 
 def run_refresh(context: JobContext, params: RefreshParams, *, settings: Settings) -> JobResult:
     """Propose again over the site's rasters and replace the proposals nobody has reviewed or edited."""
+    from models.vma.checkpoint import checkpoint_kind
+    from models.vma.element_masks.checkpoint import KIND as MASK_KIND
     from models.vma.propose import propose
 
     _annotations, raster_dir, name = site_annotations(context)
@@ -280,10 +293,13 @@ def run_refresh(context: JobContext, params: RefreshParams, *, settings: Setting
         raise ValueError("refresh_proposals: the learned proposer needs a VMA registry (CAMA_VMA_REGISTRY)")
     context.report(0.05, f"proposing over {name} ({'learned' if learned else 'rule-based'})", force=True)
     out = context.workdir / PROPOSALS_FILE
+    masks = (
+        learned and settings.vma_registry is not None and checkpoint_kind(settings.vma_registry) == MASK_KIND
+    )
     propose(
         raster_dir,
         out,
-        proposer="learned" if learned else "rule",
+        proposer="masks" if masks else "learned" if learned else "rule",
         checkpoint=settings.vma_registry if learned else None,
         min_confidence=params.min_confidence,
         overwrite=True,

@@ -1,0 +1,172 @@
+"""Element-mask proposer (network geometry) against the rule-based proposer on sites the network never saw.
+
+The element-mask network (`models.vma.element_masks`: a BEV segmentation U-Net over the one-hot semantic + RGB
+rasters, its class masks traced into polylines) is scored beside the rule-based proposer, in one run, on:
+1. BEV-only held-out generator sites (seeds 2000-2004; the same as `bench/vma.py`), clean and with the same
+   reconstruction-like damage `bench/vma.py` applies (`models.vma.degrade`, default strengths, seeded by site);
+2. reconstructed rasters: the surface stage's BEV of full synthetic sites (`--recon-site`, default: the
+   default site and the randomised site 9001, each with `cama run` done), against the true vectors inside the
+   reconstructed extent and cut to the observed cells; the rule-based proposer runs there as `cama run` runs it
+   (boundaries from the road's edge), the network as everywhere.
+Figures per proposer and condition: Chamfer-AP at 0.5 / 1.0 / 1.5 m per class and mean (30 m tiles), the
+confidence bins, and the scripted annotator's speed-up over drawing (`app.review_effort.review_time`). Every
+site is first checked never to have been seen by the checkpoint (`models.vma.checkpoint.ensure_unseen`: an
+error, not a skip).
+
+Usage: .venv/bin/python bench/vma_masks.py [--checkpoint models/vma/element_masks/checkpoints]
+       [--seeds 2000-2004] [--recon-site data/synthetic/default ...] [--threads 2] [--out bench/results/vma_masks.json]
+"""
+
+import argparse
+import json
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import torch
+from rich.console import Console
+
+from app.review_effort.review_time import review_time
+from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from models.vma.bev_sites import ensure_bev_sites
+from models.vma.checkpoint import ensure_unseen
+from models.vma.commands import seed_range
+from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.propose import predict_site_masks
+from models.vma.evaluate import evaluate_proposer, evaluate_sites
+from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.vectors import Vector, read_vectors
+
+RESULTS = Path(__file__).parent / "results"
+Proposer = Callable[[SiteRasters], list[Vector]]
+
+
+def reconstructed_bev(site: Path) -> Path:
+    """The surface stage's raster folder of a synthetic site with `cama run` done (exactly one site)."""
+    found = sorted((site / "workspace" / "surface").glob("*/bev"))
+    if len(found) != 1:
+        raise SystemExit(
+            f"{site}: expected one workspace/surface/<site>/bev (run `cama run` first), found {found}"
+        )
+    return found[0]
+
+
+def on_degraded(propose: Proposer) -> Proposer:
+    """The proposer on the site's rasters with `bench/vma.py`'s damage (default strengths, seeded by name)."""
+
+    def run(rasters: SiteRasters) -> list[Vector]:
+        return propose(degrade_rasters(rasters, DegradeConfig(seed=sum(rasters.name.encode()))))
+
+    return run
+
+
+def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
+    """Chamfer-AP against all true vectors in the reconstructed extent and against their observed parts, and
+    the annotator's speed-up, over the reconstructed rasters of `sites`."""
+    all_truth, observed_truth = [], []
+    for site in sites:
+        rasters = load_site_rasters(reconstructed_bev(site))
+        truths = read_vectors(site / "ground_truth" / "vector_map.json")
+        mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
+        seen = [Vector(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]
+        predictions = propose(rasters)
+        all_truth.append((predictions, truths, rasters.extent()))
+        observed_truth.append((predictions, seen, rasters.extent()))
+    keys = ("mean_ap", "class_ap", "confidence_bins")
+    return {
+        "all_truth": {k: v for k, v in evaluate_sites(all_truth).items() if k in keys},
+        "observed_truth": {k: v for k, v in evaluate_sites(observed_truth).items() if k in keys},
+        "annotator": review_time(propose, sites, rasters_of=reconstructed_bev),
+        "sites": [str(s) for s in sites],
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/element_masks/checkpoints"))
+    parser.add_argument("--seeds", default="2000-2004", help="held-out BEV site seeds ('A-B')")
+    parser.add_argument("--site-root", type=Path, default=Path("data/vma/heldout"))
+    parser.add_argument(
+        "--recon-site",
+        type=Path,
+        action="append",
+        help="synthetic site with `cama run` done (repeatable; default: data/synthetic/default and random-9001)",
+    )
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=RESULTS / "vma_masks.json")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    console = Console()
+    held_out = ensure_bev_sites(seed_range(args.seeds), args.site_root)
+    recon = args.recon_site or [Path("data/synthetic/default"), Path("data/synthetic/random-9001")]
+    checkpoint = load_mask_checkpoint(args.checkpoint)
+    for site in [*held_out, *recon]:  # SeenSiteError when the network trained on a site scored here
+        ensure_unseen(checkpoint, site)
+    started = time.perf_counter()
+
+    def network(rasters: SiteRasters) -> list[Vector]:
+        return predict_site_masks(checkpoint.model, rasters)
+
+    def rule_on_reconstruction(rasters: SiteRasters) -> list[Vector]:
+        return propose_rule_based(rasters, RuleConfig(boundary_source="road_edge"))
+
+    results: dict[str, dict[str, Any]] = {"clean": {}, "degraded": {}, "reconstructed": {}}
+    for name, propose, recon_propose in (
+        ("rule_based", propose_rule_based, rule_on_reconstruction),
+        ("element_masks", network, network),
+    ):
+        console.print(f"evaluating {name} ...")
+        for condition, run in (("clean", propose), ("degraded", on_degraded(propose))):
+            results[condition][name] = {
+                **evaluate_proposer(run, held_out),
+                "annotator": review_time(run, held_out),
+            }
+        results["reconstructed"][name] = reconstructed_figures(recon_propose, recon)
+    margins = {
+        condition: _margin(per, "observed_truth" if condition == "reconstructed" else None)
+        for condition, per in results.items()
+    }
+    report = {
+        "command": f"python bench/vma_masks.py --checkpoint {args.checkpoint} --seeds {args.seeds} "
+        + " ".join(f"--recon-site {s}" for s in recon)
+        + f" --threads {args.threads}",
+        "held_out_seeds": seed_range(args.seeds),
+        "checkpoint": {
+            "version": checkpoint.path.name,
+            "data": checkpoint.meta.get("data"),
+            "model_config": checkpoint.meta.get("model_config"),
+            "train_metrics": checkpoint.meta.get("metrics"),
+        },
+        "results": results,
+        "map_margin_over_rule_based": margins,
+        "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    for condition, per in results.items():
+        for name, result in per.items():
+            scored = result["observed_truth"] if condition == "reconstructed" else result
+            classes = ", ".join(f"{c} {v:.3f}" for c, v in scored["class_ap"].items())
+            console.print(
+                f"[bold]{condition} {name}[/bold]: mAP {scored['mean_ap']:.3f} ({classes}); "
+                f"annotator {result['annotator']['speed_up']:.2f}x"
+            )
+    console.print(f"margins over rule-based: {margins}; written to {args.out}")
+
+
+def _margin(per: dict[str, Any], truth: str | None) -> float:
+    """The network's mAP minus the rule-based proposer's."""
+
+    def score(name: str) -> float:
+        return float((per[name][truth] if truth else per[name])["mean_ap"])
+
+    return round(score("element_masks") - score("rule_based"), 4)
+
+
+if __name__ == "__main__":
+    main()

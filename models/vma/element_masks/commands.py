@@ -1,0 +1,55 @@
+"""`cama train-masks`: the element-mask network's training command (a thin layer over `train_masks`)."""
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from cama_pipeline.console import bad_input, console
+from models.vma.bev_sites import ensure_bev_sites
+from models.vma.checkpoint import CheckpointError
+from models.vma.commands import seed_range
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
+from models.vma.element_masks.train import train_masks
+
+
+def train_masks_command(
+    registry: Annotated[
+        Path, typer.Option(help="Element-mask checkpoint registry to add the new version to.")
+    ],
+    site: Annotated[
+        list[Path] | None, typer.Option(help="Training site folder with vector_map.json (repeatable).")
+    ] = None,
+    bev_seeds: Annotated[
+        str, typer.Option(help="Also train on BEV-only synthetic sites of these seeds ('A-B').")
+    ] = "",
+    bev_root: Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")] = Path(
+        "data/vma/train"
+    ),
+    init: Annotated[Path | None, typer.Option(help="Continue from this element-mask checkpoint.")] = None,
+    steps: Annotated[int, typer.Option(help="Training batches.")] = 3000,
+    max_minutes: Annotated[
+        float, typer.Option(help="Time budget; training stops at --steps or here.")
+    ] = 40.0,
+    damaged_copies: Annotated[
+        int, typer.Option(help="Damaged copies of every site beside the clean one.")
+    ] = 3,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+) -> None:
+    """Train the element-mask VMA network (BEV segmentation, vectorised afterwards) as a new promoted version."""
+    try:
+        sites = list(site or []) + ensure_bev_sites(seed_range(bev_seeds), bev_root)
+        parent = load_mask_checkpoint(init) if init is not None else None
+        folder = train_masks(
+            parent.model.config if parent is not None else MaskModelConfig(),
+            MaskTrainConfig(
+                steps=steps, max_seconds=max_minutes * 60, damaged_copies=damaged_copies, seed=seed
+            ),
+            sites,
+            registry,
+            parent=parent,
+        )
+    except (ValueError, FileNotFoundError, CheckpointError) as err:
+        raise bad_input(err) from err
+    console.print(f"[green]checkpoint[/green] {folder} (promoted)")

@@ -1,0 +1,270 @@
+"""Site rasters -> element-mask probabilities -> vectors with confidence: the element-mask proposer.
+
+The network runs tile by tile over the site at its own resolution (tiles overlap; each cell takes the
+prediction of the tile whose centre is nearest, so no cell is predicted from a tile's border). Its class
+probabilities are brought back to the raster's resolution and vectorised by the rule-based proposer's own
+tracing (`models.vma.rule_based`): a semantic raster is written in which lane marking, crosswalk and curb are
+the network's masks (road and background are the input's), so dividers are the skeletons of the divider mask,
+boundaries of the boundary mask and crosswalks the blocks of the crosswalk mask. The geometry is the network's;
+the tracing only turns masks into polylines. A vector's confidence is the mean probability of its class along it.
+"""
+
+import logging
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+import torch
+from scipy.ndimage import map_coordinates
+from shapely.geometry import LineString
+
+from cama_pipeline.progress import StageProgress
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
+from models.vma.element_masks.net import STRIDE, ElementMaskNet
+from models.vma.element_masks.targets import mask_grid
+from models.vma.infer import window_origins
+from models.vma.rasters import SiteRasters
+from models.vma.rule_based import RuleConfig, crosswalk_vectors, propose_rule_based
+from models.vma.vectors import CLASSES, Vector
+
+logger = logging.getLogger(__name__)
+
+LAYER_OF_CLASS: dict[str, Semantic] = {
+    "ped_crossing": Semantic.CROSSWALK,
+    "divider": Semantic.LANE_MARKING,
+    "boundary": Semantic.CURB,
+}
+"""The semantic label each class's mask is written as for the tracing (in this order: later ones win)."""
+
+
+@dataclass(frozen=True)
+class MaskInferenceConfig:
+    """How the network is run over a site and its masks traced."""
+
+    tile_px: int = 384
+    """Side of the square tiles the network sees (network pixels; a multiple of the network's stride)."""
+    overlap_px: int = 64
+    threshold: float = 0.5
+    """A cell belongs to a class's mask at this probability or more."""
+    rule: RuleConfig = field(default_factory=lambda: RuleConfig(boundary_source="curb"))
+    """The tracing of the masks; boundaries follow the boundary mask (`boundary_source='curb'`)."""
+    sample_step_m: float = 0.25
+    """Spacing of the probability samples along a vector for its confidence."""
+    refine_step_m: float = 1.0
+    """Dividers and boundaries are refined at stations this far apart along them (see `refined_line`)."""
+    refine_reach_m: float = 0.5
+    """How far across the line a station looks for the centre of its class's probability."""
+    refine_simplify_m: float = 0.04
+    """Tolerance of the simplification after refinement."""
+
+    def __post_init__(self) -> None:
+        if self.tile_px < 32 or self.tile_px % STRIDE or not 0 <= self.overlap_px < self.tile_px // 2:
+            raise ValueError(
+                f"MaskInferenceConfig: tile_px must be a multiple of {STRIDE} >= 32 and 0 <= overlap_px < "
+                f"tile_px / 2, got {self.tile_px}, {self.overlap_px}"
+            )
+        if not 0.0 < self.threshold < 1.0 or not self.sample_step_m > 0:
+            raise ValueError("MaskInferenceConfig: threshold in (0, 1) and sample_step_m > 0 required")
+        if not (self.refine_step_m > 0 and self.refine_reach_m >= 0 and self.refine_simplify_m >= 0):
+            raise ValueError(
+                "MaskInferenceConfig: refine_step_m > 0, refine_reach_m and refine_simplify_m >= 0"
+            )
+        if self.rule.boundary_source != "curb":
+            raise ValueError(
+                "MaskInferenceConfig.rule.boundary_source must be 'curb' (boundaries follow their mask)"
+            )
+
+
+@torch.no_grad()
+def predict_probabilities(
+    model: ElementMaskNet,
+    rasters: SiteRasters,
+    config: MaskInferenceConfig | None = None,
+    *,
+    show_progress: bool = False,
+) -> np.ndarray:
+    """(K, H, W) float32 class probabilities at the raster's own resolution (K = `CLASSES`)."""
+    config = config or MaskInferenceConfig()
+    grid = mask_grid(rasters, model.config)
+    _, height, width = grid.image.shape
+    tile = config.tile_px
+    padded = np.zeros((grid.image.shape[0], max(height, tile), max(width, tile)), np.float32)
+    padded[:, :height, :width] = grid.image
+    rows = window_origins(padded.shape[1], tile, config.overlap_px)
+    cols = window_origins(padded.shape[2], tile, config.overlap_px)
+    probabilities = np.zeros((len(CLASSES), height, width), np.float32)
+    device = next(model.parameters()).device
+    with StageProgress("element masks", logger=logger, enabled=show_progress) as progress:
+        bar = progress.add_task(total=len(rows) * len(cols))
+        for r0 in rows:
+            for c0 in cols:
+                window = torch.as_tensor(padded[None, :, r0 : r0 + tile, c0 : c0 + tile], device=device)
+                out = torch.sigmoid(model(window))[0].cpu().numpy()
+                r_lo, r_hi = _owned(r0, rows, tile, height)
+                c_lo, c_hi = _owned(c0, cols, tile, width)
+                probabilities[:, r_lo:r_hi, c_lo:c_hi] = out[:, r_lo - r0 : r_hi - r0, c_lo - c0 : c_hi - c0]
+                progress.update(bar, advance=1)
+    size = (rasters.shape[1], rasters.shape[0])
+    return np.stack([cv2.resize(p, size, interpolation=cv2.INTER_LINEAR) for p in probabilities])
+
+
+def _owned(origin: int, origins: list[int], tile: int, length: int) -> tuple[int, int]:
+    """The cells [lo, hi) of a window that it predicts: those nearer its centre than any other window's."""
+    centres = [o + tile / 2 for o in origins]
+    k = origins.index(origin)
+    lo = 0 if k == 0 else int(np.ceil((centres[k - 1] + centres[k]) / 2))
+    hi = length if k == len(origins) - 1 else int(np.ceil((centres[k] + centres[k + 1]) / 2))
+    return max(0, lo), min(length, hi)
+
+
+def traced_semantic(rasters: SiteRasters, probabilities: np.ndarray, threshold: float) -> np.ndarray:
+    """The semantic raster the tracing reads: the input's road (marking and crosswalk cells as road) and
+    background (its curb cells as background), unobserved cells kept, and each class's mask written on top."""
+    semantic = rasters.semantic
+    out = np.where(np.isin(semantic, ROAD_SURFACE_IDS), int(Semantic.ROAD), int(Semantic.BACKGROUND)).astype(
+        np.uint8
+    )
+    for cls, label in LAYER_OF_CLASS.items():
+        out[probabilities[CLASSES.index(cls)] >= threshold] = int(label)
+    out[semantic == int(Semantic.UNOBSERVED)] = int(Semantic.UNOBSERVED)
+    return out
+
+
+def mean_probability(
+    rasters: SiteRasters, probability: np.ndarray, points: np.ndarray, step_m: float
+) -> float:
+    """Mean of a class's probability sampled every `step_m` along a polyline (or ring)."""
+    line = LineString(points)
+    stations = np.linspace(0.0, line.length, max(2, int(line.length / step_m) + 1))
+    samples = np.array([line.interpolate(s).coords[0] for s in stations])
+    colrow = np.rint(rasters.pixel_from_global(samples)).astype(int)
+    h, w = probability.shape
+    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    values = np.zeros(len(samples), np.float64)
+    values[inside] = probability[colrow[inside, 1], colrow[inside, 0]]
+    return float(values.mean())
+
+
+def refined_line(
+    rasters: SiteRasters,
+    probability: np.ndarray,
+    points: np.ndarray,
+    config: MaskInferenceConfig,
+    evidence: np.ndarray | None = None,
+) -> np.ndarray:
+    """A traced line moved onto the centre of its class's band, below the grid's cell size.
+
+    The skeleton of a thresholded mask lies on whole raster cells and wanders with the band (the network's band
+    bends by a few decimetres, most at dash gaps). Stations every `refine_step_m` along the line each look across
+    it (along its normal, within `refine_reach_m`) and move to the centre of what they find there: the cells of
+    `evidence` (the paint the rasters read, for dividers) where there is any, else the probability-weighted
+    centre of the network's band (trained on bands centred on the true lines). So where paint was read the line
+    lies on it, and where none was (gaps, faded or missed paint) the network's course is kept. The offsets are
+    smoothed along the line and the result simplified."""
+    line = LineString(points)
+    if config.refine_reach_m == 0 or line.length < 2 * config.refine_step_m:
+        return points
+    stations = np.linspace(0.0, line.length, int(np.ceil(line.length / config.refine_step_m)) + 1)
+    centres = np.array([line.interpolate(s).coords[0] for s in stations])
+    ahead = np.array([line.interpolate(min(s + 0.5, line.length)).coords[0] for s in stations])
+    behind = np.array([line.interpolate(max(s - 0.5, 0.0)).coords[0] for s in stations])
+    tangent = ahead - behind
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-9)
+    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+    offsets = np.arange(-config.refine_reach_m, config.refine_reach_m + 1e-9, 0.25 * rasters.resolution_m)
+    across = centres[:, None, :] + offsets[None, :, None] * normal[:, None, :]
+    colrow = rasters.pixel_from_global(across.reshape(-1, 2))
+    values = map_coordinates(probability, [colrow[:, 1], colrow[:, 0]], order=1, mode="constant")
+    weights = np.clip(values.reshape(len(stations), len(offsets)) - 0.5 * config.threshold, 0.0, None)
+    seen = np.zeros(len(stations), bool)
+    if evidence is not None:
+        read = map_coordinates(evidence, [colrow[:, 1], colrow[:, 0]], order=0, mode="constant")
+        read = read.reshape(len(stations), len(offsets)).astype(np.float64)
+        seen = read.sum(axis=1) > 0
+        weights[seen] = read[seen]
+    total = weights.sum(axis=1)
+    shift = np.where(total > 0, (weights * offsets).sum(axis=1) / np.maximum(total, 1e-9), 0.0)
+    if len(shift) >= 3:  # the band's centre is smoothed along the line; read paint is taken as it is
+        smoothed = shift.copy()
+        smoothed[1:-1] = 0.25 * shift[:-2] + 0.5 * shift[1:-1] + 0.25 * shift[2:]
+        shift = np.where(seen, shift, smoothed)
+    moved = centres + shift[:, None] * normal
+    bridged = _bridged(stations, seen, config.rule.join_gap_m)
+    if bridged.any():
+        # across a gap in the paint the line runs straight from the paint before it to the paint after it
+        for axis in range(2):
+            moved[bridged, axis] = np.interp(stations[bridged], stations[seen], moved[seen, axis])
+    return np.asarray(LineString(moved).simplify(config.refine_simplify_m).coords)
+
+
+def read_crossing(rasters: SiteRasters, ring: np.ndarray, config: MaskInferenceConfig) -> np.ndarray:
+    """A traced crossing's ring, or, where the rasters read its stripes, the block of those stripes.
+
+    The network finds the crossing (missed or worn stripes included) but its block's edges are as soft as its
+    band; where the stripes inside it (within `refine_reach_m`) were read over at least a third of its area,
+    the rule-based block of those stripes, carried to the kerbs as the rules carry it, is the sharper ring."""
+    res = rasters.resolution_m
+    inside = np.zeros(rasters.shape, np.uint8)
+    cv2.fillPoly(inside, [np.rint(rasters.pixel_from_global(ring)).astype(np.int32)], 1)
+    reach = max(1, round(config.refine_reach_m / res))
+    region = cv2.dilate(inside, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1,) * 2)) > 0
+    stripes = region & (rasters.semantic == int(Semantic.CROSSWALK))
+    if stripes.sum() < inside.sum() / 6:  # zebra stripes cover about half of a block
+        return ring
+    blocks = crosswalk_vectors(rasters, stripes, config.rule)
+    return blocks[0].points if len(blocks) == 1 else ring
+
+
+def _bridged(stations: np.ndarray, seen: np.ndarray, gap_m: float) -> np.ndarray:
+    """Stations without evidence that lie in a gap no longer than `gap_m` between stations with evidence."""
+    out = np.zeros(len(stations), bool)
+    idx = np.flatnonzero(seen)
+    for before, after in zip(idx[:-1], idx[1:], strict=True):
+        if after - before > 1 and stations[after] - stations[before] <= gap_m:
+            out[before + 1 : after] = True
+    return out
+
+
+def vectors_from_probabilities(
+    rasters: SiteRasters, probabilities: np.ndarray, config: MaskInferenceConfig | None = None
+) -> list[Vector]:
+    """Trace the class masks into vectors scored by their mean class probability."""
+    config = config or MaskInferenceConfig()
+    traced = replace(rasters, semantic=traced_semantic(rasters, probabilities, config.threshold))
+    paint = (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)
+    out = []
+    for vector in propose_rule_based(traced, config.rule):
+        probability = probabilities[CLASSES.index(vector.cls)]
+        if vector.closed:
+            # a crossing's ring runs along its edge; its confidence is the mask inside it
+            points = read_crossing(rasters, vector.points, config)
+            score = _mean_inside(rasters, probability, vector.points)
+        else:
+            points = refined_line(
+                rasters, probability, vector.points, config, paint if vector.cls == "divider" else None
+            )
+            score = mean_probability(rasters, probability, points, config.sample_step_m)
+        out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
+    return out
+
+
+def _mean_inside(rasters: SiteRasters, probability: np.ndarray, ring: np.ndarray) -> float:
+    """Mean probability over the cells inside a ring."""
+    inside = np.zeros(probability.shape, np.uint8)
+    cv2.fillPoly(inside, [np.rint(rasters.pixel_from_global(ring)).astype(np.int32)], 1)
+    return float(probability[inside > 0].mean()) if inside.any() else 0.0
+
+
+def predict_site_masks(
+    model: ElementMaskNet,
+    rasters: SiteRasters,
+    config: MaskInferenceConfig | None = None,
+    *,
+    show_progress: bool = False,
+) -> list[Vector]:
+    """The element-mask proposer on one site: vectors in global metres with confidence."""
+    config = config or MaskInferenceConfig()
+    probabilities = predict_probabilities(model, rasters, config, show_progress=show_progress)
+    vectors = vectors_from_probabilities(rasters, probabilities, config)
+    logger.info("element-mask proposer: %d vectors on %s", len(vectors), rasters.name)
+    return vectors

@@ -1,0 +1,137 @@
+"""Retraining the element-mask network from people's corrections, behind the same gates as the MapTR-style model.
+
+Accepted, fixed and approved elements of each corrected site are drawn as the target masks (`targets`), so a
+fixed line teaches the network where the line really is; rejected proposals are negatives: crops are cut around
+them too, where the targets say nothing is there. Crops are centred on labelled and rejected elements (unreviewed
+elements inside a crop count as background, so correction batches should cover whole regions, as for the
+MapTR-style model). The promoted version is fine-tuned at a low rate on the corrected sites' clean and damaged
+rasters; candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
+annotator time when given); the candidate is saved either way with what it saw and promoted only if both gates
+pass (`models.vma.retrain.gate_passes`).
+"""
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from models.vma.checkpoint import refuse_seen_validation, seen_records
+from models.vma.config import config_dict
+from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
+from models.vma.element_masks.config import MaskTrainConfig
+from models.vma.element_masks.net import ElementMaskNet
+from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.train import fit_masks, training_site
+from models.vma.evaluate import evaluate_proposer
+from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.retrain import (
+    LABEL_STATES,
+    NEGATIVE_STATES,
+    CandidateRecord,
+    Corrections,
+    RetrainResult,
+    ReviewGate,
+    gate_passes,
+    save_candidate,
+)
+from models.vma.train import DAMAGE_SEED_BASE
+from models.vma.vectors import Vector, vectors_from_annotations
+
+
+@dataclass(frozen=True)
+class MaskRetrainConfig:
+    """Fine-tuning and gate settings of the element-mask network."""
+
+    train: MaskTrainConfig = field(
+        default_factory=lambda: MaskTrainConfig(steps=300, learning_rate=3e-4, damaged_copies=2)
+    )
+    tolerance: float = 0.0
+    """The candidate is promoted when its mAP >= current mAP - tolerance."""
+    time_tolerance: float = 0.0
+    """With a `review` gate: promoted only when its correction time <= current time * (1 + time_tolerance)."""
+    min_labels: int = 1
+
+    def __post_init__(self) -> None:
+        if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1:
+            raise ValueError(
+                "MaskRetrainConfig: tolerance >= 0, time_tolerance >= 0 and min_labels >= 1 required"
+            )
+
+
+def evaluate_mask_model(
+    model: ElementMaskNet, sites: Sequence[Path], review: ReviewGate | None = None
+) -> dict[str, Any]:
+    """Chamfer-AP of the network's proposals on validation sites, with the `review` figures (key "review")."""
+
+    def propose(rasters: SiteRasters) -> list[Vector]:
+        return predict_site_masks(model, rasters)
+
+    metrics = evaluate_proposer(propose, sites)
+    if review is not None:
+        metrics["review"] = review(propose, sites)
+    return metrics
+
+
+def retrain_masks_from_corrections(
+    registry: Path,
+    corrections: Sequence[Corrections],
+    validation_sites: Sequence[Path],
+    config: MaskRetrainConfig | None = None,
+    *,
+    review: ReviewGate | None = None,
+    show_progress: bool = False,
+) -> RetrainResult:
+    """Fine-tune the promoted element-mask version of `registry` on corrections; save the candidate; promote it
+    if the gates pass."""
+    config = config or MaskRetrainConfig()
+    started = time.perf_counter()
+    current = load_mask_checkpoint(Path(registry))
+    seen = seen_records([c.site for c in corrections], current)
+    refuse_seen_validation(seen, validation_sites, f"{current.path} with these corrections")
+    prepared, num_labels, num_negatives = [], 0, 0
+    for k, item in enumerate(corrections):
+        labels = vectors_from_annotations(item.annotations, LABEL_STATES)
+        negatives = vectors_from_annotations(item.annotations, NEGATIVE_STATES)
+        num_labels, num_negatives = num_labels + len(labels), num_negatives + len(negatives)
+        if labels or negatives:
+            rasters = load_site_rasters(item.site)
+            seed = DAMAGE_SEED_BASE + 7919 * (k + 1) + config.train.seed
+            prepared.append(
+                training_site(
+                    str(item.site),
+                    rasters,
+                    labels,
+                    current.model.config,
+                    config.train.damaged_copies,
+                    seed,
+                    centres_on=[*labels, *negatives],
+                )
+            )
+    if num_labels < config.min_labels:
+        raise ValueError(
+            f"retrain: {num_labels} accepted/fixed annotations, need at least {config.min_labels}"
+        )
+    current_metrics = evaluate_mask_model(current.model, validation_sites, review)
+    candidate = load_mask_checkpoint(current.path).model  # a fresh copy to fine-tune
+    fit_masks(candidate, prepared, config.train, show_progress=show_progress)
+    candidate.cpu()
+    candidate_metrics = evaluate_mask_model(candidate, validation_sites, review)
+    promoted = gate_passes(current_metrics, candidate_metrics, config)
+    return save_candidate(
+        Path(registry),
+        candidate,
+        CandidateRecord(
+            current.path.name,
+            config_dict(config.train),
+            corrections,
+            validation_sites,
+            seen,
+            (num_labels, num_negatives),
+            time.perf_counter() - started,
+        ),
+        current_metrics,
+        candidate_metrics,
+        promoted,
+        {"kind": KIND},
+    )

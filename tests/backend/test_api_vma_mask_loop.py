@@ -1,0 +1,91 @@
+"""The VMA loop with an element-mask registry: the server's refresh proposes with the network the registry holds,
+and a retrain job fine-tunes that network (its candidate is an element-mask version that names what it saw)."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.backend.config import Settings
+from models.vma.checkpoint import checkpoint_kind
+from models.vma.element_masks.checkpoint import KIND
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
+from tests.backend.backend_helpers import PASSWORD, register_site
+from tests.backend.test_api_vma_loop import (
+    HANG_S,
+    TINY_RETRAIN,
+    Headers,
+    bulk,
+    live,
+    review,
+    submit,
+    wait_for,
+)
+from tests.backend.vma_loop_site import DIVIDER_Y, write_site
+
+
+@pytest.fixture
+def loop_site(tmp_path: Path) -> Path:
+    write_site(tmp_path / "site")
+    return tmp_path / "site"
+
+
+@pytest.fixture
+def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Settings:
+    """Settings whose registry is a copy of the shipped element-mask registry."""
+    registry = tmp_path / "mask-registry"
+    shutil.copytree(shipped_registry(*SHIPPED_MASK_REGISTRY), registry)
+    return Settings(
+        data_dir=tmp_path / "data",
+        data_roots=(tmp_path,),
+        database_url=database_url,
+        scrypt_n=2**4,
+        extent_margin_m=10.0,
+        admin_username="root",
+        admin_password=PASSWORD,
+        vma_registry=registry,
+        vma_validation_sites=(write_site(tmp_path / "validation").parents[1],),
+    )
+
+
+@pytest.fixture
+def site_id(client: TestClient, headers: Headers, loop_site: Path) -> int:
+    return register_site(client, headers["lead"], loop_site / "ground_truth" / "bev", "loop")
+
+
+def test_refresh_proposes_with_the_registrys_element_mask_network(
+    client: TestClient, headers: Headers, site_id: int, settings: Settings
+) -> None:
+    job = submit(client, headers, site_id, "refresh_proposals")
+    done = wait_for(client, headers, job["id"], {"succeeded", "failed"}, HANG_S)
+    assert done["state"] == "succeeded", done["message"]
+    elements = live(client, headers, site_id)
+    version = json.loads((Path(settings.vma_registry or "") / "current.json").read_text())["version"]
+    assert elements and {e["proposed_by"] for e in elements} == {f"vma-masks-{version}"}
+    on_paint = [
+        e
+        for e in elements
+        if e["class"] == "divider" and all(abs(p[1] - DIVIDER_Y) < 0.5 for p in e["points"])
+    ]
+    assert on_paint and on_paint[0]["points"][-1][0] - on_paint[0]["points"][0][0] > 80.0
+
+
+@pytest.mark.slow  # a spawned child imports torch, fine-tunes and evaluates twice
+def test_retrain_fine_tunes_the_element_mask_network(
+    client: TestClient, headers: Headers, site_id: int, settings: Settings
+) -> None:
+    drawn = bulk(
+        client, headers, site_id, [{"class": "divider", "points": [[5.0, DIVIDER_Y], [95.0, DIVIDER_Y]]}]
+    )
+    review(client, headers, site_id, drawn[0], "fixed", "annotator")
+    job = submit(client, headers, site_id, "retrain", **TINY_RETRAIN)
+    done = wait_for(client, headers, job["id"], {"succeeded", "failed"}, HANG_S)
+    assert done["state"] == "succeeded", done["message"]
+    outcome = json.loads(client.get(done["download_url"], headers=headers["lead"]).content)
+    candidate = Path(settings.vma_registry or "") / outcome["candidate"]
+    assert checkpoint_kind(candidate) == KIND and outcome["labels"] == 1
+    meta = json.loads((candidate / "checkpoint.json").read_text())
+    assert meta["train_config"]["steps"] == TINY_RETRAIN["steps"] and len(meta["data"]["corrections"]) == 1
+    assert "validation mAP" in done["message"] and "simulated annotator" in done["message"]

@@ -1,0 +1,187 @@
+"""The element-mask proposer: targets on the right cells, masks traced into vectors scored by probability, versions
+that record and refuse their training sites, and a network that learns what the rules cannot read."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from cama_pipeline.semantics import Semantic
+from cama_pipeline.site_identity import SeenSiteError
+from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint
+from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
+from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
+from models.vma.element_masks.net import ElementMaskNet
+from models.vma.element_masks.propose import (
+    MaskInferenceConfig,
+    predict_probabilities,
+    read_crossing,
+    refined_line,
+    traced_semantic,
+    vectors_from_probabilities,
+)
+from models.vma.element_masks.targets import element_masks, mask_grid
+from models.vma.element_masks.train import smeared_kerbs, train_masks
+from models.vma.rasters import load_site_rasters
+from models.vma.rule_based import RuleConfig
+from models.vma.vectors import CLASSES, Vector
+from tests.vma.vma_test_sites import ORIGIN_XY, global_xy
+
+CONFIG = MaskModelConfig()
+
+
+def test_targets_draw_each_class_on_its_own_cells(drawn_site: Path) -> None:
+    rasters = load_site_rasters(drawn_site)
+    grid = mask_grid(rasters, CONFIG)
+    assert grid.shape == (200, 300)  # 40 m x 60 m at 0.2 m
+    line = Vector("divider", np.array([global_xy(10, 20), global_xy(50, 20)]))
+    ring = Vector(
+        "ped_crossing",
+        np.array(
+            [global_xy(30, 13), global_xy(34, 13), global_xy(34, 27), global_xy(30, 27), global_xy(30, 13)]
+        ),
+    )
+    masks = element_masks([line, ring], grid, CONFIG)
+    divider, crossing, boundary = (masks[CLASSES.index(c)] for c in ("divider", "ped_crossing", "boundary"))
+    assert not boundary.any()
+    rows = np.nonzero(divider[:, 100])[0]  # x = 20 m
+    # the band is 0.6 m (3 cells) wide around y = 20 m: grid row (20 m - 0.05 m + 0.1 m) / 0.2 m ~ 100
+    assert len(rows) == 3 and abs(rows.mean() - 99.75) <= 0.5
+    assert not divider[:, 40].any()  # x = 8 m: before the line starts
+    assert crossing[100, 160] == 1 and crossing[100, 145] == 0  # x = 32 m inside, x = 29 m outside
+    assert grid.image.shape[0] == CONFIG.in_channels and grid.observed.all()
+
+
+def test_network_predicts_a_mask_per_class_and_names_a_bad_input_size() -> None:
+    net = ElementMaskNet(CONFIG).eval()
+    with torch.no_grad():
+        out = net(torch.zeros(1, CONFIG.in_channels, 64, 96))
+    assert out.shape == (1, len(CLASSES), 64, 96)
+    with pytest.raises(ValueError, match="multiples of 8"):
+        net(torch.zeros(1, CONFIG.in_channels, 60, 96))
+
+
+def test_masks_are_traced_into_vectors_scored_by_their_probability(drawn_site: Path) -> None:
+    rasters = load_site_rasters(drawn_site)
+    probabilities = np.zeros((len(CLASSES), *rasters.shape), np.float32)
+    row = round(20 / rasters.resolution_m)
+    probabilities[CLASSES.index("divider"), row - 2 : row + 3, 20:500] = 0.8  # x 2..50 m at y = 20 m
+    probabilities[CLASSES.index("boundary"), round(12 / 0.1) - 2 : round(12 / 0.1) + 3, :] = 0.9
+    probabilities[CLASSES.index("ped_crossing"), 130:270, 300:340] = 0.7
+    semantic = traced_semantic(rasters, probabilities, 0.5)
+    # the input's own marking labels are not traced: only the masks are
+    assert (semantic == int(Semantic.LANE_MARKING)).sum() == 5 * 480
+    vectors = vectors_from_probabilities(rasters, probabilities, MaskInferenceConfig())
+    by_class = {c: [v for v in vectors if v.cls == c] for c in CLASSES}
+    assert (
+        len(by_class["divider"]) == 1
+        and len(by_class["boundary"]) == 1
+        and len(by_class["ped_crossing"]) == 1
+    )
+    divider = by_class["divider"][0]
+    xs = sorted(divider.points[:, 0] - ORIGIN_XY[0])
+    assert xs[0] < 3.0 and xs[-1] > 49.0 and np.allclose(divider.points[:, 1], ORIGIN_XY[1] - 20, atol=0.15)
+    assert divider.score == pytest.approx(0.8, abs=0.05)
+    assert by_class["boundary"][0].score == pytest.approx(0.9, abs=0.05)
+    # the block is carried across the road to its kerbs (as the rules carry stripes), over a few empty cells
+    assert 0.55 < by_class["ped_crossing"][0].score <= 0.7
+    with pytest.raises(ValueError, match="boundary_source"):
+        MaskInferenceConfig(rule=RuleConfig(boundary_source="road_edge"))
+
+
+def test_smeared_kerbs_spread_and_break_the_kerb_label_only(rng: np.random.Generator) -> None:
+    semantic = np.zeros((200, 200), np.uint8)
+    semantic[:, :100] = int(Semantic.ROAD)
+    semantic[:, 100:102] = int(Semantic.CURB)
+    semantic[:, 150] = int(Semantic.LANE_MARKING)
+    out = smeared_kerbs(semantic, 0.1, rng)
+    changed = out != semantic
+    assert changed.any()
+    assert set(np.unique(out[changed]).tolist()) <= {int(Semantic.CURB), int(Semantic.BACKGROUND)}
+    assert (out[:, :100] == int(Semantic.ROAD)).all() and (out[:, 150] == int(Semantic.LANE_MARKING)).all()
+
+
+def test_a_trained_version_records_its_sites_and_is_refused_on_them(
+    bev_sites: dict[str, Path], tmp_path: Path
+) -> None:
+    registry = tmp_path / "registry"
+    config = MaskModelConfig(base_channels=4)
+    folder = train_masks(
+        config,
+        MaskTrainConfig(steps=2, batch_size=2, crop_px=64, damaged_copies=1, threads=1),
+        [bev_sites["train"]],
+        registry,
+        show_progress=False,
+    )
+    meta = json.loads((folder / "checkpoint.json").read_text())
+    assert meta["kind"] == KIND and meta["data"]["seen_sites"][0]["seed"] == 3001
+    loaded = load_mask_checkpoint(registry)
+    assert loaded.path == folder and loaded.model.config == config
+    with pytest.raises(SeenSiteError, match="3001|trained on"):
+        ensure_unseen(loaded, bev_sites["train"])
+    assert ensure_unseen(loaded, bev_sites["val"]) is not None
+    with pytest.raises(SeenSiteError):
+        train_masks(
+            config,
+            MaskTrainConfig(steps=1, batch_size=1, crop_px=64, damaged_copies=0, threads=1),
+            [bev_sites["train"]],
+            registry,
+            validation_sites=[bev_sites["train"]],
+            show_progress=False,
+        )
+    with pytest.raises(CheckpointError, match="kind"):
+        load_mask_checkpoint(Path("models/vma/checkpoints"))
+    with pytest.raises(CheckpointError, match="checkpoint.json"):
+        load_checkpoint(folder)
+    probabilities = predict_probabilities(
+        loaded.model, load_site_rasters(bev_sites["val"]), MaskInferenceConfig(tile_px=128, overlap_px=32)
+    )
+    assert probabilities.shape[1:] == load_site_rasters(bev_sites["val"]).shape
+    assert ((probabilities >= 0) & (probabilities <= 1)).all()
+
+
+def _band_site(drawn_site: Path) -> tuple:
+    """The drawn site's rasters and a divider probability band whose centre wobbles 0.3 m around y = 20 m."""
+    rasters = load_site_rasters(drawn_site)
+    probability = np.zeros(rasters.shape, np.float32)
+    for col in range(rasters.shape[1]):
+        centre_y = 20.0 + 0.3 * np.sin(col * rasters.resolution_m * 2 * np.pi / 9.0)
+        rows = np.arange(rasters.shape[0]) * rasters.resolution_m
+        probability[:, col] = np.clip(1.0 - np.abs(rows - centre_y) / 0.4, 0.0, 1.0)
+    return rasters, probability
+
+
+def test_refined_lines_follow_the_band_centre_and_the_paint_where_read(drawn_site: Path) -> None:
+    rasters, probability = _band_site(drawn_site)
+    traced = np.array([global_xy(5, 20.15), global_xy(25, 20.15)])  # a skeleton a cell and a half off
+    config = MaskInferenceConfig()
+    band = refined_line(rasters, probability, traced, config)
+    xs = band[:, 0] - ORIGIN_XY[0]
+    expected = 20.0 + 0.3 * np.sin(xs * 2 * np.pi / 9.0)
+    # on the band's centre (within the smoothing of a 9 m wave), not where the skeleton was
+    assert np.abs((ORIGIN_XY[1] - band[:, 1]) - expected).max() < 0.1
+    paint = (rasters.semantic == int(Semantic.LANE_MARKING)).astype(
+        np.float32
+    )  # dashes at y = 20 m, x 1-4, 10-13, ...
+    snapped = refined_line(rasters, probability, traced, config, paint)
+    # read paint wins, and the 6 m gaps between dashes are bridged straight instead of following the wobble;
+    # before the first dash read and after the last the network's course is kept
+    xs = snapped[:, 0] - ORIGIN_XY[0]
+    between = (xs >= 10.0) & (xs <= 22.0)
+    assert between.sum() >= 2 and np.abs((ORIGIN_XY[1] - snapped[between, 1]) - 20.0).max() < 0.06
+    wave = 20.0 + 0.3 * np.sin(xs[~between] * 2 * np.pi / 9.0)
+    assert np.abs((ORIGIN_XY[1] - snapped[~between, 1]) - wave).max() < 0.1
+    assert refined_line(rasters, probability, traced, MaskInferenceConfig(refine_reach_m=0.0)) is traced
+
+
+def test_crossings_take_the_block_of_the_stripes_read_inside_them(drawn_site: Path) -> None:
+    rasters = load_site_rasters(drawn_site)
+    soft = np.array([global_xy(29.6, 13), global_xy(34.5, 13), global_xy(34.5, 27.2), global_xy(29.6, 27.2)])
+    ring = np.vstack([soft, soft[:1]])
+    read = read_crossing(rasters, ring, MaskInferenceConfig())
+    xs = read[:, 0] - ORIGIN_XY[0]
+    assert xs.min() == pytest.approx(30.0, abs=0.15) and xs.max() == pytest.approx(34.0, abs=0.15)
+    elsewhere = ring + np.array([15.0, 0.0])  # no stripes were read there: the network's ring stays
+    assert read_crossing(rasters, elsewhere, MaskInferenceConfig()) is elsewhere
