@@ -21,7 +21,7 @@
 Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-count map) go to
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
 
-Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|rule]
+Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|masks|rule]
        [--masks auto|dataset|predicted|DIR] [--out bench/results/end_to_end.json] [--measure-only]
 """
 
@@ -61,9 +61,10 @@ from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
 from models.vma.checkpoint import ensure_unseen, load_checkpoint
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import load_site_rasters
-from models.vma.shipped import resolve_checkpoint
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, resolve_checkpoint
 from models.vma.vectors import Vector, read_vectors, vectors_from_annotations
 
 matplotlib.use("Agg")
@@ -338,7 +339,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
     parser.add_argument("--site-id", default="site-001")
-    parser.add_argument("--proposer", choices=("learned", "rule"), default="learned")
+    parser.add_argument("--proposer", choices=("learned", "masks", "rule"), default="learned")
     parser.add_argument("--max-features", type=int, default=None)
     parser.add_argument(
         "--masks",
@@ -358,6 +359,8 @@ def main() -> None:
     site, site_id = args.site, args.site_id
     if args.proposer == "learned":  # SeenSiteError when the shipped VMA trained on this site
         ensure_unseen(load_checkpoint(resolve_checkpoint(None)), site)
+    if args.proposer == "masks":  # the same for the shipped element-mask network
+        ensure_unseen(load_mask_checkpoint(resolve_checkpoint(None, SHIPPED_MASK_REGISTRY)), site)
     workspace = Workspace.for_dataset(site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:

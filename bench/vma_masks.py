@@ -6,8 +6,8 @@ rasters, its class masks traced into polylines) is scored beside the rule-based 
    reconstruction-like damage `bench/vma.py` applies (`models.vma.degrade`, default strengths, seeded by site);
 2. reconstructed rasters: the surface stage's BEV of full synthetic sites (`--recon-site`, default: the
    default site and the randomised site 9001, each with `cama run` done), against the true vectors inside the
-   reconstructed extent and cut to the observed cells; the rule-based proposer runs there as `cama run` runs it
-   (boundaries from the road's edge), the network as everywhere.
+   reconstructed extent and cut to the observed cells; both proposers run there as `cama run` runs them
+   (the rules' boundaries follow the road's edge; the network's snap to it where it is seen).
 Figures per proposer and condition: Chamfer-AP at 0.5 / 1.0 / 1.5 m per class and mean (30 m tiles), the
 confidence bins, and the scripted annotator's speed-up over drawing (`app.review_effort.review_time`). Every
 site is first checked never to have been seen by the checkpoint (`models.vma.checkpoint.ensure_unseen`: an
@@ -35,7 +35,7 @@ from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
-from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks
 from models.vma.evaluate import evaluate_proposer, evaluate_sites
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.rule_based import RuleConfig, propose_rule_based
@@ -111,13 +111,18 @@ def main() -> None:
     def network(rasters: SiteRasters) -> list[Vector]:
         return predict_site_masks(checkpoint.model, rasters)
 
+    def network_on_reconstruction(rasters: SiteRasters) -> list[Vector]:
+        return predict_site_masks(
+            checkpoint.model, rasters, MaskInferenceConfig(boundary_evidence="road_edge")
+        )
+
     def rule_on_reconstruction(rasters: SiteRasters) -> list[Vector]:
         return propose_rule_based(rasters, RuleConfig(boundary_source="road_edge"))
 
     results: dict[str, dict[str, Any]] = {"clean": {}, "degraded": {}, "reconstructed": {}}
     for name, propose, recon_propose in (
         ("rule_based", propose_rule_based, rule_on_reconstruction),
-        ("element_masks", network, network),
+        ("element_masks", network, network_on_reconstruction),
     ):
         console.print(f"evaluating {name} ...")
         for condition, run in (("clean", propose), ("degraded", on_degraded(propose))):

@@ -161,7 +161,7 @@ VMA_ROWS = {
 
 
 def test_vma_chamfer_ap_table() -> None:
-    t = table("proposer")
+    t = table("proposer", "bench/vma.py")
     assert_names_source(t, "vma.json", "bench/vma.py")
     recorded = results("vma.json")["results"]
     for label, key in VMA_ROWS.items():
@@ -570,3 +570,16 @@ def test_kerb_step_annotator_figures() -> None:
         for n in ("step", "foot", "flat")
     }
     assert maps == {"0.91"} and "proposal mAP 0.91 in all three" in text
+
+
+def test_element_mask_proposer_table() -> None:
+    t = table("proposer", "bench/vma_masks.py")
+    assert_names_source(t, "vma_masks.json", "bench/vma_masks.py")
+    recorded = results("vma_masks.json")
+    assert recorded["checkpoint"]["version"] in " ".join(t.rows)
+    for label, key in (("rule-based", "rule_based"), ("element-mask network", "element_masks")):
+        cells = row(t, next(name for name in t.rows if name.startswith(label)))
+        for cell, condition in zip(cells[1:4], ("clean", "degraded", "reconstructed"), strict=True):
+            figures = recorded["results"][condition][key]
+            scored = figures["observed_truth"] if condition == "reconstructed" else figures
+            assert_shows(cell, [scored["mean_ap"], figures["annotator"]["speed_up"]], f"{label} {condition}")

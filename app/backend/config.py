@@ -31,6 +31,10 @@ def _paths(value: str) -> tuple[Path, ...]:
     return tuple(Path(part) for part in value.split(os.pathsep) if part)
 
 
+VMA_MODELS = ("maptr", "masks")
+"""The shipped networks a server's registry can be seeded from (`Settings.vma_model`)."""
+
+
 @dataclass(frozen=True)
 class Settings:
     """Everything the backend needs to start; build with `Settings.from_env()` or directly in tests."""
@@ -53,6 +57,10 @@ class Settings:
     vma_registry: Path | None = None
     """VMA checkpoint registry (`models.vma.checkpoint`); retrain needs it, proposal refresh uses it (else the
     rule-based proposer), and its promoted version's calibration gives the pre-accept threshold."""
+    vma_model: str = "maptr"
+    """Which shipped network seeds `DATA_DIR`'s registry when `vma_registry` is not set: `maptr` (the anchored
+    MapTR-style model, `DATA_DIR/vma-registry`) or `masks` (the element-mask network, `DATA_DIR/vma-mask-registry`).
+    A configured registry is used as it is, whichever network it holds (jobs dispatch on its `kind`)."""
     vma_validation_sites: tuple[Path, ...] = ()
     """Held-out site folders (rasters + ground-truth vector map) the retrain gate evaluates on."""
     retrain_after: int = 0
@@ -99,6 +107,10 @@ class Settings:
             raise ValueError("CAMA_ADMIN_USERNAME and CAMA_ADMIN_PASSWORD: set both or neither")
         if self.retrain_after < 0:
             raise ValueError(f"CAMA_RETRAIN_AFTER: must be >= 0, got {self.retrain_after}")
+        if self.vma_model not in VMA_MODELS:
+            raise ValueError(
+                f"CAMA_VMA_MODEL: must be one of {', '.join(VMA_MODELS)}, got {self.vma_model!r}"
+            )
         if not 0.0 <= self.qa_share <= 1.0:
             raise ValueError(f"CAMA_QA_SHARE: must be in [0, 1], got {self.qa_share}")
         if self.preaccept_threshold is not None and not 0.0 <= self.preaccept_threshold <= 1.0:
@@ -157,6 +169,7 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "admin_username": str,
     "admin_password": str,
     "vma_registry": Path,
+    "vma_model": str,
     "vma_validation_sites": _paths,
     "retrain_after": int,
     "qa_share": float,

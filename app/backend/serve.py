@@ -37,6 +37,13 @@ def serve_command(
             "DATA_DIR/vma-registry, seeded with the shipped model on first start."
         ),
     ] = None,
+    vma_model: Annotated[
+        str | None,
+        typer.Option(
+            help="maptr or masks: which shipped network seeds the default registry (CAMA_VMA_MODEL); "
+            "masks: DATA_DIR/vma-mask-registry."
+        ),
+    ] = None,
     validation_site: Annotated[
         list[Path] | None,
         typer.Option(
@@ -59,6 +66,7 @@ def serve_command(
                 database_url=database_url,
                 admin_username=admin_username,
                 vma_registry=vma_registry,
+                vma_model=vma_model,
                 vma_validation_sites=tuple(validation_site) if validation_site else None,
                 review_url=review_url,
             )

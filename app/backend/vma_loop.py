@@ -38,14 +38,18 @@ def qa_sample(element_ids: Collection[int], share: float, seed: int) -> set[int]
 
 
 def with_shipped_registry(settings: Settings) -> Settings:
-    """`settings` with a VMA registry: the configured one, else `<data_dir>/vma-registry`, seeded on first start
-    with a copy of the model shipped in the package (found from any working directory), so the servers that
+    """`settings` with a VMA registry: the configured one, else `<data_dir>/vma-registry` (or, with
+    `vma_model="masks"`, `<data_dir>/vma-mask-registry`), seeded on first start with a copy of that model as shipped
+    in the package (found from any working directory), so the servers that
     `cama serve` and `cama demo` start can refresh proposals with the learned model and retrain it, and new
     versions land in the server's data folder, never inside the installed package."""
-    from models.vma.shipped import seed_registry
+    from models.vma.shipped import SHIPPED_MASK_REGISTRY, seed_registry
 
     if settings.vma_registry is not None:
         return settings
-    registry = seed_registry(Path(settings.data_dir) / "vma-registry")
-    logger.info("VMA registry %s (seeded from the shipped model)", registry)
+    if settings.vma_model == "masks":
+        registry = seed_registry(Path(settings.data_dir) / "vma-mask-registry", SHIPPED_MASK_REGISTRY)
+    else:
+        registry = seed_registry(Path(settings.data_dir) / "vma-registry")
+    logger.info("VMA registry %s (seeded from the shipped %s model)", registry, settings.vma_model)
     return replace(settings, vma_registry=registry)

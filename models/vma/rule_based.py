@@ -101,7 +101,7 @@ def propose_rule_based(rasters: SiteRasters, config: RuleConfig | None = None) -
     """Dividers, boundaries and crosswalks of a site from its semantic raster, global metres, with confidence."""
     config = config or RuleConfig()
     semantic = rasters.semantic
-    road = _road_mask(semantic, rasters.resolution_m, config)
+    road = road_mask(semantic, rasters.resolution_m, config)
     vectors = [
         *_line_vectors(
             rasters, semantic == int(Semantic.LANE_MARKING), "divider", config, config.join_gap_m, road
@@ -162,7 +162,7 @@ def _boundary_mask(
     return semantic == int(Semantic.CURB)
 
 
-def _road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
+def road_mask(semantic: np.ndarray, resolution_m: float, config: RuleConfig) -> np.ndarray:
     """Road, marking and crosswalk cells (uint8), with small non-road holes in it (label noise) filled."""
     road = np.isin(semantic, ROAD_SURFACE_IDS).astype(np.uint8)
     holes = (1 - road) & (1 - remove_small_blobs(1 - road, round(config.road_hole_m2 / resolution_m**2)))
@@ -197,7 +197,7 @@ def road_edge(semantic: np.ndarray, road: np.ndarray, resolution_m: float, confi
     """Cells just outside the road with observed off-road ground (curb or background) within `curb_reach_m`:
     the road's boundary as a 1-cell band, at the road's sharp edge rather than along the curb label smeared
     over the sidewalk (or missing), bridging the thin unobserved strip a curb's face hides. Where the road
-    runs into unobserved cells (a cut-off arm) there is none. `road`: `_road_mask` of the raster."""
+    runs into unobserved cells (a cut-off arm) there is none. `road`: `road_mask` of the raster."""
     off_road = np.isin(semantic, OFF_ROAD_IDS).astype(np.uint8)
     near_off_road = cv2.dilate(off_road, _disk(config.curb_reach_m / resolution_m)) > 0
     rim = (cv2.dilate(road, np.ones((3, 3), np.uint8)) > 0) & (road == 0)

@@ -54,15 +54,16 @@ def checkpoint_label(version: Path) -> str:
     return f"{version.name} ({'shipped with the package: ' if shipped else ''}{version})"
 
 
-def seed_registry(registry: Path) -> Path:
+def seed_registry(registry: Path, shipped: tuple[str, ...] = ()) -> Path:
     """A writable registry at `registry`: kept as it is when it already has a promoted version, else made as a
-    copy of the shipped registry (staged beside it, then renamed, so an interruption leaves no half copy)."""
+    copy of the shipped registry (`shipped`: its parts, as `shipped_registry` takes them; staged beside it, then
+    renamed, so an interruption leaves no half copy)."""
     registry = Path(registry)
     if (registry / CURRENT).is_file():
         return registry
     if registry.exists() and any(registry.iterdir()):
         raise CheckpointError(f"{registry}: not empty and not a VMA registry ({CURRENT} missing)")
-    source = shipped_registry()
+    source = shipped_registry(*shipped)
     registry.parent.mkdir(parents=True, exist_ok=True)
     staging = registry.with_name(f".{registry.name}.partial")
     shutil.rmtree(staging, ignore_errors=True)

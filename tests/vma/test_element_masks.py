@@ -2,6 +2,7 @@
 that record and refuse their training sites, and a network that learns what the rules cannot read."""
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from models.vma.element_masks.propose import (
     predict_probabilities,
     read_crossing,
     refined_line,
+    road_edge_band,
     traced_semantic,
     vectors_from_probabilities,
 )
@@ -165,7 +167,7 @@ def test_refined_lines_follow_the_band_centre_and_the_paint_where_read(drawn_sit
     paint = (rasters.semantic == int(Semantic.LANE_MARKING)).astype(
         np.float32
     )  # dashes at y = 20 m, x 1-4, 10-13, ...
-    snapped = refined_line(rasters, probability, traced, config, paint)
+    snapped = refined_line(rasters, probability, traced, config, paint, bridge_m=7.0)
     # read paint wins, and the 6 m gaps between dashes are bridged straight instead of following the wobble;
     # before the first dash read and after the last the network's course is kept
     xs = snapped[:, 0] - ORIGIN_XY[0]
@@ -185,3 +187,14 @@ def test_crossings_take_the_block_of_the_stripes_read_inside_them(drawn_site: Pa
     assert xs.min() == pytest.approx(30.0, abs=0.15) and xs.max() == pytest.approx(34.0, abs=0.15)
     elsewhere = ring + np.array([15.0, 0.0])  # no stripes were read there: the network's ring stays
     assert read_crossing(rasters, elsewhere, MaskInferenceConfig()) is elsewhere
+
+
+def test_the_road_edge_band_straddles_the_edge_and_configs_name_bad_evidence(drawn_site: Path) -> None:
+    rasters = load_site_rasters(drawn_site)
+    semantic = np.full(rasters.shape, int(Semantic.BACKGROUND), np.uint8)
+    semantic[:, :300] = int(Semantic.ROAD)  # road west of x = 30 m, observed ground east of it
+    semantic[:, 450:] = int(Semantic.UNOBSERVED)
+    band = road_edge_band(replace(rasters, semantic=semantic), RuleConfig())
+    assert set(np.nonzero(band.any(axis=0))[0].tolist()) == {299, 300}  # the cells on both sides of the edge
+    with pytest.raises(ValueError, match="boundary_evidence"):
+        MaskInferenceConfig(boundary_evidence="curb")  # type: ignore[arg-type]

@@ -17,7 +17,14 @@ from app.backend.vma_loop import with_shipped_registry
 from cama_pipeline.site_identity import SeenSiteError
 from cama_studio.config import PipelineConfig
 from models.vma.bev_sites import write_bev_site
-from models.vma.checkpoint import CURRENT, CheckpointError, ensure_unseen, load_checkpoint, refuse_seen
+from models.vma.checkpoint import (
+    CURRENT,
+    CheckpointError,
+    checkpoint_kind,
+    ensure_unseen,
+    load_checkpoint,
+    refuse_seen,
+)
 from models.vma.config import ModelConfig, TrainConfig
 from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
 from models.vma.train import train
@@ -102,6 +109,17 @@ def test_servers_get_a_seeded_registry_so_the_learned_model_and_retrain_are_avai
     assert "retrain" not in unavailable_kinds(gated)
     chosen = Settings(data_dir=tmp_path / "data", vma_registry=tmp_path / "mine")
     assert with_shipped_registry(chosen) == chosen  # a configured registry is used as it is
+
+
+def test_a_server_can_start_from_the_shipped_element_mask_network(tmp_path: Path) -> None:
+    settings = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_model="masks"))
+    assert settings.vma_registry == tmp_path / "data" / "vma-mask-registry"
+    assert checkpoint_kind(settings.vma_registry) == "element_masks"
+    assert (
+        checkpoint_kind(with_shipped_registry(Settings(data_dir=tmp_path / "other")).vma_registry) == "maptr"
+    )
+    with pytest.raises(ValueError, match="CAMA_VMA_MODEL: must be one of maptr, masks"):
+        Settings.from_env({"CAMA_VMA_MODEL": "hdmapnet"}, data_dir=tmp_path)
 
 
 def test_a_checkpoint_refuses_to_be_scored_on_the_sites_it_trained_on(

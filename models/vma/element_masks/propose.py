@@ -11,6 +11,7 @@ the tracing only turns masks into polylines. A vector's confidence is the mean p
 
 import logging
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -24,7 +25,14 @@ from models.vma.element_masks.net import STRIDE, ElementMaskNet
 from models.vma.element_masks.targets import mask_grid
 from models.vma.infer import window_origins
 from models.vma.rasters import SiteRasters
-from models.vma.rule_based import RuleConfig, crosswalk_vectors, propose_rule_based
+from models.vma.rule_based import (
+    RuleConfig,
+    crosswalk_vectors,
+    propose_rule_based,
+    road_edge,
+    road_mask,
+    trim_hooks,
+)
 from models.vma.vectors import CLASSES, Vector
 
 logger = logging.getLogger(__name__)
@@ -56,6 +64,10 @@ class MaskInferenceConfig:
     """How far across the line a station looks for the centre of its class's probability."""
     refine_simplify_m: float = 0.04
     """Tolerance of the simplification after refinement."""
+    boundary_evidence: Literal["none", "road_edge"] = "none"
+    """What boundaries snap to where the rasters show it: nothing (a generator's rasters: the network's band is
+    nearer the true kerb line than the curb label's centre), or the road's sharp edge next to observed off-road
+    ground (a surface stage's rasters, whose kerb labels are smeared; `models.vma.rule_based.road_edge`)."""
 
     def __post_init__(self) -> None:
         if self.tile_px < 32 or self.tile_px % STRIDE or not 0 <= self.overlap_px < self.tile_px // 2:
@@ -68,6 +80,10 @@ class MaskInferenceConfig:
         if not (self.refine_step_m > 0 and self.refine_reach_m >= 0 and self.refine_simplify_m >= 0):
             raise ValueError(
                 "MaskInferenceConfig: refine_step_m > 0, refine_reach_m and refine_simplify_m >= 0"
+            )
+        if self.boundary_evidence not in ("none", "road_edge"):
+            raise ValueError(
+                f"MaskInferenceConfig.boundary_evidence must be 'none' or 'road_edge', got {self.boundary_evidence!r}"
             )
         if self.rule.boundary_source != "curb":
             raise ValueError(
@@ -151,6 +167,7 @@ def refined_line(
     points: np.ndarray,
     config: MaskInferenceConfig,
     evidence: np.ndarray | None = None,
+    bridge_m: float = 0.0,
 ) -> np.ndarray:
     """A traced line moved onto the centre of its class's band, below the grid's cell size.
 
@@ -159,8 +176,9 @@ def refined_line(
     it (along its normal, within `refine_reach_m`) and move to the centre of what they find there: the cells of
     `evidence` (the paint the rasters read, for dividers) where there is any, else the probability-weighted
     centre of the network's band (trained on bands centred on the true lines). So where paint was read the line
-    lies on it, and where none was (gaps, faded or missed paint) the network's course is kept. The offsets are
-    smoothed along the line and the result simplified."""
+    lies on it, across a gap in it up to `bridge_m` long the line runs straight from evidence to evidence, and
+    where none was (faded or missed paint) the network's course is kept. The band's offsets are smoothed along the
+    line and the result simplified."""
     line = LineString(points)
     if config.refine_reach_m == 0 or line.length < 2 * config.refine_step_m:
         return points
@@ -189,7 +207,7 @@ def refined_line(
         smoothed[1:-1] = 0.25 * shift[:-2] + 0.5 * shift[1:-1] + 0.25 * shift[2:]
         shift = np.where(seen, shift, smoothed)
     moved = centres + shift[:, None] * normal
-    bridged = _bridged(stations, seen, config.rule.join_gap_m)
+    bridged = _bridged(stations, seen, bridge_m)
     if bridged.any():
         # across a gap in the paint the line runs straight from the paint before it to the paint after it
         for axis in range(2):
@@ -215,6 +233,15 @@ def read_crossing(rasters: SiteRasters, ring: np.ndarray, config: MaskInferenceC
     return blocks[0].points if len(blocks) == 1 else ring
 
 
+def road_edge_band(rasters: SiteRasters, rule: RuleConfig) -> np.ndarray:
+    """The road's edge next to observed off-road ground as a 2-cell band (the rim cells outside the road and the
+    road cells touching them), whose centre across is the edge itself (float32 0/1)."""
+    road = road_mask(rasters.semantic, rasters.resolution_m, rule)
+    rim = road_edge(rasters.semantic, road, rasters.resolution_m, rule).astype(np.uint8)
+    inner = (cv2.dilate(rim, np.ones((3, 3), np.uint8)) > 0) & (road > 0)
+    return ((rim > 0) | inner).astype(np.float32)
+
+
 def _bridged(stations: np.ndarray, seen: np.ndarray, gap_m: float) -> np.ndarray:
     """Stations without evidence that lie in a gap no longer than `gap_m` between stations with evidence."""
     out = np.zeros(len(stations), bool)
@@ -231,7 +258,9 @@ def vectors_from_probabilities(
     """Trace the class masks into vectors scored by their mean class probability."""
     config = config or MaskInferenceConfig()
     traced = replace(rasters, semantic=traced_semantic(rasters, probabilities, config.threshold))
-    paint = (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)
+    evidence = {"divider": (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)}
+    if config.boundary_evidence == "road_edge":
+        evidence["boundary"] = road_edge_band(rasters, config.rule)
     out = []
     for vector in propose_rule_based(traced, config.rule):
         probability = probabilities[CLASSES.index(vector.cls)]
@@ -240,9 +269,12 @@ def vectors_from_probabilities(
             points = read_crossing(rasters, vector.points, config)
             score = _mean_inside(rasters, probability, vector.points)
         else:
+            bridge_m = config.rule.join_gap_m if vector.cls == "divider" else config.rule.join_boundary_gap_m
             points = refined_line(
-                rasters, probability, vector.points, config, paint if vector.cls == "divider" else None
+                rasters, probability, vector.points, config, evidence.get(vector.cls), bridge_m
             )
+            if vector.cls == "boundary":  # a band's end bends round into a corner's band: cut the hook off
+                points = trim_hooks(points, config.rule.hook_m, config.rule.hook_angle_deg)
             score = mean_probability(rasters, probability, points, config.sample_step_m)
         out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
     return out
