@@ -583,3 +583,32 @@ def test_element_mask_proposer_table() -> None:
             figures = recorded["results"][condition][key]
             scored = figures["observed_truth"] if condition == "reconstructed" else figures
             assert_shows(cell, [scored["mean_ap"], figures["annotator"]["speed_up"]], f"{label} {condition}")
+
+
+def test_element_mask_end_to_end_figures() -> None:
+    text = " ".join(readme_text().split())
+    masks, maptr = results("end_to_end_masks.json"), results("end_to_end_kerb_step.json")
+    assert masks["proposer"] == "masks" and maptr["proposer"] == "learned"
+    shown = (
+        f"proposal mAP is {masks['proposals_ap']['observed_truth']['mean_ap']:.3f} against "
+        f"{maptr['proposals_ap']['observed_truth']['mean_ap']:.2f} with the shipped MapTR-style model"
+    )
+    assert shown in text
+    speed = f"speed-up {masks['annotator']['speed_up']:.2f}x against {maptr['annotator']['speed_up']:.2f}x"
+    assert speed in text
+    counts = masks["annotator"]["corrected"]["counts"]
+    assert f"it accepts {counts['accept']} proposals" in text and f"draws {counts['drawn']} instead" in text
+
+
+def test_element_mask_loop_rounds_table() -> None:
+    t = table("masks round")
+    assert_names_source(t, "vma_loop_masks.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks.json")
+    for entry in recorded["rounds"]:
+        cells = row(t, next(name for name in t.rows if name.split(" ")[0] == str(entry["round"])))
+        assert entry["heldout"]["version"] in cells[1]
+        if "candidate" in entry:
+            assert entry["candidate"] in cells[1] and ("kept out" in cells[1]) != entry["promoted"]
+            assert_shows(cells[2], [entry["retrain_seconds"]], f"masks round {entry['round']} seconds")
+        assert_shows(cells[3], _loop_figures(entry["heldout"]), f"masks round {entry['round']}")
+    assert_shows(row(t, "rule-based")[3], _loop_figures(recorded["rule_based"]), "rule-based")
