@@ -29,6 +29,14 @@ logger = logging.getLogger(__name__)
 _ERRORS = (ValueError, FileNotFoundError, CheckpointError, EvaluationInputError)
 
 
+TrainingSites = Annotated[
+    list[Path] | None, typer.Option("--site", help="Training site folder with vector_map.json (repeatable).")
+]
+BevSeeds = Annotated[str, typer.Option(help="Also train on BEV-only synthetic sites of these seeds ('A-B').")]
+BevRoot = Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")]
+"""The training data options `cama train` and `cama train-masks` share."""
+
+
 def seed_range(text: str) -> list[int]:
     """'1000-1007' or '1000,1003' as a list of seeds."""
     try:
@@ -107,15 +115,9 @@ def train_command(
             "shipped model)."
         ),
     ],
-    site: Annotated[
-        list[Path] | None, typer.Option(help="Training site folder with vector_map.json (repeatable).")
-    ] = None,
-    bev_seeds: Annotated[
-        str, typer.Option(help="Also train on BEV-only synthetic sites of these seeds ('A-B').")
-    ] = "",
-    bev_root: Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")] = Path(
-        "data/vma/train"
-    ),
+    site: TrainingSites = None,
+    bev_seeds: BevSeeds = "",
+    bev_root: BevRoot = Path("data/vma/train"),
     init: Annotated[
         Path | None, typer.Option(help="Continue from this checkpoint (same model config).")
     ] = None,

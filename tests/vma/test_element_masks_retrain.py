@@ -56,13 +56,7 @@ def gutter_truth(site: Path) -> list[Vector]:
 def corrected(site: Path, vectors: list[Vector]) -> AnnotationSet:
     """`vectors` as a reviewed annotation set of `site` (every element fixed)."""
     rasters = load_site_rasters(site)
-    georeference = Georeference(
-        site_origin_xy=rasters.origin_xy,
-        origin_xy=rasters.origin_xy,
-        resolution=rasters.resolution_m,
-        width=rasters.shape[1],
-        height=rasters.shape[0],
-    )
+    georeference = Georeference.of(rasters.georeference, site_origin_xy=rasters.origin_xy)
     labelled = proposals_as_annotations(vectors, georeference, site.name, "reviewer")
     return labelled.model_copy(
         update={"elements": [e.with_changes(review_state="fixed") for e in labelled.elements]}

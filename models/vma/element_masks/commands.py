@@ -8,7 +8,7 @@ import typer
 from cama_pipeline.console import bad_input, console
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import CheckpointError
-from models.vma.commands import seed_range
+from models.vma.commands import BevRoot, BevSeeds, TrainingSites, seed_range
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.train import train_masks
@@ -18,15 +18,9 @@ def train_masks_command(
     registry: Annotated[
         Path, typer.Option(help="Element-mask checkpoint registry to add the new version to.")
     ],
-    site: Annotated[
-        list[Path] | None, typer.Option(help="Training site folder with vector_map.json (repeatable).")
-    ] = None,
-    bev_seeds: Annotated[
-        str, typer.Option(help="Also train on BEV-only synthetic sites of these seeds ('A-B').")
-    ] = "",
-    bev_root: Annotated[Path, typer.Option(help="Where BEV-only sites are generated (cached).")] = Path(
-        "data/vma/train"
-    ),
+    site: TrainingSites = None,
+    bev_seeds: BevSeeds = "",
+    bev_root: BevRoot = Path("data/vma/train"),
     init: Annotated[Path | None, typer.Option(help="Continue from this element-mask checkpoint.")] = None,
     steps: Annotated[int, typer.Option(help="Training batches.")] = 3000,
     max_minutes: Annotated[
