@@ -30,6 +30,8 @@ from rich.console import Console
 
 from app.review_effort.review_time import review_time
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from cama_pipeline.site.io import read_site_ids
+from cama_pipeline.workspace import Workspace
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
@@ -47,10 +49,12 @@ Proposer = Callable[[SiteRasters], list[Vector]]
 
 def reconstructed_bev(site: Path) -> Path:
     """The surface stage's raster folder of a synthetic site with `cama run` done (exactly one site)."""
-    found = sorted((site / "workspace" / "surface").glob("*/bev"))
+    workspace = Workspace.for_dataset(site / "nuscenes")
+    site_ids = read_site_ids(workspace.sites_index()) if workspace.sites_index().is_file() else []
+    found = [workspace.surface_bev(s) for s in site_ids if workspace.surface_bev(s).is_dir()]
     if len(found) != 1:
         raise SystemExit(
-            f"{site}: expected one workspace/surface/<site>/bev (run `cama run` first), found {found}"
+            f"{site}: expected the surface rasters of one site (run `cama run` first), found {found}"
         )
     return found[0]
 

@@ -68,6 +68,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "run": ([nowhere, "--stop-after", "wigo"], nowhere),
         "propose": ([nowhere, "--proposer", "rule", "--out", str(tmp / "p.json")], nowhere),
         "train": (["--registry", str(tmp / "registry"), "--bev-seeds", "x-y"], "--bev-seeds"),
+        "train-masks": (["--registry", str(tmp / "masks"), "--site", nowhere], nowhere),
         "retrain": (
             ["--corrections", "no-equals-sign", "--val", nowhere, "--registry", str(tmp / "registry")],
             "--corrections",

@@ -25,7 +25,7 @@ from models.vma.element_masks.propose import (
     vectors_from_probabilities,
 )
 from models.vma.element_masks.targets import element_masks, mask_grid
-from models.vma.element_masks.train import smeared_kerbs, train_masks
+from models.vma.element_masks.train import smeared_kerbs, train_masks, training_site
 from models.vma.rasters import load_site_rasters
 from models.vma.rule_based import RuleConfig
 from models.vma.vectors import CLASSES, Vector
@@ -198,3 +198,15 @@ def test_the_road_edge_band_straddles_the_edge_and_configs_name_bad_evidence(dra
     assert set(np.nonzero(band.any(axis=0))[0].tolist()) == {299, 300}  # the cells on both sides of the edge
     with pytest.raises(ValueError, match="boundary_evidence"):
         MaskInferenceConfig(boundary_evidence="curb")  # type: ignore[arg-type]
+
+
+def test_correction_crops_centre_on_the_elements_and_the_road_between_them(drawn_site: Path) -> None:
+    rasters = load_site_rasters(drawn_site)
+    divider = Vector("divider", np.array([global_xy(20, 20), global_xy(30, 20)]))
+    alone = training_site("drawn", rasters, [divider], CONFIG, 0, 1, centres_on=[divider])
+    with_road = training_site("drawn", rasters, [divider], CONFIG, 0, 1, centres_on=[divider], context_m=5.0)
+    assert alone.road.shape[1] == 6  # points every 2 m along 10 m
+    assert with_road.road.shape[1] == 12  # as many road cells again
+    extra_rows, extra_cols = with_road.road[:, 6:] * CONFIG.resolution_m
+    # within 5 m of the divider (y = 20 m, x 20..30 m) and on road (y 12..28 m)
+    assert ((extra_cols > 14.5) & (extra_cols < 35.5) & (extra_rows > 11.9) & (extra_rows < 28.1)).all()

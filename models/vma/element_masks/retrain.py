@@ -51,11 +51,14 @@ class MaskRetrainConfig:
     time_tolerance: float = 0.0
     """With a `review` gate: promoted only when its correction time <= current time * (1 + time_tolerance)."""
     min_labels: int = 1
+    context_m: float = 10.0
+    """Half the crops are centred on road cells within this distance of the reviewed elements (the rest on the
+    elements): without them the network forgets that most road between elements holds nothing to draw."""
 
     def __post_init__(self) -> None:
-        if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1:
+        if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1 or self.context_m < 0:
             raise ValueError(
-                "MaskRetrainConfig: tolerance >= 0, time_tolerance >= 0 and min_labels >= 1 required"
+                "MaskRetrainConfig: tolerance, time_tolerance and context_m >= 0 and min_labels >= 1 required"
             )
 
 
@@ -106,6 +109,7 @@ def retrain_masks_from_corrections(
                     config.train.damaged_copies,
                     seed,
                     centres_on=[*labels, *negatives],
+                    context_m=config.context_m,
                 )
             )
     if num_labels < config.min_labels:

@@ -119,9 +119,12 @@ def training_site(
     seed: int,
     *,
     centres_on: Sequence[Vector] | None = None,
+    context_m: float = 0.0,
 ) -> MaskTrainingSite:
     """A site's inputs (clean + damaged) and target masks on the network's grid; crops are centred on its road
-    cells, or on the points of `centres_on` (corrected and rejected elements) when given."""
+    cells, or, when `centres_on` (corrected and rejected elements) is given, on their points and on as many road
+    cells within `context_m` of them (the reviewed region's road between the elements, where nothing is to be
+    drawn)."""
     grid = mask_grid(rasters, config)
     images = [grid.image] + [
         mask_grid(r, config).image for r in damaged_versions(rasters, damaged_copies, seed)
@@ -133,6 +136,17 @@ def training_site(
         colrow = grid.pixel_from_global(np.vstack(points)) if points else np.zeros((0, 2))
         inside = (colrow >= 0).all(axis=1) & (colrow[:, 0] < grid.shape[1]) & (colrow[:, 1] < grid.shape[0])
         cols, rows = np.rint(colrow[inside]).astype(int).T
+        if context_m > 0 and rows.size:
+            points_mask = np.zeros(grid.shape, np.uint8)
+            points_mask[rows, cols] = 1
+            radius = max(1, round(context_m / grid.resolution_m))
+            near = (
+                cv2.dilate(points_mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2))
+                > 0
+            )
+            road_rows, road_cols = np.nonzero(near & (grid.image[1:NUM_SEMANTIC].sum(axis=0) > 0.5))
+            pick = np.random.default_rng(seed).permutation(road_rows.size)[: rows.size]
+            rows, cols = np.concatenate([rows, road_rows[pick]]), np.concatenate([cols, road_cols[pick]])
     if rows.size == 0:
         raise ValueError(f"{name}: no road cell or element on the rasters to train on")
     return MaskTrainingSite(name, images, element_masks(vectors, grid, config), np.stack([rows, cols]))
