@@ -10,6 +10,7 @@ proposer run on the drawn patch itself.
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -62,8 +63,20 @@ class SiteGrid:
         colrow = np.asarray(colrow, dtype=np.float64).reshape(-1, 2) * self.resolution_m
         return np.column_stack([self.origin_xy[0] + colrow[:, 0], self.origin_xy[1] - colrow[:, 1]])
 
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width) in grid pixels."""
+        return (int(self.image.shape[1]), int(self.image.shape[2]))
 
-def site_grid(rasters: SiteRasters, config: ModelConfig) -> SiteGrid:
+
+class GridResolution(Protocol):
+    """What `site_grid` reads of a model config (the MapTR-style model's or the element-mask network's)."""
+
+    @property
+    def resolution_m(self) -> float: ...
+
+
+def site_grid(rasters: SiteRasters, config: GridResolution) -> SiteGrid:
     """The model input of a whole site; grid pixel i's centre is native pixel (i + 0.5) / scale - 0.5."""
     shift = 0.5 * config.resolution_m - 0.5 * rasters.resolution_m
     origin = (rasters.origin_xy[0] + shift, rasters.origin_xy[1] - shift)

@@ -20,12 +20,14 @@ from models.vma.element_masks.propose import (
     predict_probabilities,
     read_crossing,
     refined_line,
+    ring_cells,
     road_edge_band,
     traced_semantic,
     vectors_from_probabilities,
 )
-from models.vma.element_masks.targets import element_masks, mask_grid
+from models.vma.element_masks.targets import element_masks
 from models.vma.element_masks.train import smeared_kerbs, train_masks, training_site
+from models.vma.patches import site_grid
 from models.vma.rasters import load_site_rasters
 from models.vma.rule_based import RuleConfig
 from models.vma.vectors import CLASSES, Vector
@@ -36,7 +38,7 @@ CONFIG = MaskModelConfig()
 
 def test_targets_draw_each_class_on_its_own_cells(drawn_site: Path) -> None:
     rasters = load_site_rasters(drawn_site)
-    grid = mask_grid(rasters, CONFIG)
+    grid = site_grid(rasters, CONFIG)
     assert grid.shape == (200, 300)  # 40 m x 60 m at 0.2 m
     line = Vector("divider", np.array([global_xy(10, 20), global_xy(50, 20)]))
     ring = Vector(
@@ -53,7 +55,7 @@ def test_targets_draw_each_class_on_its_own_cells(drawn_site: Path) -> None:
     assert len(rows) == 3 and abs(rows.mean() - 99.75) <= 0.5
     assert not divider[:, 40].any()  # x = 8 m: before the line starts
     assert crossing[100, 160] == 1 and crossing[100, 145] == 0  # x = 32 m inside, x = 29 m outside
-    assert grid.image.shape[0] == CONFIG.in_channels and grid.observed.all()
+    assert grid.image.shape[0] == CONFIG.in_channels
 
 
 def test_network_predicts_a_mask_per_class_and_names_a_bad_input_size() -> None:
@@ -182,11 +184,12 @@ def test_crossings_take_the_block_of_the_stripes_read_inside_them(drawn_site: Pa
     rasters = load_site_rasters(drawn_site)
     soft = np.array([global_xy(29.6, 13), global_xy(34.5, 13), global_xy(34.5, 27.2), global_xy(29.6, 27.2)])
     ring = np.vstack([soft, soft[:1]])
-    read = read_crossing(rasters, ring, MaskInferenceConfig())
+    read = read_crossing(rasters, ring, ring_cells(rasters, ring) > 0, MaskInferenceConfig())
     xs = read[:, 0] - ORIGIN_XY[0]
     assert xs.min() == pytest.approx(30.0, abs=0.15) and xs.max() == pytest.approx(34.0, abs=0.15)
     elsewhere = ring + np.array([15.0, 0.0])  # no stripes were read there: the network's ring stays
-    assert read_crossing(rasters, elsewhere, MaskInferenceConfig()) is elsewhere
+    inside = ring_cells(rasters, elsewhere) > 0
+    assert read_crossing(rasters, elsewhere, inside, MaskInferenceConfig()) is elsewhere
 
 
 def test_the_road_edge_band_straddles_the_edge_and_configs_name_bad_evidence(drawn_site: Path) -> None:

@@ -22,8 +22,8 @@ from shapely.geometry import LineString
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.element_masks.net import STRIDE, ElementMaskNet
-from models.vma.element_masks.targets import mask_grid
 from models.vma.infer import window_origins
+from models.vma.patches import site_grid
 from models.vma.rasters import SiteRasters
 from models.vma.rule_based import (
     RuleConfig,
@@ -101,7 +101,7 @@ def predict_probabilities(
 ) -> np.ndarray:
     """(K, H, W) float32 class probabilities at the raster's own resolution (K = `CLASSES`)."""
     config = config or MaskInferenceConfig()
-    grid = mask_grid(rasters, model.config)
+    grid = site_grid(rasters, model.config)
     _, height, width = grid.image.shape
     tile = config.tile_px
     padded = np.zeros((grid.image.shape[0], max(height, tile), max(width, tile)), np.float32)
@@ -215,17 +215,31 @@ def refined_line(
     return np.asarray(LineString(moved).simplify(config.refine_simplify_m).coords)
 
 
-def read_crossing(rasters: SiteRasters, ring: np.ndarray, config: MaskInferenceConfig) -> np.ndarray:
-    """A traced crossing's ring, or, where the rasters read its stripes, the block of those stripes.
-
-    The network finds the crossing (missed or worn stripes included) but its block's edges are as soft as its
-    band; where the stripes inside it (within `refine_reach_m`) were read over at least a third of its area,
-    the rule-based block of those stripes, carried to the kerbs as the rules carry it, is the sharper ring."""
-    res = rasters.resolution_m
+def ring_cells(rasters: SiteRasters, ring: np.ndarray) -> np.ndarray:
+    """(H, W) uint8: 1 on the raster cells inside a ring (global metres)."""
     inside = np.zeros(rasters.shape, np.uint8)
     cv2.fillPoly(inside, [np.rint(rasters.pixel_from_global(ring)).astype(np.int32)], 1)
+    return inside
+
+
+def read_crossing(
+    rasters: SiteRasters, ring: np.ndarray, inside: np.ndarray, config: MaskInferenceConfig
+) -> np.ndarray:
+    """A traced crossing's ring (`inside`: the bool cells within it), or, where the rasters read its stripes, the block of
+    those stripes.
+
+    The network finds the crossing (missed or worn stripes included) but its block's edges are as soft as its
+    band; where the stripes inside it (within `refine_reach_m`) cover at least a sixth of its area (a third of
+    what zebra stripes cover), the rule-based block of those stripes, carried to the kerbs as the rules carry it,
+    is the sharper ring."""
+    res = rasters.resolution_m
     reach = max(1, round(config.refine_reach_m / res))
-    region = cv2.dilate(inside, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1,) * 2)) > 0
+    region = (
+        cv2.dilate(
+            inside.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1,) * 2)
+        )
+        > 0
+    )
     stripes = region & (rasters.semantic == int(Semantic.CROSSWALK))
     if stripes.sum() < inside.sum() / 6:  # zebra stripes cover about half of a block
         return ring
@@ -266,8 +280,9 @@ def vectors_from_probabilities(
         probability = probabilities[CLASSES.index(vector.cls)]
         if vector.closed:
             # a crossing's ring runs along its edge; its confidence is the mask inside it
-            points = read_crossing(rasters, vector.points, config)
-            score = _mean_inside(rasters, probability, vector.points)
+            inside = ring_cells(rasters, vector.points) > 0
+            points = read_crossing(rasters, vector.points, inside, config)
+            score = float(probability[inside].mean()) if inside.any() else 0.0
         else:
             bridge_m = config.rule.join_gap_m if vector.cls == "divider" else config.rule.join_boundary_gap_m
             points = refined_line(
@@ -278,13 +293,6 @@ def vectors_from_probabilities(
             score = mean_probability(rasters, probability, points, config.sample_step_m)
         out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
     return out
-
-
-def _mean_inside(rasters: SiteRasters, probability: np.ndarray, ring: np.ndarray) -> float:
-    """Mean probability over the cells inside a ring."""
-    inside = np.zeros(probability.shape, np.uint8)
-    cv2.fillPoly(inside, [np.rint(rasters.pixel_from_global(ring)).astype(np.int32)], 1)
-    return float(probability[inside > 0].mean()) if inside.any() else 0.0
 
 
 def predict_site_masks(

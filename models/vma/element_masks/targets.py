@@ -1,69 +1,26 @@
-"""Vectors rasterised into the element-mask network's targets, and site rasters into its input, on one grid.
+"""Vectors rasterised into the element-mask network's targets on the grid of its input.
 
-The grid is the site's raster resampled to the network's resolution (`MaskModelConfig.resolution_m`): pixel
-(col, row) of the grid covers the same ground as the site raster's pixels scaled by the resolution ratio.
-Dividers and boundaries are drawn as bands `line_width_m` wide along their polylines (continuous across dash
+The grid is the site's raster resampled to the network's resolution (`models.vma.patches.site_grid` at
+`MaskModelConfig.resolution_m`, the MapTR-style model's grid too). Dividers and boundaries are drawn as bands `line_width_m` wide along their polylines (continuous across dash
 gaps: a dashed lane line is one divider); crosswalks are their filled rings. The same drawing serves generator
 ground truth and annotators' corrections, so a correction teaches the network the geometry it should draw.
 """
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from annotations.schema import POLYGON_CLASSES
-from cama_pipeline.semantics import Semantic
 from models.vma.element_masks.config import MaskModelConfig
-from models.vma.rasters import SiteRasters, model_input
+from models.vma.patches import SiteGrid
 from models.vma.vectors import CLASSES, Vector
 
 SUBPIXEL_BITS = 4
 """Fractional bits of the polyline coordinates handed to OpenCV's drawing (1/16 px)."""
 
 
-@dataclass(frozen=True, eq=False)
-class MaskGrid:
-    """A site at the network's resolution: its input channels and the mapping to global metres."""
-
-    image: np.ndarray
-    """(C, H, W) float32 network input."""
-    observed: np.ndarray
-    """(H, W) bool: cells some camera saw (any semantic class)."""
-    origin_xy: tuple[float, float]
-    """Global metres of grid pixel (0, 0)'s centre."""
-    resolution_m: float
-
-    def pixel_from_global(self, xy: np.ndarray) -> np.ndarray:
-        """Global x, y to fractional grid (col, row); rows run towards -y as in every BEV raster."""
-        xy = np.asarray(xy, dtype=np.float64)
-        col = (xy[:, 0] - self.origin_xy[0]) / self.resolution_m
-        row = (self.origin_xy[1] - xy[:, 1]) / self.resolution_m
-        return np.column_stack([col, row])
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """(height, width) in grid pixels."""
-        return (int(self.image.shape[1]), int(self.image.shape[2]))
-
-
-def mask_grid(rasters: SiteRasters, config: MaskModelConfig) -> MaskGrid:
-    """The network input of a site's rasters on the grid at `config.resolution_m`."""
-    image = model_input(rasters, config.resolution_m)
-    observed = cv2.resize(
-        (rasters.semantic != int(Semantic.UNOBSERVED)).astype(np.uint8),
-        (image.shape[2], image.shape[1]),
-        interpolation=cv2.INTER_NEAREST,
-    ).astype(bool)
-    # both grids share the raster's top-left corner; rows run towards -y
-    x0, y0 = rasters.origin_xy
-    corner = (x0 - 0.5 * rasters.resolution_m, y0 + 0.5 * rasters.resolution_m)
-    half = 0.5 * config.resolution_m
-    return MaskGrid(image, observed, (corner[0] + half, corner[1] - half), config.resolution_m)
-
-
-def element_masks(vectors: Sequence[Vector], grid: MaskGrid, config: MaskModelConfig) -> np.ndarray:
+def element_masks(vectors: Sequence[Vector], grid: SiteGrid, config: MaskModelConfig) -> np.ndarray:
     """(K, H, W) float32 target masks of `vectors` on `grid`, one per class of `CLASSES`."""
     height, width = grid.shape
     masks = np.zeros((len(CLASSES), height, width), np.uint8)

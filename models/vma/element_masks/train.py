@@ -28,7 +28,8 @@ from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import KIND, MaskCheckpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.targets import element_masks, mask_grid
+from models.vma.element_masks.targets import element_masks
+from models.vma.patches import site_grid
 from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters, vector_map_of
 from models.vma.train import DAMAGE_SEED_BASE, optimise
 from models.vma.vectors import Vector, read_vectors
@@ -125,9 +126,9 @@ def training_site(
     cells, or, when `centres_on` (corrected and rejected elements) is given, on their points and on as many road
     cells within `context_m` of them (the reviewed region's road between the elements, where nothing is to be
     drawn)."""
-    grid = mask_grid(rasters, config)
+    grid = site_grid(rasters, config)
     images = [grid.image] + [
-        mask_grid(r, config).image for r in damaged_versions(rasters, damaged_copies, seed)
+        site_grid(r, config).image for r in damaged_versions(rasters, damaged_copies, seed)
     ]
     if centres_on is None:
         rows, cols = np.nonzero(grid.image[1:NUM_SEMANTIC].sum(axis=0) > 0.5)
