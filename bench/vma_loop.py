@@ -1,20 +1,24 @@
 """The human-in-the-loop rounds measured (issue 26.4): propose, let the simulated annotator correct, retrain, gate.
 
-Round 0 is the promoted model of `--checkpoint` (the shipped v0003: trained on the generator's truth of BEV sites
-1000-1011; or an element-mask registry, `models/vma/element_masks/checkpoints`, whose network draws its own
-geometry), copied into a scratch registry. Round k (1..N) takes a new BEV site (seed `--new-seeds`, one per
-round, never seen by any model here): the current model proposes on it, the scripted annotator
-(`app.review_effort`, in-memory queue) accepts, fixes or rejects each proposal and draws what is missing; its
-verdicts become the corrections (accepted / fixed / drawn as labels, rejected as negatives) that
-`models.vma.retrain.retrain_from_corrections` fine-tunes on, behind both gates (validation mAP and the annotator's
-correction time on the validation sites, `--val-seeds`). After every round, the promoted model is measured on the
-held-out sites (`--heldout-seeds`, never proposed on, corrected or validated on): Chamfer mAP on clean and on
-reconstruction-like damaged rasters (`models.vma.degrade`), the same for the model's own refined points, and the
-annotator's speed-up over drawing on clean rasters; the rule-based proposer is measured beside it once.
-A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
+Round 0 is either the promoted model of `--checkpoint` (the shipped MapTR-style v0003, or an element-mask
+registry, `models/vma/element_masks/checkpoints`, whose network draws its own geometry), copied into a scratch
+registry, or, with `--bootstrap-seeds A-B`, an element-mask network trained from scratch here on the generator's
+truth of those few BEV sites (`--bootstrap-steps` batches): a team's first model, before any correction. Round k
+(1..N) takes a new BEV site (seed `--new-seeds`, one per round, never seen by any model here): the current model
+proposes on it (`--propose-on damaged`: on its rasters with reconstruction-like damage, as the product proposes on
+reconstructions), the scripted annotator (`app.review_effort`, in-memory queue) accepts, fixes or rejects each
+proposal against the truth and draws what is missing; its verdicts become corrections (accepted / fixed / drawn as
+labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
+lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
+both gates (validation mAP and the annotator's correction time on the validation sites, `--val-seeds`). After
+every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
+sites `--heldout-seeds` (Chamfer mAP clean and damaged, `models.vma.degrade`; the annotator's speed-up over
+drawing on clean rasters) and, for the element-mask network, the surface stage's reconstructed rasters of full
+synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-based proposer is measured beside
+it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
-Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY] [--rounds 3] [--steps 300] [--threads 2]
-       [--out bench/results/vma_loop.json] [--plot-only]
+Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
+       [--steps 300] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON).
 """
@@ -23,6 +27,7 @@ import argparse
 import json
 import platform
 import shutil
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -43,13 +48,13 @@ from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import checkpoint_kind, current_version, ensure_unseen, load_checkpoint, promote
 from models.vma.commands import seed_range
 from models.vma.config import TrainConfig
-from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import KIND as MASK_KIND
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
-from models.vma.element_masks.config import MaskTrainConfig
+from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks
 from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
+from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig
 from models.vma.rasters import SiteRasters, load_site_rasters
@@ -60,19 +65,18 @@ from models.vma.retrain import (
     model_proposer,
     retrain_from_corrections,
 )
-from models.vma.rule_based import propose_rule_based
+from models.vma.rule_based import RuleConfig, propose_rule_based
 from models.vma.vectors import Vector, proposals_as_annotations, simple_geometry
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+# the shared conditions: `bench` is a package at the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 Proposer = Callable[[SiteRasters], list[Vector]]
-
-
-def on_damaged(propose: Proposer) -> Proposer:
-    """The proposer run on the site's rasters with reconstruction-like damage, seeded by the site's name."""
-    return lambda rasters: propose(degrade_rasters(rasters, DegradeConfig(seed=sum(rasters.name.encode()))))
 
 
 def corrections_of(site: Path, propose: Proposer) -> tuple[Corrections, dict[str, int]]:
@@ -111,14 +115,19 @@ def measure(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
     }
 
 
-def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
+def measure_model(registry: Path, sites: list[Path], recon_sites: list[Path]) -> dict[str, Any]:
     """The promoted model as the product proposes with it (rescored candidates, or the element-mask network's own
-    traced masks), and an anchored model's own refined points."""
+    traced masks, also on the reconstructed rasters of `recon_sites`), and an anchored model's own refined
+    points."""
     if checkpoint_kind(registry) == MASK_KIND:
         masks = load_mask_checkpoint(registry)
-        for site in sites:
+        for site in [*sites, *recon_sites]:
             ensure_unseen(masks, site)
-        return {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
+        figures = {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
+        if recon_sites:
+            on_reconstruction = mask_proposer(masks.model, MaskInferenceConfig(boundary_evidence="road_edge"))
+            figures["reconstructed"] = reconstructed_figures(on_reconstruction, recon_sites)
+        return figures
     loaded = load_checkpoint(registry)
     for site in sites:
         ensure_unseen(loaded, site)
@@ -129,9 +138,34 @@ def measure_model(registry: Path, sites: list[Path]) -> dict[str, Any]:
     return figures
 
 
-def mask_proposer(model: ElementMaskNet) -> Proposer:
+def mask_proposer(model: ElementMaskNet, config: MaskInferenceConfig | None = None) -> Proposer:
     """A site's proposals by the element-mask network."""
-    return lambda rasters: predict_site_masks(model, rasters)
+    return lambda rasters: predict_site_masks(model, rasters, config)
+
+
+def measure_rule_based(sites: list[Path], recon_sites: list[Path]) -> dict[str, Any]:
+    """The rule-based proposer's held-out figures; on reconstructions its boundaries follow the road's edge, as
+    `cama run` runs it there."""
+    figures = measure(propose_rule_based, sites)
+    if recon_sites:
+        on_reconstruction = RuleConfig(boundary_source="road_edge")
+        figures["reconstructed"] = reconstructed_figures(
+            lambda rasters: propose_rule_based(rasters, on_reconstruction), recon_sites
+        )
+    return figures
+
+
+def bootstrap_model(registry: Path, sites: list[Path], steps: int, refused: list[Path]) -> None:
+    """Round 0 from scratch: an element-mask network trained on the generator's truth of a few `sites`, saved
+    and promoted as the registry's first version (refusing to have seen any of `refused`)."""
+    train_masks(
+        MaskModelConfig(),
+        MaskTrainConfig(steps=steps),
+        sites,
+        registry,
+        validation_sites=refused,
+        show_progress=False,
+    )
 
 
 def promoted_proposer(registry: Path) -> Proposer:
@@ -142,14 +176,14 @@ def promoted_proposer(registry: Path) -> Proposer:
 
 
 def retrain_round(
-    registry: Path, corrections: Corrections, validation: list[Path], steps: int
+    registry: Path, corrections: list[Corrections], validation: list[Path], steps: int
 ) -> RetrainResult:
-    """One retraining of the registry's network on a round's corrections, behind both gates."""
+    """One retraining of the registry's network on corrections, behind both gates."""
     if checkpoint_kind(registry) == MASK_KIND:
         config = MaskRetrainConfig(train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2))
-        return retrain_masks_from_corrections(registry, [corrections], validation, config, review=review_time)
+        return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
     retrain = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4))
-    return retrain_from_corrections(registry, [corrections], validation, retrain, review=review_time)
+    return retrain_from_corrections(registry, corrections, validation, retrain, review=review_time)
 
 
 def plot_path(out: Path) -> Path:
@@ -157,23 +191,37 @@ def plot_path(out: Path) -> Path:
     return out.with_suffix("") / "rounds.png"
 
 
+def recon_map(figures: dict[str, Any]) -> float | None:
+    """Chamfer mAP on the reconstructed rasters against the observed truth, when measured."""
+    recon = figures.get("reconstructed")
+    return None if recon is None else float(recon["observed_truth"]["mean_ap"])
+
+
 def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None:
-    """mAP (clean, damaged) and the annotator's speed-up per round, the rule-based proposer dashed."""
+    """mAP (clean, damaged, reconstructed) and the annotator's speed-up per round, the rule-based proposer
+    dashed."""
     ks = [r["round"] for r in rounds]
     own = [r["heldout"].get("own_points") for r in rounds]
     fig, (ax_map, ax_speed) = plt.subplots(1, 2, figsize=(10, 4))
     for key, colour in (("map_clean", "tab:blue"), ("map_damaged", "tab:orange")):
-        ax_map.plot(ks, [r["heldout"][key] for r in rounds], "o-", color=colour, label=f"rescored {key[4:]}")
+        ax_map.plot(ks, [r["heldout"][key] for r in rounds], "o-", color=colour, label=f"model {key[4:]}")
         if all(own):
             ax_map.plot(ks, [o[key] for o in own], "s:", color=colour, label=f"own points {key[4:]}")
         ax_map.axhline(rule[key], color=colour, linestyle="--", label=f"rule-based {key[4:]}")
+    recon = [recon_map(r["heldout"]) for r in rounds]
+    rule_recon = recon_map(rule)
+    if rule_recon is not None and all(v is not None for v in recon):
+        ax_map.plot(ks, recon, "o-", color="tab:green", label="model reconstructed")
+        ax_map.axhline(rule_recon, color="tab:green", linestyle="--", label="rule-based reconstructed")
     ax_map.set(xlabel="round", ylabel="held-out Chamfer mAP", title="proposal quality")
     ax_map.legend(fontsize=7)
-    ax_speed.plot(ks, [r["heldout"]["annotator"]["speed_up"] for r in rounds], "o-", label="rescored")
+    ax_speed.plot(ks, [r["heldout"]["annotator"]["speed_up"] for r in rounds], "o-", label="model")
     if all(own):
         ax_speed.plot(ks, [o["annotator"]["speed_up"] for o in own], "s:", label="own points")
     ax_speed.axhline(rule["annotator"]["speed_up"], linestyle="--", label="rule-based")
-    ax_speed.set(xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out")
+    ax_speed.set(
+        xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out BEV sites"
+    )
     ax_speed.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -181,9 +229,22 @@ def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None
     plt.close(fig)
 
 
+def summary(figures: dict[str, Any]) -> str:
+    """One line of held-out figures."""
+    recon = recon_map(figures)
+    line = f"{figures['map_clean']:.3f} clean / {figures['map_damaged']:.3f} damaged"
+    line += "" if recon is None else f" / {recon:.3f} reconstructed"
+    return line + f", {figures['annotator']['speed_up']:.2f}x"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/checkpoints"))
+    parser.add_argument(
+        "--bootstrap-seeds",
+        help="round 0: an element-mask network trained here on these BEV sites' truth ('A-B'), not --checkpoint",
+    )
+    parser.add_argument("--bootstrap-steps", type=int, default=600)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument(
         "--steps", type=int, default=300, help="fine-tuning batches per round (the job's default)"
@@ -191,6 +252,15 @@ def main() -> None:
     parser.add_argument("--new-seeds", default="4000-4002", help="one new site per round ('A-B')")
     parser.add_argument("--val-seeds", default="3000-3002", help="the gate's validation sites")
     parser.add_argument("--heldout-seeds", default="2000-2004", help="measured after every round")
+    parser.add_argument(
+        "--recon-site",
+        type=Path,
+        action="append",
+        help="synthetic site with `cama run` done, measured on its reconstructed rasters after every round "
+        + "(element-mask network; repeatable; default: data/synthetic/default and random-9001)",
+    )
+    parser.add_argument("--propose-on", choices=("clean", "damaged"), default="damaged")
+    parser.add_argument("--corrections", choices=("all", "latest"), default="all")
     parser.add_argument("--site-root", type=Path, default=Path("data/vma/loop"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS / "vma_loop.json")
@@ -210,50 +280,72 @@ def main() -> None:
         )
     validation = ensure_bev_sites(seed_range(args.val_seeds), args.site_root)
     heldout = ensure_bev_sites(seed_range(args.heldout_seeds), args.site_root)
+    recon = args.recon_site or [Path("data/synthetic/default"), Path("data/synthetic/random-9001")]
     scratch = Path(tempfile.mkdtemp(prefix="bench-vma-loop-"))
     registry = scratch / "registry"
-    shipped = current_version(args.checkpoint)
-    shutil.copytree(shipped, registry / shipped.name)
-    promote(registry, shipped.name)
     started = time.perf_counter()
-    rule = measure(propose_rule_based, heldout)
-    print(
-        f"rule-based: {rule['map_clean']:.3f} / {rule['map_damaged']:.3f}, {rule['annotator']['speed_up']:.2f}x"
-    )
-    rounds: list[dict[str, Any]] = [{"round": 0, "heldout": measure_model(registry, heldout)}]
+    if args.bootstrap_seeds:
+        bootstrap_sites = ensure_bev_sites(seed_range(args.bootstrap_seeds), args.site_root)
+        bootstrap_model(
+            registry, bootstrap_sites, args.bootstrap_steps, [*new_sites, *validation, *heldout, *recon]
+        )
+        start = (
+            f"element-mask network trained on BEV sites {args.bootstrap_seeds}, {args.bootstrap_steps} steps"
+        )
+        print(f"round 0 trained in {time.perf_counter() - started:.0f} s")
+    else:
+        shipped = current_version(args.checkpoint)
+        shutil.copytree(shipped, registry / shipped.name)
+        promote(registry, shipped.name)
+        start = str(shipped)
+    if checkpoint_kind(registry) != MASK_KIND:
+        recon = []  # the reconstructed condition is measured for the element-mask network only
+    propose_on = on_damaged if args.propose_on == "damaged" else (lambda propose: propose)
+    rule = measure_rule_based(heldout, recon)
+    print(f"rule-based: {summary(rule)}")
+    rounds: list[dict[str, Any]] = [{"round": 0, "heldout": measure_model(registry, heldout, recon)}]
+    print(f"round 0: {summary(rounds[0]['heldout'])}")
+    corrected: list[Corrections] = []
     try:
         for k, site in enumerate(new_sites, start=1):
             round_started = time.perf_counter()
-            corrections, review_counts = corrections_of(site, promoted_proposer(registry))
-            result = retrain_round(registry, corrections, validation, args.steps)
+            corrections, review_counts = corrections_of(site, propose_on(promoted_proposer(registry)))
+            corrected = [*corrected, corrections] if args.corrections == "all" else [corrections]
+            result = retrain_round(registry, corrected, validation, args.steps)
             retrain_s = time.perf_counter() - round_started
             rounds.append(
                 {
                     "round": k,
                     "corrected_site": str(site),
+                    "trained_on": [str(c.site) for c in corrected],
                     "review_counts": review_counts,
                     "candidate": result.candidate.name,
                     "promoted": result.promoted,
                     "gate": {"current": result.current_metrics, "candidate": result.candidate_metrics},
                     "retrain_seconds": round(retrain_s, 1),
-                    "heldout": measure_model(registry, heldout),
+                    "heldout": measure_model(registry, heldout, recon),
                 }
             )
-            last: dict[str, Any] = rounds[-1]["heldout"]
             print(
                 f"round {k}: {result.candidate.name} {'promoted' if result.promoted else 'kept out'} "
-                f"({retrain_s:.0f} s); held-out {last['map_clean']:.3f} / {last['map_damaged']:.3f}, "
-                f"{last['annotator']['speed_up']:.2f}x"
+                f"({retrain_s:.0f} s); held-out {summary(rounds[-1]['heldout'])}"
             )
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     plot(rounds, rule, plot_path(args.out))
+    origin = (
+        f"--bootstrap-seeds {args.bootstrap_seeds} --bootstrap-steps {args.bootstrap_steps}"
+        if args.bootstrap_seeds
+        else f"--checkpoint {args.checkpoint}"
+    )
     report = {
-        "command": f"python bench/vma_loop.py --checkpoint {args.checkpoint} "
+        "command": f"python bench/vma_loop.py {origin} "
         + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
-        + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} --threads {args.threads}",
-        "start": shipped.name,
+        + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} "
+        + "".join(f"--recon-site {s} " for s in recon)
+        + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
+        "start": start,
         "rule_based": rule,
         "rounds": rounds,
         "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},

@@ -20,8 +20,8 @@ Usage: .venv/bin/python bench/vma_masks.py [--checkpoint models/vma/element_mask
 import argparse
 import json
 import platform
+import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,64 +29,21 @@ import torch
 from rich.console import Console
 
 from app.review_effort.review_time import review_time
-from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
-from cama_pipeline.site.io import read_site_ids
-from cama_pipeline.workspace import Workspace
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
-from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks
-from models.vma.evaluate import evaluate_proposer, evaluate_sites
-from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.evaluate import evaluate_proposer
+from models.vma.rasters import SiteRasters
 from models.vma.rule_based import RuleConfig, propose_rule_based
-from models.vma.vectors import Vector, read_vectors
+from models.vma.vectors import Vector
+
+# the shared conditions: `bench` is a package at the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-Proposer = Callable[[SiteRasters], list[Vector]]
-
-
-def reconstructed_bev(site: Path) -> Path:
-    """The surface stage's raster folder of a synthetic site with `cama run` done (exactly one site)."""
-    workspace = Workspace.for_dataset(site / "nuscenes")
-    site_ids = read_site_ids(workspace.sites_index()) if workspace.sites_index().is_file() else []
-    found = [workspace.surface_bev(s) for s in site_ids if workspace.surface_bev(s).is_dir()]
-    if len(found) != 1:
-        raise SystemExit(
-            f"{site}: expected the surface rasters of one site (run `cama run` first), found {found}"
-        )
-    return found[0]
-
-
-def on_degraded(propose: Proposer) -> Proposer:
-    """The proposer on the site's rasters with `bench/vma.py`'s damage (default strengths, seeded by name)."""
-
-    def run(rasters: SiteRasters) -> list[Vector]:
-        return propose(degrade_rasters(rasters, DegradeConfig(seed=sum(rasters.name.encode()))))
-
-    return run
-
-
-def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
-    """Chamfer-AP against all true vectors in the reconstructed extent and against their observed parts, and
-    the annotator's speed-up, over the reconstructed rasters of `sites`."""
-    all_truth, observed_truth = [], []
-    for site in sites:
-        rasters = load_site_rasters(reconstructed_bev(site))
-        truths = read_vectors(site / "ground_truth" / "vector_map.json")
-        mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
-        seen = [Vector(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]
-        predictions = propose(rasters)
-        all_truth.append((predictions, truths, rasters.extent()))
-        observed_truth.append((predictions, seen, rasters.extent()))
-    keys = ("mean_ap", "class_ap", "confidence_bins")
-    return {
-        "all_truth": {k: v for k, v in evaluate_sites(all_truth).items() if k in keys},
-        "observed_truth": {k: v for k, v in evaluate_sites(observed_truth).items() if k in keys},
-        "annotator": review_time(propose, sites, rasters_of=reconstructed_bev),
-        "sites": [str(s) for s in sites],
-    }
 
 
 def main() -> None:
@@ -129,7 +86,7 @@ def main() -> None:
         ("element_masks", network, network_on_reconstruction),
     ):
         console.print(f"evaluating {name} ...")
-        for condition, run in (("clean", propose), ("degraded", on_degraded(propose))):
+        for condition, run in (("clean", propose), ("degraded", on_damaged(propose))):
             results[condition][name] = {
                 **evaluate_proposer(run, held_out),
                 "annotator": review_time(run, held_out),

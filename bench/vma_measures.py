@@ -1,0 +1,63 @@
+"""What the VMA benchmarks share: damaged and reconstructed conditions of a proposer, scored the same way.
+
+`bench/vma_masks.py` (one checkpoint against the rule-based proposer) and `bench/vma_loop.py` (the rounds) both
+score a proposer on held-out BEV sites with reconstruction-like damage and on the surface stage's reconstructed
+rasters of full synthetic sites; this module is that one definition of both conditions.
+"""
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from app.review_effort.review_time import review_time
+from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
+from cama_pipeline.site.io import read_site_ids
+from cama_pipeline.workspace import Workspace
+from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.evaluate import evaluate_sites
+from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.vectors import Vector, read_vectors
+
+Proposer = Callable[[SiteRasters], list[Vector]]
+
+
+def on_damaged(propose: Proposer) -> Proposer:
+    """The proposer on the site's rasters with `bench/vma.py`'s damage (default strengths, seeded by name)."""
+
+    def run(rasters: SiteRasters) -> list[Vector]:
+        return propose(degrade_rasters(rasters, DegradeConfig(seed=sum(rasters.name.encode()))))
+
+    return run
+
+
+def reconstructed_bev(site: Path) -> Path:
+    """The surface stage's raster folder of a synthetic site with `cama run` done (exactly one site)."""
+    workspace = Workspace.for_dataset(site / "nuscenes")
+    site_ids = read_site_ids(workspace.sites_index()) if workspace.sites_index().is_file() else []
+    found = [workspace.surface_bev(s) for s in site_ids if workspace.surface_bev(s).is_dir()]
+    if len(found) != 1:
+        raise SystemExit(
+            f"{site}: expected the surface rasters of one site (run `cama run` first), found {found}"
+        )
+    return found[0]
+
+
+def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
+    """Chamfer-AP against all true vectors in the reconstructed extent and against their observed parts, and
+    the annotator's speed-up, over the reconstructed rasters of `sites`."""
+    all_truth, observed_truth = [], []
+    for site in sites:
+        rasters = load_site_rasters(reconstructed_bev(site))
+        truths = read_vectors(site / "ground_truth" / "vector_map.json")
+        mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
+        seen = [Vector(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]
+        predictions = propose(rasters)
+        all_truth.append((predictions, truths, rasters.extent()))
+        observed_truth.append((predictions, seen, rasters.extent()))
+    keys = ("mean_ap", "class_ap", "confidence_bins")
+    return {
+        "all_truth": {k: v for k, v in evaluate_sites(all_truth).items() if k in keys},
+        "observed_truth": {k: v for k, v in evaluate_sites(observed_truth).items() if k in keys},
+        "annotator": review_time(propose, sites, rasters_of=reconstructed_bev),
+        "sites": [str(s) for s in sites],
+    }
