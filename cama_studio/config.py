@@ -97,8 +97,9 @@ class PipelineConfig:
     """Where SfM clips run."""
     workers: int = 2
     """SfM processes (or Ray tasks) at once."""
-    proposer: Literal["learned", "rule", "masks"] = "learned"
-    """The learned MapTR-style model, the rule-based proposer, or the element-mask network."""
+    proposer: Literal["learned", "rule", "masks"] = "masks"
+    """The element-mask network (its geometry is what retraining on corrections changes), the learned
+    MapTR-style model (rule-based candidates, rescored and refined), or the rule-based proposer."""
     checkpoint: Path | None = None
     """Checkpoint registry or version folder for the learned or element-mask proposer (of that kind); None: the
     one shipped with the package (`models.vma.shipped`), found from any working directory."""

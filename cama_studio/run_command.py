@@ -38,7 +38,10 @@ def run_command(
         int | None, typer.Option(help="SIFT keypoints per image (sets features.max_num_features).")
     ] = None,
     proposer: Annotated[
-        str | None, typer.Option(help="learned (the checkpoint), masks (the element-mask network) or rule.")
+        str | None,
+        typer.Option(
+            help="masks (the element-mask network, default), learned (the MapTR-style model) or rule."
+        ),
     ] = None,
     checkpoint: Annotated[
         Path | None,
@@ -58,7 +61,8 @@ def run_command(
 ) -> None:
     """Run every stage in order, each skipping what is up to date; print the time per stage.
 
-    Without --config every stage runs with its defaults (local executor, 2 workers, the learned proposer)."""
+    Without --config every stage runs with its defaults (local executor, 2 workers, the element-mask
+    network proposing)."""
     from cama_studio.config import dump_toml
     from cama_studio.pipeline import STAGES, PipelineError, run
 

@@ -31,7 +31,7 @@ def _paths(value: str) -> tuple[Path, ...]:
     return tuple(Path(part) for part in value.split(os.pathsep) if part)
 
 
-VMA_MODELS = ("maptr", "masks")
+VMA_MODELS = ("auto", "maptr", "masks")
 """The shipped networks a server's registry can be seeded from (`Settings.vma_model`)."""
 
 
@@ -57,9 +57,11 @@ class Settings:
     vma_registry: Path | None = None
     """VMA checkpoint registry (`models.vma.checkpoint`); retrain needs it, proposal refresh uses it (else the
     rule-based proposer), and its promoted version's calibration gives the pre-accept threshold."""
-    vma_model: str = "maptr"
-    """Which shipped network seeds `DATA_DIR`'s registry when `vma_registry` is not set: `maptr` (the anchored
-    MapTR-style model, `DATA_DIR/vma-registry`) or `masks` (the element-mask network, `DATA_DIR/vma-mask-registry`).
+    vma_model: str = "auto"
+    """Which shipped network seeds `DATA_DIR`'s registry when `vma_registry` is not set: `masks` (the element-mask
+    network, whose geometry retraining changes, `DATA_DIR/vma-mask-registry`), `maptr` (the anchored MapTR-style
+    model, `DATA_DIR/vma-registry`) or `auto`: masks, unless the data folder already holds a MapTR-style registry
+    and no mask registry (a server started before the default changed keeps the versions its leads trained).
     A configured registry is used as it is, whichever network it holds (jobs dispatch on its `kind`)."""
     vma_validation_sites: tuple[Path, ...] = ()
     """Held-out site folders (rasters + ground-truth vector map) the retrain gate evaluates on."""

@@ -40,8 +40,9 @@ def serve_command(
     vma_model: Annotated[
         str | None,
         typer.Option(
-            help="maptr or masks: which shipped network seeds the default registry (CAMA_VMA_MODEL); "
-            "masks: DATA_DIR/vma-mask-registry."
+            help="auto, masks or maptr: which shipped network seeds the default registry (CAMA_VMA_MODEL); "
+            "masks: DATA_DIR/vma-mask-registry, maptr: DATA_DIR/vma-registry; auto (default): masks unless "
+            "DATA_DIR holds only a MapTR-style registry."
         ),
     ] = None,
     validation_site: Annotated[

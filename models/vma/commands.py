@@ -15,12 +15,14 @@ from cama_pipeline.io import atomic_write_json
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint, promote
 from models.vma.config import ANCHORED_MODEL, ModelConfig, TrainConfig
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.propose import predict_site_masks
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.propose import PROPOSERS, propose
 from models.vma.retrain import Corrections, RetrainConfig, gate_checkpoint, retrain_from_corrections
 from models.vma.rule_based import RuleConfig, propose_rule_based
-from models.vma.shipped import checkpoint_label, resolve_checkpoint, seed_registry
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, checkpoint_label, resolve_checkpoint, seed_registry
 from models.vma.split import SplitConfig, split_dataset
 from models.vma.train import train
 
@@ -56,10 +58,10 @@ def propose_command(
     proposer: Annotated[
         str,
         typer.Option(
-            help="learned (the shipped MapTR-style model unless --checkpoint), masks (the shipped element-mask "
-            "network unless --checkpoint) or rule."
+            help="masks (the shipped element-mask network unless --checkpoint), learned (the shipped MapTR-style "
+            "model unless --checkpoint) or rule."
         ),
-    ] = "learned",
+    ] = "masks",
     checkpoint: Annotated[
         Path | None,
         typer.Option(
@@ -210,7 +212,7 @@ def retrain_command(
 
 def vma_eval_command(
     site: Annotated[list[Path], typer.Argument(help="Site folders with ground truth (vector_map.json).")],
-    proposer: Annotated[str, typer.Option(help="learned or rule.")] = "learned",
+    proposer: Annotated[str, typer.Option(help="masks (element-mask network), learned or rule.")] = "masks",
     checkpoint: Annotated[
         Path | None,
         typer.Option(
@@ -219,10 +221,17 @@ def vma_eval_command(
     ] = None,
     out: Annotated[Path, typer.Option(help="JSON report to write.")] = Path("vma_eval.json"),
 ) -> None:
-    """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer; a learned
+    """Chamfer-AP (0.5/1.0/1.5 m, per class and mean) and precision per confidence bin of a proposer; a network's
     checkpoint is refused (exit 2) on a site it trained on."""
     try:
-        if proposer == "learned":
+        if proposer == "masks":
+            version = resolve_checkpoint(checkpoint, SHIPPED_MASK_REGISTRY)
+            console.print(f"element-mask checkpoint {checkpoint_label(version)}")
+            masks = load_mask_checkpoint(version)
+            for folder in site:
+                ensure_unseen(masks, folder)
+            report = evaluate_proposer(lambda r: predict_site_masks(masks.model, r), site)
+        elif proposer == "learned":
             version = resolve_checkpoint(checkpoint)
             console.print(f"VMA checkpoint {checkpoint_label(version)}")
             loaded = load_checkpoint(version)
@@ -233,7 +242,7 @@ def vma_eval_command(
         elif proposer == "rule":
             report = evaluate_proposer(propose_rule_based, site)
         else:
-            raise ValueError(f"--proposer must be 'learned' or 'rule', got {proposer!r}")
+            raise ValueError(f"--proposer must be one of {', '.join(PROPOSERS)}, got {proposer!r}")
     except _ERRORS as err:
         raise bad_input(err) from err
     atomic_write_json(out, report, indent=1)

@@ -70,7 +70,7 @@ def propose(
     site: Path,
     out: Path,
     *,
-    proposer: Proposer = "learned",
+    proposer: Proposer = "masks",
     checkpoint: Path | None = None,
     min_confidence: float = 0.1,
     inference: InferenceConfig | None = None,

@@ -79,19 +79,12 @@ def test_train_propose_eval_retrain(drawn_site: Path, tmp_path: Path) -> None:
     assert (registry / "v0001" / "model.pt").is_file() and (registry / "current.json").is_file()
 
     out = tmp_path / "learned.json"
-    result = runner.invoke(
-        app,
-        [
-            "propose",
-            str(drawn_site),
-            "--checkpoint",
-            str(registry),
-            "--out",
-            str(out),
-            "--min-confidence",
-            "0",
-        ],
-    )
+    args = ["propose", str(drawn_site), "--checkpoint", str(registry), "--out", str(out)]
+    # the default proposer is the element-mask network: a MapTR-style registry is named as such, not loaded
+    wrong_kind = runner.invoke(app, args)
+    assert wrong_kind.exit_code == 2 and "proposer 'learned'" in wrong_kind.output, wrong_kind.output
+    assert not out.exists()
+    result = runner.invoke(app, [*args, "--proposer", "learned", "--min-confidence", "0"])
     assert result.exit_code == 0, result.output
     assert AnnotationSet.read_json(out).site_id == "drawn"
 
@@ -117,7 +110,17 @@ def test_train_propose_eval_retrain(drawn_site: Path, tmp_path: Path) -> None:
     ]
     # the model trained on the drawn site: it may be neither scored nor gated on it
     seen = runner.invoke(
-        app, ["vma-eval", str(drawn_site), "--checkpoint", str(registry), "--out", str(report)]
+        app,
+        [
+            "vma-eval",
+            str(drawn_site),
+            "--proposer",
+            "learned",
+            "--checkpoint",
+            str(registry),
+            "--out",
+            str(report),
+        ],
     )
     assert seen.exit_code == 2 and "trained on this folder" in seen.output, seen.output
     refused = runner.invoke(app, [*retrain, "--val", str(drawn_site)])

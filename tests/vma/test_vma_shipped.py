@@ -21,12 +21,13 @@ from models.vma.checkpoint import (
     CURRENT,
     CheckpointError,
     checkpoint_kind,
+    current_version,
     ensure_unseen,
     load_checkpoint,
     refuse_seen,
 )
 from models.vma.config import ModelConfig, TrainConfig
-from models.vma.shipped import resolve_checkpoint, seed_registry, shipped_registry
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, resolve_checkpoint, seed_registry, shipped_registry
 from models.vma.train import train
 
 REPO = Path(__file__).resolve().parents[2]
@@ -57,7 +58,8 @@ def test_resolve_checkpoint_names_a_bad_folder(tmp_path: Path) -> None:
 def test_cama_propose_from_a_temporary_directory_uses_and_names_the_shipped_model(
     drawn_site: Path, tmp_path: Path
 ) -> None:
-    """The real command line, started outside the checkout: it finds the model and prints which one."""
+    """The real command line, started outside the checkout: it finds the default model (the element-mask
+    network) and prints which one."""
     workdir = tmp_path / "elsewhere"
     workdir.mkdir()
     env = {**os.environ, "COLUMNS": "60"}
@@ -70,11 +72,10 @@ def test_cama_propose_from_a_temporary_directory_uses_and_names_the_shipped_mode
         timeout=300,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    version = _promoted_version()
-    shipped = shipped_registry().resolve() / version
-    assert f"VMA checkpoint {version} (shipped with the package: {shipped})" in done.stdout
+    shipped = current_version(shipped_registry(*SHIPPED_MASK_REGISTRY)).resolve()
+    assert f"VMA checkpoint {shipped.name} (shipped with the package: {shipped})" in done.stdout
     proposals = AnnotationSet.read_json(workdir / "p.json")
-    assert proposals.elements and {e.author for e in proposals.elements} == {f"vma-{version}"}
+    assert proposals.elements and {e.author for e in proposals.elements} == {f"vma-masks-{shipped.name}"}
 
 
 def test_seed_registry_copies_the_shipped_model_once_and_leaves_it_untouched(tmp_path: Path) -> None:
@@ -101,8 +102,11 @@ def test_servers_get_a_seeded_registry_so_the_learned_model_and_retrain_are_avai
     bare = Settings(data_dir=tmp_path / "data")
     assert "no VMA checkpoint registry" in unavailable_kinds(bare)["retrain"]
     settings = with_shipped_registry(bare)
-    assert settings.vma_registry == tmp_path / "data" / "vma-registry"
-    assert (tmp_path / "data" / "vma-registry" / CURRENT).is_file()
+    assert (
+        settings.vma_registry == tmp_path / "data" / "vma-mask-registry"
+    )  # the element-mask network by default
+    assert checkpoint_kind(settings.vma_registry) == "element_masks"
+    assert (tmp_path / "data" / "vma-mask-registry" / CURRENT).is_file()
     # the registry is there; what retrain still needs is a held-out site for its promotion gate
     assert "validation sites" in unavailable_kinds(settings)["retrain"]
     gated = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_validation_sites=(tmp_path,)))
@@ -111,14 +115,19 @@ def test_servers_get_a_seeded_registry_so_the_learned_model_and_retrain_are_avai
     assert with_shipped_registry(chosen) == chosen  # a configured registry is used as it is
 
 
-def test_a_server_can_start_from_the_shipped_element_mask_network(tmp_path: Path) -> None:
-    settings = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_model="masks"))
-    assert settings.vma_registry == tmp_path / "data" / "vma-mask-registry"
-    assert checkpoint_kind(settings.vma_registry) == "element_masks"
-    assert (
-        checkpoint_kind(with_shipped_registry(Settings(data_dir=tmp_path / "other")).vma_registry) == "maptr"
-    )
-    with pytest.raises(ValueError, match="CAMA_VMA_MODEL: must be one of maptr, masks"):
+def test_a_server_can_start_from_the_shipped_maptr_model_and_an_older_server_keeps_its_registry(
+    tmp_path: Path,
+) -> None:
+    settings = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_model="maptr"))
+    assert settings.vma_registry == tmp_path / "data" / "vma-registry"
+    assert checkpoint_kind(settings.vma_registry) == "maptr"
+    # a server whose data folder holds only a MapTR-style registry (started before the default changed) keeps it
+    assert with_shipped_registry(Settings(data_dir=tmp_path / "data")).vma_registry == settings.vma_registry
+    masks = with_shipped_registry(Settings(data_dir=tmp_path / "data", vma_model="masks"))
+    assert checkpoint_kind(masks.vma_registry) == "element_masks"
+    # once both are there, auto takes the element-mask network's
+    assert with_shipped_registry(Settings(data_dir=tmp_path / "data")).vma_registry == masks.vma_registry
+    with pytest.raises(ValueError, match="CAMA_VMA_MODEL: must be one of auto, maptr, masks"):
         Settings.from_env({"CAMA_VMA_MODEL": "hdmapnet"}, data_dir=tmp_path)
 
 

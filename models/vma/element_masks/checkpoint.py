@@ -41,6 +41,7 @@ def load_mask_checkpoint(path: Path, device: str = "cpu") -> MaskCheckpoint:
     if meta.get("kind") != KIND:
         raise CheckpointError(
             f"{meta_path}: field 'kind' is {meta.get('kind')!r}, not an {KIND!r} checkpoint"
+            + (" (a MapTR-style VMA checkpoint: use proposer 'learned')" if "model_config" in meta else "")
         )
     try:
         config = MaskModelConfig(**meta["model_config"])
