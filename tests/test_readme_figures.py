@@ -612,3 +612,26 @@ def test_element_mask_loop_rounds_table() -> None:
             assert_shows(cells[2], [entry["retrain_seconds"]], f"masks round {entry['round']} seconds")
         assert_shows(cells[3], _loop_figures(entry["heldout"]), f"masks round {entry['round']}")
     assert_shows(row(t, "rule-based")[3], _loop_figures(recorded["rule_based"]), "rule-based")
+
+
+def test_element_mask_loop_from_a_first_model_table() -> None:
+    t = table("first-model round")
+    assert_names_source(t, "vma_loop_masks_bootstrap.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_bootstrap.json")
+    assert "--bootstrap-seeds" in recorded["command"]
+
+    def reconstructed(figures: dict[str, Any]) -> list[Expected]:
+        recon = figures["reconstructed"]
+        return [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]]
+
+    for entry in recorded["rounds"]:
+        cells = row(t, next(name for name in t.rows if name.split(" ")[0] == str(entry["round"])))
+        assert entry["heldout"]["version"] in cells[1]
+        if "candidate" in entry:
+            assert entry["candidate"] in cells[1] and ("kept out" in cells[1]) != entry["promoted"]
+            assert_shows(cells[2], [entry["retrain_seconds"]], f"first-model round {entry['round']} seconds")
+        assert_shows(cells[3], _loop_figures(entry["heldout"]), f"first-model round {entry['round']}")
+        assert_shows(cells[4], reconstructed(entry["heldout"]), f"first-model round {entry['round']} recon")
+    rule = row(t, "rule-based")
+    assert_shows(rule[3], _loop_figures(recorded["rule_based"]), "rule-based")
+    assert_shows(rule[4], reconstructed(recorded["rule_based"]), "rule-based reconstructed")
