@@ -600,38 +600,41 @@ def test_element_mask_end_to_end_figures() -> None:
     assert f"it accepts {counts['accept']} proposals" in text and f"draws {counts['drawn']} instead" in text
 
 
-def test_element_mask_loop_rounds_table() -> None:
-    t = table("masks round")
-    assert_names_source(t, "vma_loop_masks.json", "bench/vma_loop.py")
-    recorded = results("vma_loop_masks.json")
+def _reconstructed_figures(figures: dict[str, Any]) -> list[Expected]:
+    recon = figures["reconstructed"]
+    return [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]]
+
+
+def _check_mask_loop_table(first_column: str, results_file: str, *, reconstructed: bool) -> dict[str, Any]:
+    """A table of the element-mask loop's rounds against its results: each round's promoted version, its
+    kept-out candidate, retrain seconds, held-out figures (and, with `reconstructed`, the reconstructed-raster
+    figures in the next column), and the rule-based row."""
+    t = table(first_column)
+    assert_names_source(t, results_file, "bench/vma_loop.py")
+    recorded = results(results_file)
     for entry in recorded["rounds"]:
+        label = f"{first_column} {entry['round']}"
         cells = row(t, next(name for name in t.rows if name.split(" ")[0] == str(entry["round"])))
         assert entry["heldout"]["version"] in cells[1]
         if "candidate" in entry:
             assert entry["candidate"] in cells[1] and ("kept out" in cells[1]) != entry["promoted"]
-            assert_shows(cells[2], [entry["retrain_seconds"]], f"masks round {entry['round']} seconds")
-        assert_shows(cells[3], _loop_figures(entry["heldout"]), f"masks round {entry['round']}")
-    assert_shows(row(t, "rule-based")[3], _loop_figures(recorded["rule_based"]), "rule-based")
+            assert_shows(cells[2], [entry["retrain_seconds"]], f"{label} seconds")
+        assert_shows(cells[3], _loop_figures(entry["heldout"]), label)
+        if reconstructed:
+            assert_shows(cells[4], _reconstructed_figures(entry["heldout"]), f"{label} reconstructed")
+    rule = row(t, "rule-based")
+    assert_shows(rule[3], _loop_figures(recorded["rule_based"]), "rule-based")
+    if reconstructed:
+        assert_shows(rule[4], _reconstructed_figures(recorded["rule_based"]), "rule-based reconstructed")
+    return recorded
+
+
+def test_element_mask_loop_rounds_table() -> None:
+    _check_mask_loop_table("masks round", "vma_loop_masks.json", reconstructed=False)
 
 
 def test_element_mask_loop_from_a_first_model_table() -> None:
-    t = table("first-model round")
-    assert_names_source(t, "vma_loop_masks_bootstrap.json", "bench/vma_loop.py")
-    recorded = results("vma_loop_masks_bootstrap.json")
+    recorded = _check_mask_loop_table(
+        "first-model round", "vma_loop_masks_bootstrap.json", reconstructed=True
+    )
     assert "--bootstrap-seeds" in recorded["command"]
-
-    def reconstructed(figures: dict[str, Any]) -> list[Expected]:
-        recon = figures["reconstructed"]
-        return [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]]
-
-    for entry in recorded["rounds"]:
-        cells = row(t, next(name for name in t.rows if name.split(" ")[0] == str(entry["round"])))
-        assert entry["heldout"]["version"] in cells[1]
-        if "candidate" in entry:
-            assert entry["candidate"] in cells[1] and ("kept out" in cells[1]) != entry["promoted"]
-            assert_shows(cells[2], [entry["retrain_seconds"]], f"first-model round {entry['round']} seconds")
-        assert_shows(cells[3], _loop_figures(entry["heldout"]), f"first-model round {entry['round']}")
-        assert_shows(cells[4], reconstructed(entry["heldout"]), f"first-model round {entry['round']} recon")
-    rule = row(t, "rule-based")
-    assert_shows(rule[3], _loop_figures(recorded["rule_based"]), "rule-based")
-    assert_shows(rule[4], reconstructed(recorded["rule_based"]), "rule-based reconstructed")
