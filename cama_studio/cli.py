@@ -155,7 +155,11 @@ def _register_stage_commands() -> None:
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
     from cama_pipeline.pairs.command import pairs_command
-    from cama_pipeline.segment.command import segment_command, train_segmenter_command
+    from cama_pipeline.segment.command import (
+        calibrate_segmenter_command,
+        segment_command,
+        train_segmenter_command,
+    )
     from cama_pipeline.segment.import_masks import import_masks_command
     from cama_pipeline.sfm.command import sfm_command
     from cama_pipeline.site.command import sites_command
@@ -195,6 +199,7 @@ def _register_stage_commands() -> None:
     app.command("vma-eval")(vma_eval_command)
     app.command("vma-split")(vma_split_command)
     app.command("train-segmenter")(train_segmenter_command)
+    app.command("calibrate-segmenter")(calibrate_segmenter_command)
 
 
 _register_stage_commands()

@@ -76,6 +76,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "vma-eval": ([nowhere, "--proposer", "rule", "--out", str(tmp / "eval.json")], nowhere),
         "vma-split": ([nowhere, "--out", str(tmp / "split.json")], nowhere),
         "train-segmenter": (["--sites", nowhere, "--out", str(tmp / "segmenter")], nowhere),
+        "calibrate-segmenter": (["--sites", nowhere, "--out", str(tmp / "calibrated")], nowhere),
     }
 
 

@@ -1,4 +1,5 @@
-"""`cama segment` (masks for a data set without its own) and `cama train-segmenter` (the network behind it)."""
+"""`cama segment` (masks for a data set without its own), `cama train-segmenter` (the network behind it) and
+`cama calibrate-segmenter` (its per-class logit offsets, fitted on fresh sites)."""
 
 import logging
 from pathlib import Path
@@ -9,6 +10,7 @@ from rich.table import Table
 
 from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
+from cama_pipeline.segment.calibrate import calibrate
 from cama_pipeline.segment.checkpoint import read_meta
 from cama_pipeline.segment.config import SegmentConfig, TrainConfig
 from cama_pipeline.segment.predict import resolve_device
@@ -56,6 +58,15 @@ def segment_command(
         f"{report['made_by']['checkpoint']} ({state})"
     )
     console.print(f"  -> {item.path}")
+
+
+def _iou_table(title: str, per_class: dict[str, float | None]) -> Table:
+    """A one-row table of per-class IoU (- for a class neither present nor predicted)."""
+    table = Table(title=title)
+    for name in per_class:
+        table.add_column(name)
+    table.add_row(*("-" if v is None else f"{v:.3f}" for v in per_class.values()))
+    return table
 
 
 def train_segmenter_command(
@@ -106,14 +117,58 @@ def train_segmenter_command(
         raise bad_input(err) from err
     held = meta["metrics"].get("held_out")
     if held:
-        table = Table(title=f"held-out IoU ({held['images']} images)")
-        for name in held["per_class_iou"]:
-            table.add_column(name)
-        table.add_row(*("-" if v is None else f"{v:.3f}" for v in held["per_class_iou"].values()))
-        console.print(table)
+        console.print(_iou_table(f"held-out IoU ({held['images']} images)", held["per_class_iou"]))
     console.print(
         f"[green]trained[/green] on {meta['images']} images of {len(meta['training_sites'])} sites in "
         f"{meta['seconds']:.0f} s; {meta['metrics']['cpu_seconds_per_512x288']:.3f} s per 512x288 image on one "
         "CPU thread"
     )
+    console.print(f"  -> {folder}")
+
+
+def calibrate_segmenter_command(
+    sites: Annotated[
+        list[Path],
+        typer.Option(
+            "--sites",
+            help="Generated site folders, or folders of them (repeatable): randomised sites the checkpoint "
+            "never saw, not measurement sites.",
+        ),
+    ],
+    out: Annotated[Path, typer.Option(help="Calibrated checkpoint folder to write (replaced if there).")],
+    checkpoint: Annotated[
+        Path | None, typer.Option(help="Checkpoint to calibrate; default: the one shipped with the package.")
+    ] = None,
+    held_out: Annotated[
+        list[Path] | None,
+        typer.Option("--held-out", help="Sites to report the calibrated per-class IoU on (repeatable)."),
+    ] = None,
+    device: DeviceOpt = "auto",
+    label: Annotated[
+        str | None, typer.Option(help="Name recorded in the checkpoint (default: folder).")
+    ] = None,
+) -> None:
+    """Fit one logit offset per class on fresh sites' images (undoing the class-weighted loss's pull toward
+    thin classes) and write the calibrated checkpoint, which counts those sites as seen."""
+    try:
+        folder = calibrate(
+            sites,
+            out,
+            checkpoint=checkpoint,
+            held_out=held_out or [],
+            device=resolve_device(device),
+            label=label,
+        )
+        meta = read_meta(folder)
+    except INPUT_ERRORS as err:
+        raise bad_input(err) from err
+    record = meta["calibration"]
+    console.print(
+        _iou_table(f"calibration images ({record['images']}), before", record["before"]["per_class_iou"])
+    )
+    console.print(_iou_table("after", record["after"]["per_class_iou"]))
+    held = meta["metrics"].get("held_out")
+    if held:
+        console.print(_iou_table(f"held-out IoU ({held['images']} images)", held["per_class_iou"]))
+    console.print(f"[green]calibrated[/green] offsets {record['offsets']} in {record['seconds']:.0f} s")
     console.print(f"  -> {folder}")

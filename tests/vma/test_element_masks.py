@@ -26,9 +26,9 @@ from models.vma.element_masks.propose import (
     vectors_from_probabilities,
 )
 from models.vma.element_masks.targets import element_masks
-from models.vma.element_masks.train import smeared_kerbs, train_masks, training_site
+from models.vma.element_masks.train import jitter_appearance, smeared_kerbs, train_masks, training_site
 from models.vma.patches import site_grid
-from models.vma.rasters import load_site_rasters
+from models.vma.rasters import NUM_SEMANTIC, load_site_rasters
 from models.vma.rule_based import RuleConfig
 from models.vma.vectors import CLASSES, Vector
 from tests.vma.vma_test_sites import ORIGIN_XY, global_xy
@@ -105,6 +105,28 @@ def test_smeared_kerbs_spread_and_break_the_kerb_label_only(rng: np.random.Gener
     assert changed.any()
     assert set(np.unique(out[changed]).tolist()) <= {int(Semantic.CURB), int(Semantic.BACKGROUND)}
     assert (out[:, :100] == int(Semantic.ROAD)).all() and (out[:, 150] == int(Semantic.LANE_MARKING)).all()
+
+
+def test_appearance_jitter_recolours_seen_cells_only_and_keeps_paint_brighter(
+    rng: np.random.Generator,
+) -> None:
+    image = np.zeros((NUM_SEMANTIC + 3, 16, 16), np.float32)
+    image[int(Semantic.ROAD), :, :8] = 1.0
+    image[NUM_SEMANTIC:, :, :8] = 0.3
+    image[NUM_SEMANTIC:, :, 4] = 0.8  # a painted line on the road
+    semantic_before = image[:NUM_SEMANTIC].copy()
+    looks = []
+    for _ in range(20):
+        jittered = image.copy()
+        jitter_appearance(jittered, rng)
+        rgb = jittered[NUM_SEMANTIC:]
+        assert np.array_equal(jittered[:NUM_SEMANTIC], semantic_before)
+        assert (rgb[:, :, 8:] == 0).all() and rgb.min() >= 0 and rgb.max() <= 1
+        assert rgb[:, :, 4].mean() >= rgb[:, :, 0].mean()
+        looks.append(float(rgb[:, :, 0].mean()))
+    assert max(looks) - min(looks) > 0.2, "exposures should vary widely from crop to crop"
+    with pytest.raises(ValueError, match="appearance_share"):
+        MaskTrainConfig(appearance_share=1.5)
 
 
 def test_a_trained_version_records_its_sites_and_is_refused_on_them(

@@ -48,6 +48,8 @@ class MaskTrainConfig:
     """Damaged copies of every training site (`models.vma.degrade`, random strengths) beside the clean one."""
     unobserved_share: float = 0.3
     """Share of crops in which a random region is made unobserved (reconstructions see only what was driven)."""
+    appearance_share: float = 0.8
+    """Share of crops given another exposure, gamma, contrast and tint (`train.jitter_appearance`)."""
     seed: int = 0
     threads: int = 2
     max_seconds: float = 1e9
@@ -60,5 +62,9 @@ class MaskTrainConfig:
             raise ValueError(f"MaskTrainConfig.crop_px must be a multiple of 8 and >= 32, got {self.crop_px}")
         if self.damaged_copies < 0 or not 0.0 <= self.unobserved_share <= 1.0:
             raise ValueError("MaskTrainConfig: damaged_copies >= 0 and unobserved_share in [0, 1] required")
+        if not 0.0 <= self.appearance_share <= 1.0:
+            raise ValueError(
+                f"MaskTrainConfig.appearance_share must be in [0, 1], got {self.appearance_share}"
+            )
         if not self.max_seconds > 0:
             raise ValueError(f"MaskTrainConfig.max_seconds must be > 0, got {self.max_seconds}")

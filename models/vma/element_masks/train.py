@@ -162,10 +162,34 @@ def load_mask_training_site(path: Path, config: MaskModelConfig, damaged_copies:
     )
 
 
+def jitter_appearance(image: np.ndarray, rng: np.random.Generator) -> None:
+    """Give a (C, H, W) network input another photometric appearance in place, on its observed cells only:
+    contrast about the crop's mean colour 0.4-1.3 (faded paint, light asphalt), gamma 0.7-1.4, exposure gain
+    0.5-2.2 (log-uniform), a tint of +-8 % per channel, then clipped to [0, 1] as a camera saturates. The
+    ranges cover the randomised generator's (asphalt lightness 0.18-0.5, exposure 0.7-1.35, paint fade up to
+    0.45) with room for real logs."""
+    rgb = image[NUM_SEMANTIC:]
+    observed = image[:NUM_SEMANTIC].sum(axis=0) > 0.5
+    if not observed.any():
+        return
+    values = rgb[:, observed]
+    mean = values.mean(axis=1, keepdims=True)
+    values = mean + float(rng.uniform(0.4, 1.3)) * (values - mean)
+    values = np.clip(values, 0.0, 1.0) ** float(rng.uniform(0.7, 1.4))
+    gain = float(np.exp(rng.uniform(np.log(0.5), np.log(2.2))))
+    values = values * gain * rng.uniform(0.92, 1.08, (3, 1))
+    rgb[:, observed] = np.clip(values, 0.0, 1.0)
+
+
 def random_crop(
-    site: MaskTrainingSite, crop_px: int, unobserved_share: float, rng: np.random.Generator
+    site: MaskTrainingSite,
+    crop_px: int,
+    unobserved_share: float,
+    rng: np.random.Generator,
+    appearance_share: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A rotated crop (input, target) centred near a random road cell of a random version of the site."""
+    """A rotated crop (input, target) centred near a random road cell of a random version of the site; with
+    probability `appearance_share` in another appearance (`jitter_appearance`)."""
     image = site.images[int(rng.integers(len(site.images)))]
     k = int(rng.integers(site.road.shape[1]))
     centre = site.road[::-1, k].astype(np.float64) + rng.uniform(-crop_px / 4, crop_px / 4, 2)
@@ -182,6 +206,8 @@ def random_crop(
         )
 
     crop, target = warp(image), warp(site.targets)
+    if rng.random() < appearance_share:
+        jitter_appearance(crop, rng)
     if rng.random() < unobserved_share:
         normal = rng.normal(size=2)
         cols, rows = np.meshgrid(np.arange(crop_px) - half, np.arange(crop_px) - half)
@@ -216,7 +242,13 @@ def fit_masks(
 
     def batch_loss(rng: np.random.Generator, device: torch.device) -> tuple[torch.Tensor, str]:
         crops = [
-            random_crop(sites[int(rng.integers(len(sites)))], config.crop_px, config.unobserved_share, rng)
+            random_crop(
+                sites[int(rng.integers(len(sites)))],
+                config.crop_px,
+                config.unobserved_share,
+                rng,
+                config.appearance_share,
+            )
             for _ in range(config.batch_size)
         ]
         images = torch.as_tensor(np.stack([c for c, _ in crops]), device=device)
