@@ -10,6 +10,13 @@ seed 9001 (a measurement seed, which `cama train-segmenter` refuses to train on)
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/segmenter/held-out/r9001 \
         --out data/segmenter/checkpoint --epochs 22
 
+`shipped-v3` is `shipped-v2` calibrated (`cama calibrate-segmenter`: one logit offset per class) on seeds 120-122,
+which it never trained on (its checkpoint.json records v2 as its parent and these sites among those it saw):
+
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/calibrate --seeds 120-122
+    .venv/bin/cama calibrate-segmenter --sites data/segmenter/calibrate --checkpoint <shipped-v2> \
+        --out data/segmenter/ckpt/shipped-v3 --label shipped-v3
+
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """
 

@@ -18,7 +18,6 @@ Usage: .venv/bin/python bench/vma_masks.py [--checkpoint models/vma/element_mask
 """
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -29,6 +28,7 @@ import torch
 from rich.console import Console
 
 from app.review_effort.review_time import review_time
+from cama_pipeline.io import atomic_write_json
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
@@ -98,6 +98,7 @@ def main() -> None:
     }
     report = {
         "command": f"python bench/vma_masks.py --checkpoint {args.checkpoint} --seeds {args.seeds} "
+        f"--site-root {args.site_root} "
         + " ".join(f"--recon-site {s}" for s in recon)
         + f" --threads {args.threads}",
         "held_out_seeds": seed_range(args.seeds),
@@ -112,8 +113,7 @@ def main() -> None:
         "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
         "seconds": round(time.perf_counter() - started, 1),
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    atomic_write_json(args.out, report, indent=1)
     for condition, per in results.items():
         for name, result in per.items():
             scored = result["observed_truth"] if condition == "reconstructed" else result
@@ -122,6 +122,8 @@ def main() -> None:
                 f"[bold]{condition} {name}[/bold]: mAP {scored['mean_ap']:.3f} ({classes}); "
                 f"annotator {result['annotator']['speed_up']:.2f}x"
             )
+            for site, figures in scored.get("per_site", {}).items():
+                console.print(f"    {site}: mAP {figures['mean_ap']:.3f}")
     console.print(f"margins over rule-based: {margins}; written to {args.out}")
 
 

@@ -19,13 +19,16 @@ FEW_STEPS = TrainConfig(
 )
 
 
-def relabelled_copy(site: Path, out: Path, seed: int = TRAINING_SEED) -> Path:
-    """A copy of a generated site whose manifest gives it seed `seed`, a location and a layout of its own."""
+def relabelled_copy(
+    site: Path, out: Path, seed: int = TRAINING_SEED, lane_width_shift_m: float = 0.25
+) -> Path:
+    """A copy of a generated site whose manifest gives it seed `seed`, a location and a layout of its own (lanes
+    `lane_width_shift_m` wider: copies made with different shifts are different layouts)."""
     shutil.copytree(site, out)
     manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
     manifest["seed"] = manifest["config"]["seed"] = seed
     manifest["config"]["location"] = f"test-copy-{seed}"
-    manifest["config"]["layout"]["lane_width_m"] += 0.25
+    manifest["config"]["layout"]["lane_width_m"] += lane_width_shift_m
     (out / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
     return out
 

@@ -78,10 +78,7 @@ def test_the_classifier_bias_carries_the_offsets(parent: Path) -> None:
 def test_calibration_records_its_sites_as_seen_and_refuses_seen_and_measurement_sites(
     tiny_site: GeneratedSite, trained_on: Path, parent: Path, tmp_path: Path
 ) -> None:
-    fresh = relabelled_copy(tiny_site.result.out_dir, tmp_path / "fresh", seed=6161)
-    manifest = json.loads((fresh / "manifest.json").read_text(encoding="utf-8"))
-    manifest["config"]["layout"]["lane_width_m"] += 0.5  # a layout of its own
-    (fresh / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    fresh = relabelled_copy(tiny_site.result.out_dir, tmp_path / "fresh", seed=6161, lane_width_shift_m=0.75)
     config = CalibrationConfig(step=0.5, span=1.0, passes=1, pixel_stride=4)
     folder = calibrate(
         [fresh], tmp_path / "calibrated", checkpoint=parent, config=config, show_progress=False

@@ -149,10 +149,9 @@ def test_bad_checkpoints_name_their_file(checkpoint: Path, tmp_path: Path) -> No
 def test_going_on_from_a_checkpoint_keeps_what_it_saw(
     checkpoint: Path, training_site: Path, tiny_site: GeneratedSite, tmp_path: Path
 ) -> None:
-    second_site = relabelled_copy(tiny_site.result.out_dir, tmp_path / "second", seed=5151)
-    manifest = json.loads((second_site / "manifest.json").read_text(encoding="utf-8"))
-    manifest["config"]["layout"]["lane_width_m"] += 0.5  # a layout of its own
-    (second_site / "manifest.json").write_text(json.dumps(manifest), encoding="utf-8")
+    second_site = relabelled_copy(
+        tiny_site.result.out_dir, tmp_path / "second", seed=5151, lane_width_shift_m=0.75
+    )
     folder = train(FEW_STEPS, [second_site], tmp_path / "next", init=checkpoint, show_progress=False)
     meta = json.loads((folder / META).read_text(encoding="utf-8"))
     assert [s["seed"] for s in meta["training_sites"]] == [4242, 5151]
