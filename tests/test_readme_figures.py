@@ -638,3 +638,43 @@ def test_element_mask_loop_from_a_first_model_table() -> None:
         "first-model round", "vma_loop_masks_bootstrap.json", reconstructed=True
     )
     assert "--bootstrap-seeds" in recorded["command"]
+
+
+VMA_APPEARANCE_SITES = {
+    "default": "data/synthetic/default",
+    "9001": "data/synthetic/random-9001",
+    "9007 (looked at to find the cause)": "data/synthetic/random-9007",
+    "9011 (fresh)": "data/synthetic/random-9011",
+}
+
+
+def test_element_mask_appearance_table_per_site() -> None:
+    t = table("reconstructed site", "jitter_appearance")
+    assert_names_source(t, "vma_masks_v0003.json", "bench/vma_masks.py")
+    assert "bench/results/vma_masks_v0002_sites.json" in t.context
+    by_version = {"v0002": results("vma_masks_v0002_sites.json"), "v0003": results("vma_masks_v0003.json")}
+    assert {v: r["checkpoint"]["version"] for v, r in by_version.items()} == {
+        "v0002": "v0002",
+        "v0003": "v0003",
+    }
+    columns = {"rule-based": ("v0003", "rule_based"), "v0002": ("v0002", "element_masks")}
+    columns["v0003"] = ("v0003", "element_masks")
+    for header, (version, proposer) in columns.items():
+        index = t.header.index(header)
+        figures_of = by_version[version]["results"]
+        recon = figures_of["reconstructed"][proposer]
+        for label, site in VMA_APPEARANCE_SITES.items():
+            expected = [recon["observed_truth"]["per_site"][site]["mean_ap"]]
+            assert_shows(row(t, label)[index], expected, f"{header} {label}")
+        assert_shows(
+            row(t, "all four: mAP, speed-up")[index],
+            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
+            f"{header} all four",
+        )
+        bev = [figures_of["clean"][proposer]["mean_ap"], figures_of["degraded"][proposer]["mean_ap"]]
+        assert_shows(row(t, "BEV 5000-5004: clean / damaged mAP")[index], bev, f"{header} BEV")
+    rules_then = by_version["v0002"]["results"]["reconstructed"]["rule_based"]["observed_truth"]["mean_ap"]
+    assert (
+        rules_then
+        == by_version["v0003"]["results"]["reconstructed"]["rule_based"]["observed_truth"]["mean_ap"]
+    )
