@@ -678,3 +678,30 @@ def test_element_mask_appearance_table_per_site() -> None:
         rules_then
         == by_version["v0003"]["results"]["reconstructed"]["rule_based"]["observed_truth"]["mean_ap"]
     )
+
+
+SEGMENT_CALIBRATION_COLUMNS = {
+    "9001 shipped-v2": ("segment_v2_rerun_9001.json", "shipped-v2"),
+    "9001 calibrated": ("segment_v3_9001.json", "shipped-v3"),
+    "9002 shipped-v2": ("segment_v2_rerun_9002.json", "shipped-v2"),
+    "9002 calibrated": ("segment_v3_9002.json", "shipped-v3"),
+}
+
+
+def test_segmenter_calibration_table() -> None:
+    t = table("class, calibration")
+    for column, (name, label) in SEGMENT_CALIBRATION_COLUMNS.items():
+        assert_names_source(t, name, "bench/segment.py")
+        index = t.header.index(column)
+        recorded = results(name)
+        assert recorded["segmentation"]["checkpoint"]["label"] == label
+        for row_label, cells in t.rows.items():
+            if row_label.startswith("whole path"):
+                differences = recorded["differences"]
+                expected = [
+                    differences[key]["predicted_minus_reference"]
+                    for key in ("proposal_map", "elevation_rmse_cm", "sre_ref_px")
+                ]
+            else:
+                expected = [recorded["segmentation"]["per_class_iou"][row_label.replace(" ", "_")]]
+            assert_shows(cells[index], expected, f"calibration {column} {row_label!r}")
