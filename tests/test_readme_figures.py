@@ -598,6 +598,16 @@ def test_element_mask_end_to_end_figures() -> None:
     assert speed in text
     counts = masks["annotator"]["corrected"]["counts"]
     assert f"it accepts {counts['accept']} proposals" in text and f"draws {counts['drawn']} instead" in text
+    v3 = results("end_to_end_masks_v0003.json")
+    v3_counts = v3["annotator"]["corrected"]["counts"]
+    shown_v3 = (
+        f"proposal mAP is {v3['proposals_ap']['observed_truth']['mean_ap']:.3f} and the speed-up "
+        f"{v3['annotator']['speed_up']:.2f}x against v0002's {masks['annotator']['speed_up']:.2f}x: "
+        f"{v3_counts['accept']} accepted, {v3_counts['fix']} fixed, {v3_counts['reject']} rejected, "
+        f"{v3_counts['drawn']} drawn (v0002: {counts['accept']}, {counts['fix']}, {counts['reject']}, "
+        f"{counts['drawn']})"
+    )
+    assert shown_v3 in text
 
 
 def _reconstructed_figures(figures: dict[str, Any]) -> list[Expected]:
