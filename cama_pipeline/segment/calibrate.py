@@ -25,7 +25,7 @@ from cama_pipeline.data import CameraImage
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, load_checkpoint, save_checkpoint
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
-from cama_pipeline.segment.predict import iou_report, score_held_out, site_images
+from cama_pipeline.segment.predict import class_iou, confusion, iou_report, score_held_out, site_images
 from cama_pipeline.segment.train import check_training_sites, find_sites
 from cama_pipeline.site_identity import site_identity
 
@@ -88,16 +88,13 @@ def collect_logits(
 def confusion_of(pixels: PixelLogits, offsets: np.ndarray) -> np.ndarray:
     """(NUM_CLASSES, NUM_CLASSES) counts [true, predicted] with `offsets` added to the logits."""
     predicted = (pixels.logits + torch.as_tensor(offsets, dtype=pixels.logits.dtype)).max(dim=1).indices
-    index = pixels.truth * NUM_CLASSES + predicted
-    return torch.bincount(index, minlength=NUM_CLASSES**2).reshape(NUM_CLASSES, NUM_CLASSES).numpy()
+    return confusion(predicted.numpy(), pixels.truth.numpy())
 
 
 def mean_iou(matrix: np.ndarray) -> float:
-    """Mean IoU over the classes present or predicted."""
-    tp = np.diag(matrix).astype(float)
-    union = matrix.sum(axis=0) + matrix.sum(axis=1) - tp
-    present = union > 0
-    return float(np.mean(tp[present] / union[present])) if present.any() else 0.0
+    """Mean IoU over the classes present or predicted (unrounded: the offsets' search compares close values)."""
+    ious = class_iou(matrix)
+    return float(np.nanmean(ious)) if not np.isnan(ious).all() else 0.0
 
 
 def fit_logit_offsets(

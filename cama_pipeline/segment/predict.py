@@ -51,14 +51,21 @@ def confusion(predicted: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return np.bincount(index, minlength=NUM_CLASSES**2).reshape(NUM_CLASSES, NUM_CLASSES)
 
 
-def iou_report(matrix: np.ndarray, images: int) -> dict[str, Any]:
-    """Per-class IoU (None for a class neither present nor predicted), their mean and the pixel accuracy."""
+def class_iou(matrix: np.ndarray) -> np.ndarray:
+    """(NUM_CLASSES,) IoU of each class from a confusion matrix; NaN for a class neither present nor predicted."""
     tp = np.diag(matrix).astype(float)
     union = matrix.sum(axis=0) + matrix.sum(axis=1) - tp
+    return np.divide(tp, union, out=np.full(tp.shape, np.nan), where=union > 0)
+
+
+def iou_report(matrix: np.ndarray, images: int) -> dict[str, Any]:
+    """Per-class IoU (None for a class neither present nor predicted), their mean and the pixel accuracy."""
+    ious = class_iou(matrix)
     per_class = {
-        c.name.lower(): (round(float(tp[i] / union[i]), 4) if union[i] > 0 else None)
+        c.name.lower(): (None if np.isnan(ious[i]) else round(float(ious[i]), 4))
         for i, c in enumerate(IMAGE_CLASSES)
     }
+    tp = np.diag(matrix).astype(float)
     present = [v for v in per_class.values() if v is not None]
     return {
         "per_class_iou": per_class,
