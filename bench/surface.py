@@ -18,7 +18,9 @@ are compared with the site's `ground_truth/bev/` at each reconstructed cell's ce
 Baseline in the same run, ground-truth poses: the surface without the curvature prior, the SfM gate and the
 curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`); and the last pose source again
 without the kerb step (`kerb_step.enabled false`), its ablation, and with the kerb's foot raised and relabelled
-(`kerb_step.kerb_band_m`, `--kerb-band`, off by default). Adam on the per-vertex colours
+(`kerb_step.kerb_band_m`, `--kerb-band`, off by default); and the first and the last pose source without the
+multi-view refinement of the road elevation (`refine.enabled false`): the observation vote on the fitted
+elevation alone, as the stage was before the refinement. Adam on the per-vertex colours
 and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
 
 Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 1]
@@ -27,7 +29,6 @@ Prints the figures and writes them to `--out` (bench/results/surface.json by def
 """
 
 import argparse
-import json
 import logging
 import platform
 import shutil
@@ -44,6 +45,8 @@ from scipy import ndimage
 
 from cama_pipeline.bev import BevRasters, read_bev
 from cama_pipeline.data import load_dataset
+from cama_pipeline.data.masks import has_masks
+from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
@@ -171,7 +174,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     workspace = Workspace(scratch / f"{len(list(scratch.iterdir()))}-{poses}")
     workspace.root.mkdir(parents=True)
     source = Workspace.for_dataset(site / "nuscenes")
-    shared_stages: tuple[StageFolder, ...] = ("sites", "sfm")
+    shared_stages: tuple[StageFolder, ...] = ("sites", "sfm", "masks")  # masks: a mask-free site's predicted
     for shared in shared_stages:
         if source.stage_dir(shared).exists():
             workspace.stage_dir(shared).symlink_to(source.stage_dir(shared).absolute())
@@ -189,6 +192,8 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     report = result.report
     return {
         "poses": poses,
+        "masks": "dataset" if has_masks(site / "nuscenes") else "predicted",
+        "refine": config.refine.enabled,
         "kerb_step": config.kerb_step.enabled,
         "kerb_band_m": config.kerb_step.kerb_band_m,
         "epochs": config.epochs,
@@ -201,10 +206,13 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
         "vertices": report["vertices"],
         "points": report["points"],
         "losses_last_epoch": report["losses"]["epochs"][-1:] or None,
+        "refine_sweeps": report["losses"]["refine"],
     }
 
 
 def _variant(row: dict[str, Any]) -> str:
+    if not row["refine"]:
+        return " vote"
     return " flat" if not row["kerb_step"] else (" foot" if row["kerb_band_m"] > 0 else "")
 
 
@@ -219,10 +227,22 @@ def print_side_by_side(runs: list[dict[str, Any]]) -> None:
     for name in IOU_CLASSES:
         lines[f"IoU {name}"] = [row["iou"][name] for row in runs]
     lines["PSNR dB"] = [row["psnr_db"] for row in runs]
-    for phase in ("elevation", "observe", "optimise", "export", "total"):
+    for phase in ("elevation", "refine", "observe", "optimise", "export", "total"):
         lines[f"seconds {phase}"] = [row["seconds"].get(phase, float("nan")) for row in runs]
     for label, values in lines.items():
         print(f"{label:>22}" + "".join(f"{v:>14.3f}" for v in values))
+
+
+def refine_vs_vote(refined: dict[str, Any], vote: dict[str, Any]) -> dict[str, Any]:
+    """The refined run against the vote alone with the same poses: elevation RMSE ratio, IoU and PSNR
+    differences, time ratio."""
+    return {
+        "poses": refined["poses"],
+        "elevation_rmse": refined["elevation_rmse_m"] / max(vote["elevation_rmse_m"], 1e-9),
+        "iou_gain": {k: v - vote["iou"][k] for k, v in refined["iou"].items()},
+        "psnr_db_gain": refined["psnr_db"] - vote["psnr_db"],
+        "seconds": refined["seconds"]["total"] / max(vote["seconds"]["total"], 1e-9),
+    }
 
 
 def main() -> None:
@@ -255,9 +275,12 @@ def main() -> None:
         no_step = run_source(args.site, sources[-1], flat, scratch)
         foot = replace(config, kerb_step=replace(config.kerb_step, kerb_band_m=args.kerb_band))
         with_foot = run_source(args.site, sources[-1], foot, scratch)
+        vote = replace(config, refine=replace(config.refine, enabled=False))
+        vote_sources = list(dict.fromkeys([sources[0], sources[-1]]))
+        votes = [run_source(args.site, source, vote, scratch) for source in vote_sources]
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    for row in [baseline, *runs, no_step, with_foot]:
+    for row in [baseline, *runs, no_step, with_foot, *votes]:
         print(
             f"{row['poses']:>12} epochs {row['epochs']}: elevation RMSE {row['elevation_rmse_m'] * 100:.2f} cm "
             f"(p95 {row['elevation_p95_m'] * 100:.1f} cm), IoU "
@@ -269,7 +292,7 @@ def main() -> None:
             "    RMSE by distance from the trajectory (m):",
             row["elevation_rmse_m_by_distance_from_trajectory_m"],
         )
-    print_side_by_side([*runs, no_step, with_foot])
+    print_side_by_side([*runs, no_step, with_foot, *votes])
     reference = runs[0]
     stepped = runs[-1]
     results = {
@@ -285,6 +308,10 @@ def main() -> None:
         "runs": runs,
         "ablation_no_kerb_step": no_step,
         "variant_kerb_foot": with_foot,
+        "vote_runs": votes,
+        "refine_vs_vote": [
+            refine_vs_vote(next(r for r in runs if r["poses"] == v["poses"]), v) for v in votes
+        ],
         "ratios_vs_baseline": {
             "elevation_rmse": reference["elevation_rmse_m"] / max(baseline["elevation_rmse_m"], 1e-9),
             "psnr_db_gain": reference["psnr_db"] - baseline["psnr_db"],
@@ -299,7 +326,7 @@ def main() -> None:
         },
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1))
+    atomic_write_json(args.out, results, indent=1)
     print(f"wrote {args.out}")
 
 

@@ -179,9 +179,11 @@ SURFACE_ROWS = {
     "true": "ground_truth",
     "SfM": "sfm",
     "WIGO": "wigo",
+    "true, vote alone (no refinement)": "vote:ground_truth",
+    "SfM, vote alone (no refinement)": "vote:sfm",
     "SfM, flat (no kerb step)": "ablation_no_kerb_step",
     "SfM, kerb foot relabelled": "variant_kerb_foot",
-    "true, without the curvature prior, SfM gate and curb-height vote": (
+    "true, refined, without the curvature prior, SfM gate and curb-height vote": (
         "baseline_no_prior_no_gate_no_curb_height_gt_poses"
     ),
 }
@@ -199,12 +201,16 @@ def _surface_figures(run: dict[str, Any]) -> list[Expected]:
         iou["crosswalk"],
         run["psnr_db"],
         run["seconds"]["elevation"],
+        run["seconds"]["refine"],
         run["seconds"]["observe"],
     ]
 
 
 def _surface_run(recorded: dict[str, Any], key: str) -> dict[str, Any]:
-    """A run of bench/surface.py's results: a pose source of `runs`, or a top-level variant."""
+    """A run of bench/surface.py's results: a pose source of `runs` or (`vote:<poses>`) of `vote_runs`, or a
+    top-level variant."""
+    if key.startswith("vote:"):
+        return next(run for run in recorded["vote_runs"] if run["poses"] == key.removeprefix("vote:"))
     by_poses = {run["poses"]: run for run in recorded["runs"]}
     return by_poses[key] if key in by_poses else recorded[key]
 
@@ -213,7 +219,7 @@ def _surface_run(recorded: dict[str, Any], key: str) -> dict[str, Any]:
     ("first_header", "results_file", "labels"),
     [
         ("poses", "surface.json", list(SURFACE_ROWS)),
-        ("poses, site 9001", "surface_9001.json", list(SURFACE_ROWS)[:2] + list(SURFACE_ROWS)[3:5]),
+        ("poses, site 9011", "surface_9011.json", list(SURFACE_ROWS)[:2] + list(SURFACE_ROWS)[3:5]),
     ],
 )
 def test_surface_tables(first_header: str, results_file: str, labels: list[str]) -> None:
@@ -223,6 +229,42 @@ def test_surface_tables(first_header: str, results_file: str, labels: list[str])
     for label in labels:
         run = _surface_run(recorded, SURFACE_ROWS[label])
         assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(run), f"surface row {label!r}")
+    gains = {gain["poses"]: gain for gain in recorded["refine_vs_vote"]}
+    for poses in ("ground_truth", "sfm"):
+        refined, vote = _surface_run(recorded, poses), _surface_run(recorded, f"vote:{poses}")
+        assert (
+            gains[poses]["iou_gain"]["lane_marking"]
+            == refined["iou"]["lane_marking"] - vote["iou"]["lane_marking"]
+        )
+
+
+SPLIT_ROWS = {
+    "fitted (vote alone)": "vote",
+    "refined (the stage)": "refined",
+    "true road elevation": "true_road",
+    "true surface (kerbs raised)": "true_surface",
+}
+
+
+@pytest.mark.parametrize(
+    ("first_header", "results_file"),
+    [("surface, default site", "surface_split.json"), ("surface, site 9011", "surface_split_9011.json")],
+)
+def test_surface_split_tables(first_header: str, results_file: str) -> None:
+    t = table(first_header, "bench/surface_split.py")
+    assert_names_source(t, results_file, "bench/surface_split.py")
+    runs = results(results_file)["runs"]
+    for label, key in SPLIT_ROWS.items():
+        run = runs[key]
+        iou = run["iou"]
+        expected = [
+            run["elevation_rmse_m"] * 100,
+            iou["road"],
+            iou["curb"],
+            iou["lane_marking"],
+            iou["crosswalk"],
+        ]
+        assert_shows(" | ".join(row(t, label)[1:]), [*expected, run["psnr_db"]], f"split row {label!r}")
 
 
 SFM_ROWS = {

@@ -11,6 +11,44 @@ POSE_SOURCES: tuple[str, ...] = ("ground_truth", "wigo", "sfm")
 
 
 @dataclass(frozen=True)
+class RefineConfig:
+    """Parameters of the multi-view refinement of the road elevation (`surface.refine` in a run
+    configuration; see `cama_pipeline.surface.refine`)."""
+
+    enabled: bool = True
+    sweeps: tuple[tuple[float, float], ...] = ((0.06, 0.02), (0.015, 0.0075))
+    """(half range, step) in metres of the height hypotheses of each sweep, around the surface the sweep
+    before left: coarse first, then fine."""
+    downsample: int = 1
+    """Images averaged over blocks of this many pixels a side before they are compared (1: as they are)."""
+    vertex_stride: int = 3
+    """Every n-th vertex along rows and columns takes part (the residual lives on the 1 m control grid)."""
+    edge_margin_m: float = 1.0
+    """Road vertices this close to a vertex that is not road (a kerb, the road region's edge) are left out."""
+    semantic_weight: float = 1.0
+    """Weight of the class frequencies' variance across views beside the colour variance."""
+    smoothness_weight: float = 1.0
+    """Weight of the residual's squared second differences against the sweeps' confidence-weighted
+    heights (a unit of confidence is a 100 % drop of a control point's cost at its best height)."""
+    ridge_weight: float = 0.03
+    """Weight of the residual's square: where no paint or edge constrains a control point, it stays at 0."""
+
+    def __post_init__(self) -> None:
+        if not self.sweeps or any(not (0 < step <= half) for half, step in self.sweeps):
+            raise ValueError(
+                f"RefineConfig.sweeps must be (half range, step) pairs with 0 < step <= half, got {self.sweeps}"
+            )
+        for name in ("downsample", "vertex_stride"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"RefineConfig.{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("edge_margin_m", "semantic_weight", "smoothness_weight"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"RefineConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.ridge_weight > 0:
+            raise ValueError(f"RefineConfig.ridge_weight must be > 0, got {self.ridge_weight}")
+
+
+@dataclass(frozen=True)
 class SurfaceConfig:
     """Parameters of the RoMe-style surface: points initialisation, elevation MLP, mesh optimisation."""
 
@@ -90,6 +128,8 @@ class SurfaceConfig:
     seed: int = 0
     coverage: CoverageConfig = field(default_factory=CoverageConfig)
     """What the report calls weakly observed (`surface.coverage`)."""
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    """The photometric refinement of the road elevation before the observation pass (`surface.refine`)."""
     kerb_step: KerbStepConfig = field(default_factory=KerbStepConfig)
     """Which off-road cells stand `curb_height_m` above the road (`surface.kerb_step`; needs
     `curb_height_m` > 0)."""

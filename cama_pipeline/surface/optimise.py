@@ -59,18 +59,25 @@ class Mesh:
     step: torch.Tensor
     """(V,) metres above the elevation MLP: `curb_height_m` on the cells standing at curb height (`steps`),
     else 0."""
+    offset: torch.Tensor
+    """(rows, cols) metres added to the MLP on its control grid: the photometric refinement's residual
+    (`refine`), zeros until it runs."""
 
     def heights(self, control_z: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
         return self.control.at_vertices(control_z, ids)
+
+    def control_heights(self) -> torch.Tensor:
+        """(rows, cols) the surface on the control grid: the elevation MLP plus the refinement's residual."""
+        return self.control.heights(self.mlp) + self.offset
 
 
 def new_mesh(grid: SurfaceGrid, mlp: ElevationMLP, config: SurfaceConfig, device: torch.device) -> Mesh:
     """A mesh over the grid's vertices with the MLP's geometry; attributes are set by `observe`."""
     empty = torch.zeros(0, device=device)
     vertex_xy = torch.as_tensor(grid.vertex_xy(), device=device)
-    return Mesh(
-        grid, ControlGrid(grid, config.control_spacing_m, device), mlp, vertex_xy, empty, empty, empty, empty
-    )
+    control = ControlGrid(grid, config.control_spacing_m, device)
+    offset = torch.zeros((control.rows, control.cols), device=device)
+    return Mesh(grid, control, mlp, vertex_xy, empty, empty, empty, empty, offset)
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,17 +148,17 @@ def observe(
     road_level, curb_level = ColourMoments(vertices, device), ColourMoments(vertices, device)
     visible: list[torch.Tensor] = [torch.zeros(0, dtype=torch.int32)] * len(views)
     with torch.no_grad():
-        control_z = mesh.control.heights(mesh.mlp)
+        control_z = mesh.control_heights()
         normals = mesh.control.normals(control_z)
         heights = mesh.control.at_vertices(control_z)
         for indices in batches(views, config.images_per_batch):
             cameras = [Camera.of(views[i], device) for i in indices]
             id_lists = [visible_ids(mesh, heights, camera, config) for camera in cameras]
             images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
-            _add_votes(class_sums, road_level, mesh, control_z, normals, cameras, id_lists, images)
+            add_votes(class_sums, road_level, mesh, control_z, normals, cameras, id_lists, images)
             if config.curb_height_m > 0:
                 raised_z = control_z + config.curb_height_m
-                _add_votes(raised_sums, curb_level, mesh, raised_z, normals, cameras, id_lists, images)
+                add_votes(raised_sums, curb_level, mesh, raised_z, normals, cameras, id_lists, images)
             for i, ids in zip(indices, id_lists, strict=True):
                 visible[i] = ids.to(torch.int32).cpu()
             advance(len(indices), 0.0)
@@ -173,7 +180,7 @@ def observe(
     return visible
 
 
-def _add_votes(
+def add_votes(
     class_sums: torch.Tensor,
     moments: ColourMoments,
     mesh: Mesh,
@@ -263,7 +270,7 @@ def _step(
     """One Adam step on one image batch; its (colour, semantic, anchor) losses."""
     optimiser.zero_grad()
     with torch.set_grad_enabled(config.refine_elevation):
-        control_z = mesh.control.heights(mesh.mlp)
+        control_z = mesh.control_heights()
     normals = mesh.control.normals(control_z)
     id_lists = []
     for i in indices:

@@ -38,6 +38,7 @@ from cama_pipeline.surface.outputs import (
 )
 from cama_pipeline.surface.points import NoRoadPointsError, sfm_surface_points, surface_points
 from cama_pipeline.surface.poses import pose_inputs, posed_views
+from cama_pipeline.surface.refine import refine_elevation, refine_steps
 from cama_pipeline.surface.steps import step_summary
 from cama_pipeline.workspace import Workspace
 
@@ -132,12 +133,14 @@ def reconstruct_site(
         fitted = fit_surface(points, config, device, lambda step, loss: advance(50 if step else 1, loss))
     grid, mlp, point_tensor = fitted.grid, fitted.mlp, fitted.points
     mesh = new_mesh(grid, mlp, config, device)
+    with phases.phase("refine", refine_steps(len(views), config)) as advance:
+        refined = refine_elevation(mesh, dataset, views, config, advance)
     with phases.phase("observe", len(views)) as advance:
         visible = observe(mesh, dataset, views, config, advance)
     with phases.phase("optimise", len(views) * config.epochs) as advance:
         epoch_losses = optimise(mesh, dataset, views, visible, point_tensor, config, advance)
     with phases.phase("export", 1) as advance, torch.no_grad():
-        heights = mesh.control.at_vertices(mesh.control.heights(mlp)).cpu().numpy()
+        heights = mesh.control.at_vertices(mesh.control_heights()).cpu().numpy()
         labels = mesh.logits.argmax(dim=1).cpu().numpy().astype("uint8")
         count, step = mesh.count.cpu().numpy(), mesh.step.cpu().numpy()
         rasters = rasters_from_vertices(grid, heights, mesh.colour.cpu().numpy(), labels, count)
@@ -163,7 +166,7 @@ def reconstruct_site(
             config.coverage,
         ),
         "seconds": dict(phases.seconds),
-        "losses": {"elevation": fitted.losses, "epochs": epoch_losses},
+        "losses": {"elevation": fitted.losses, "refine": refined, "epochs": epoch_losses},
     }
 
 

@@ -80,6 +80,8 @@ def test_a_file_sets_only_what_it_names_and_numbers_keep_their_fingerprint(tmp_p
         ("[sfm]\nrigid = 1\n", ["sfm.rigid", "true or false"]),
         ("[wigo]\nlogged_pose_sigmas = [0.3, 0.1]\n", ["wigo.logged_pose_sigmas", "4 values"]),
         ("[surface]\ndevice = 'tpu'\n", ["surface.device", "'cuda'"]),
+        ("[surface.refine]\nsweeps = [[0.02, 0.05]]\n", ["[surface.refine]", "RefineConfig.sweeps"]),
+        ("[surface.refine]\nsweeps = [[0.02]]\n", ["surface.refine.sweeps"]),
         ("[sfm]\nmax_iterations = 0\n", ["[sfm]", "SfmConfig.max_iterations must be >= 1"]),
         ("executor = 'cloud'\n", ["executor", "'ray'"]),
         ("masks = ''\n", ["masks must be auto, dataset, predicted, imported or a folder"]),

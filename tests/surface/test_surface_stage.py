@@ -81,7 +81,10 @@ def test_mesh_and_report(surface: ItemResult) -> None:
     assert len(mesh.vertices) == report["cells_observed"] and len(mesh.faces) > 0
     assert mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
     assert np.all(mesh.face_normals[:, 2] > 0.5)  # upward, the road seen from above
-    assert set(report["seconds"]) == {"elevation", "observe", "optimise", "export"}
+    assert set(report["seconds"]) == {"elevation", "refine", "observe", "optimise", "export"}
+    sweeps = report["losses"]["refine"]
+    assert [sweep["step_m"] for sweep in sweeps] == [step for _, step in report["config"]["refine"]["sweeps"]]
+    assert all(sweep["control_points_constrained"] > 0 for sweep in sweeps)
     assert report["points"]["strip"] > 0 and report["points"]["sfm"] == 0
     assert report["losses"]["epochs"] and report["losses"]["elevation"][-1] < report["losses"]["elevation"][0]
     weak = report["weak_observation"]
