@@ -757,3 +757,19 @@ def test_segmenter_calibration_table() -> None:
             else:
                 expected = [recorded["segmentation"]["per_class_iou"][row_label.replace(" ", "_")]]
             assert_shows(cells[index], expected, f"calibration {column} {row_label!r}")
+
+
+def test_refinement_end_to_end_table() -> None:
+    t = table("end to end, site and refinement", "bench/end_to_end.py")
+    for site, suffix in (("default", ""), ("9011", "_9011")):
+        for state in ("off", "on"):
+            name = f"end_to_end_refine_{state}{suffix}.json"
+            assert name in t.context
+            recorded = results(name)
+            assert recorded["proposer"] == "masks"
+            ap, annotator = recorded["proposals_ap"]["observed_truth"], recorded["annotator"]
+            counts = annotator["corrected"]["counts"]
+            expected: list[Expected] = [ap["mean_ap"], ap["class_ap"]["divider"], annotator["speed_up"]]
+            expected += [counts["accept"], counts["fix"], counts["reject"], counts["drawn"]]
+            expected += [recorded["elevation"]["rmse_cm"], recorded["sre"]["c1_proposals"]["sre_ref_px"]]
+            assert_shows(" | ".join(row(t, f"{site}, {state}")[1:]), expected, f"refinement {site} {state}")
