@@ -1,6 +1,7 @@
 """The surface stage: for every site of the workspace, the RoMe-style road mesh and its BEV rasters.
 
-Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit (`fit`), observation
+Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit (`fit`), the road
+elevation's multi-view refinement against the images (`refine`), observation
 (visibility, mean colour and class, ray counts, kerb steps), mesh optimisation, export (see `outputs` for the
 files).
 """
