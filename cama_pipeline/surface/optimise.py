@@ -11,6 +11,7 @@ each vertex covers and by the ground mask, with the surface-point loss (and the 
 the MLP to the points.
 """
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -38,7 +39,7 @@ from cama_pipeline.surface.observe import (
 from cama_pipeline.surface.steps import ColourMoments, raised_vertices
 
 Advance = Callable[[int, float], None]
-"""Progress callback: images done in this call, current loss."""
+"""Progress callback: images done in this call, current loss (NaN in a pass that has none)."""
 
 
 @dataclass(eq=False)
@@ -161,7 +162,7 @@ def observe(
                 add_votes(raised_sums, curb_level, mesh, raised_z, normals, cameras, id_lists, images)
             for i, ids in zip(indices, id_lists, strict=True):
                 visible[i] = ids.to(torch.int32).cpu()
-            advance(len(indices), 0.0)
+            advance(len(indices), math.nan)
     seen = road_level.weight > 0
     mesh.count = road_level.weight
     at_curb_height = raised_sums[seen] if config.curb_height_m > 0 else None

@@ -26,7 +26,7 @@ sharp images are sparse and noisy, and Adam's per-parameter normalisation turns 
 size. The sweep finds each height from all views at once.
 """
 
-from collections.abc import Callable
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -40,11 +40,8 @@ from cama_pipeline.data import Dataset
 from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.observe import GROUND, Camera, image_channels, pixel_area, sample_images
-from cama_pipeline.surface.optimise import Mesh, batches, visible_ids
+from cama_pipeline.surface.optimise import Advance, Mesh, batches, visible_ids
 from cama_pipeline.surface.steps import VARIANCE_FLOOR
-
-Advance = Callable[[int, float], None]
-"""Progress callback: images done in this call, current loss."""
 
 VALUES = 3 + len(BEV_CLASSES)
 """Per sample: RGB and the class frequencies."""
@@ -212,7 +209,7 @@ def sweep(
             votes.square.view(-1, VALUES).index_add_(0, slot, values.square() * weight[:, None])
             middle = ground.reshape(count, -1)[count // 2] > 0
             votes.views.index_add_(0, local[ids][middle], torch.ones(int(middle.sum()), device=device))
-        advance(len(indices), 0.0)
+        advance(len(indices), math.nan)
     return votes
 
 

@@ -7,6 +7,7 @@ files).
 """
 
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -65,7 +66,7 @@ def torch_threads(count: int) -> Iterator[None]:
 
 
 class _Phases:
-    """One progress bar per phase, its description showing the loss."""
+    """One progress bar per phase, its description showing the loss of the phases that have one (NaN: none)."""
 
     def __init__(self, progress: StageProgress, site_id: str):
         self.progress = progress
@@ -78,7 +79,8 @@ class _Phases:
         started = time.perf_counter()
 
         def advance(done: int, loss: float) -> None:
-            self.progress.update(task, advance=done, description=f"{self.site_id} {name} loss {loss:.4f}")
+            shown = "" if math.isnan(loss) else f" loss {loss:.4f}"
+            self.progress.update(task, advance=done, description=f"{self.site_id} {name}{shown}")
 
         yield advance
         self.seconds[name] = round(time.perf_counter() - started, 3)
@@ -149,7 +151,7 @@ def reconstruct_site(
         write_bev(workspace.surface_bev(site_id), rasters)
         write_kerb_step(workspace.surface_kerb_step(site_id), kerb_step)
         write_mesh(workspace.surface_mesh(site_id), grid_mesh(grid, rasters, kerb_step))
-        advance(1, 0.0)
+        advance(1, math.nan)
     return {
         "site_id": site_id,
         "poses": poses,

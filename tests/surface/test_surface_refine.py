@@ -1,5 +1,6 @@
 """The multi-view refinement of the road elevation against scenes rendered from a known plane."""
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -209,3 +210,35 @@ def test_road_vertices_near_a_kerb_or_the_unseen_are_left_out_of_the_sweep() -> 
         ),
         road,
     )
+
+
+class RecordingProgress:
+    """Records the descriptions a phase's progress bar is given."""
+
+    def __init__(self) -> None:
+        self.descriptions: list[str] = []
+
+    def add_task(self, description: str, total: int) -> int:
+        self.descriptions.append(description)
+        return 0
+
+    def update(self, task: int, **fields: object) -> None:
+        if "description" in fields:
+            self.descriptions.append(str(fields["description"]))
+
+
+def test_a_phase_without_a_loss_shows_none_and_one_with_a_loss_shows_it() -> None:
+    from cama_pipeline.surface.stage import _Phases
+
+    progress = RecordingProgress()
+    phases = _Phases(progress, "site-001")  # type: ignore[arg-type]
+    with phases.phase("refine", 2) as advance:
+        advance(2, math.nan)
+    with phases.phase("elevation", 1) as advance:
+        advance(1, 0.25)
+    assert (
+        "site-001 refine" in progress.descriptions
+        and "site-001 elevation loss 0.2500" in progress.descriptions
+    )
+    assert not any("nan" in d or "refine loss" in d for d in progress.descriptions)
+    assert set(phases.seconds) == {"refine", "elevation"}
