@@ -42,7 +42,7 @@ from cama_pipeline.surface.optimise import Mesh
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.surface import RESULTS, run_source  # noqa: E402
+from bench.surface import RESULTS, nearest_true_cells, run_source  # noqa: E402
 
 
 def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool) -> torch.Tensor:
@@ -50,12 +50,7 @@ def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool) -> torch.Tensor
     off the true road when `road_only`)."""
     with torch.no_grad():
         fitted = mesh.control.at_vertices(mesh.control_heights()).cpu().numpy()
-    geo = truth.georeference
-    colrow = np.round(geo.pixel_from_global(mesh.vertex_xy.cpu().numpy())).astype(np.int64)
-    inside = (
-        (colrow[:, 0] >= 0) & (colrow[:, 0] < geo.width) & (colrow[:, 1] >= 0) & (colrow[:, 1] < geo.height)
-    )
-    cols, rows = np.where(inside, colrow[:, 0], 0), np.where(inside, colrow[:, 1], 0)
+    inside, rows, cols = nearest_true_cells(mesh.vertex_xy.cpu().numpy(), truth)
     height = truth.require("elevation")[rows, cols]
     use = inside & np.isfinite(height)
     if road_only:

@@ -41,7 +41,7 @@ from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.observe import GROUND, Camera, image_channels, pixel_area, sample_images
 from cama_pipeline.surface.optimise import Advance, Mesh, batches, visible_ids
-from cama_pipeline.surface.steps import VARIANCE_FLOOR
+from cama_pipeline.surface.steps import VARIANCE_FLOOR, ColourMoments
 
 VALUES = 3 + len(BEV_CLASSES)
 """Per sample: RGB and the class frequencies."""
@@ -78,38 +78,31 @@ def pooled(images: torch.Tensor, factor: int) -> torch.Tensor:
 class SweepVotes:
     """Weighted moments of every sampled vertex's samples at every height hypothesis."""
 
-    weight: torch.Tensor
-    """(S, H) summed weights (pixels covered on ground)."""
-    total: torch.Tensor
-    """(S, H, 8) weighted sums of RGB and class frequencies."""
-    square: torch.Tensor
-    """(S, H, 8) weighted sums of their squares."""
+    moments: ColourMoments
+    """Rows vertex * hypotheses + hypothesis; channels RGB and the class frequencies; weights are the pixels
+    covered on ground."""
     views: torch.Tensor
     """(S,) images that see the vertex on ground at the middle hypothesis."""
+    hypotheses: int
 
     @classmethod
     def empty(cls, vertices: int, hypotheses: int, device: torch.device) -> "SweepVotes":
-        return cls(
-            torch.zeros((vertices, hypotheses), device=device),
-            torch.zeros((vertices, hypotheses, VALUES), device=device),
-            torch.zeros((vertices, hypotheses, VALUES), device=device),
-            torch.zeros(vertices, device=device),
-        )
+        moments = ColourMoments(vertices * hypotheses, device, channels=VALUES)
+        return cls(moments, torch.zeros(vertices, device=device), hypotheses)
 
     def cost(self, semantic_weight: float) -> torch.Tensor:
         """(S, H) weighted variance across views of the colour plus `semantic_weight` times that of the
         class frequencies."""
-        weight = self.weight.clamp(min=1e-12)[..., None]
-        mean = self.total / weight
-        variance = (self.square / weight - mean.square()).clamp(min=0)
+        variance = self.moments.channel_variance().view(-1, self.hypotheses, VALUES)
         return variance[..., :3].sum(-1) + semantic_weight * variance[..., 3:].sum(-1)
 
     def road(self) -> torch.Tensor:
         """(S,) seen by two images or more at every hypothesis and voted a road class at the middle one."""
-        middle = self.weight.shape[1] // 2
-        classes = self.total[:, middle, 3:].argmax(dim=1)
+        weight = self.moments.weight.view(-1, self.hypotheses)
+        middle = self.hypotheses // 2
+        classes = self.moments.sum.view(-1, self.hypotheses, VALUES)[:, middle, 3:].argmax(dim=1)
         road_ids = torch.tensor(ROAD_SURFACE_IDS, device=classes.device)
-        return (self.views >= 2) & (self.weight > 0).all(dim=1) & torch.isin(classes, road_ids)
+        return (self.views >= 2) & (weight > 0).all(dim=1) & torch.isin(classes, road_ids)
 
 
 def refine_elevation(
@@ -204,9 +197,7 @@ def sweep(
             slot = local[ids].repeat(count) * count + torch.arange(count, device=device).repeat_interleave(
                 len(ids)
             )
-            votes.weight.view(-1).index_add_(0, slot, weight)
-            votes.total.view(-1, VALUES).index_add_(0, slot, values * weight[:, None])
-            votes.square.view(-1, VALUES).index_add_(0, slot, values.square() * weight[:, None])
+            votes.moments.add(slot, values, weight)
             middle = ground.reshape(count, -1)[count // 2] > 0
             votes.views.index_add_(0, local[ids][middle], torch.ones(int(middle.sum()), device=device))
         advance(len(indices), math.nan)

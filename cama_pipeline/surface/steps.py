@@ -55,28 +55,33 @@ class KerbStepConfig:
 
 
 class ColourMoments:
-    """Per-vertex weighted sums of RGB and RGB squared, for the weighted colour variance across views."""
+    """Per-vertex weighted sums of `channels` values (RGB by default) and of their squares, for the weighted
+    mean and variance across views (`refine` keeps colour and class frequencies per height hypothesis in one)."""
 
-    def __init__(self, vertices: int, device: torch.device):
+    def __init__(self, vertices: int, device: torch.device, channels: int = 3):
         self.weight = torch.zeros(vertices, device=device)
-        self.sum = torch.zeros((vertices, 3), device=device)
-        self.square = torch.zeros((vertices, 3), device=device)
+        self.sum = torch.zeros((vertices, channels), device=device)
+        self.square = torch.zeros((vertices, channels), device=device)
 
-    def add(self, ids: torch.Tensor, rgb: torch.Tensor, weight: torch.Tensor) -> None:
-        """Add (N,) vertex ids' (N, 3) samples with (N,) weights."""
+    def add(self, ids: torch.Tensor, values: torch.Tensor, weight: torch.Tensor) -> None:
+        """Add (N,) vertex ids' (N, channels) samples with (N,) weights."""
         self.weight.index_add_(0, ids, weight)
-        self.sum.index_add_(0, ids, rgb * weight[:, None])
-        self.square.index_add_(0, ids, rgb.square() * weight[:, None])
+        self.sum.index_add_(0, ids, values * weight[:, None])
+        self.square.index_add_(0, ids, values.square() * weight[:, None])
 
     def mean(self) -> torch.Tensor:
-        """(V, 3) weighted mean colour (0 where unseen)."""
+        """(V, channels) weighted mean (0 where unseen)."""
         return self.sum / self.weight.clamp(min=1e-12)[:, None]
 
-    def variance(self) -> torch.Tensor:
-        """(V,) weighted colour variance summed over the channels (0 where unseen)."""
+    def channel_variance(self) -> torch.Tensor:
+        """(V, channels) weighted variance of each channel (0 where unseen)."""
         mean = self.mean()
         second = self.square / self.weight.clamp(min=1e-12)[:, None]
-        return (second - mean.square()).clamp(min=0).sum(dim=1)
+        return (second - mean.square()).clamp(min=0)
+
+    def variance(self) -> torch.Tensor:
+        """(V,) weighted variance summed over the channels (0 where unseen)."""
+        return self.channel_variance().sum(dim=1)
 
 
 def _local_mean(grid: SurfaceGrid, values: np.ndarray, where: np.ndarray, sigma_m: float) -> np.ndarray:
