@@ -108,7 +108,8 @@ def fit_elevation(
     steps: int | None = None,
 ) -> list[float]:
     """Fit `mlp` to (N, 3) points with Adam and `surface_loss` (the curvature prior over the (V, 2) road
-    region `region_xy` when given) for `steps` (default `elevation_iterations`); the loss every 50 steps."""
+    region `region_xy` when given) for `steps` (default `elevation_iterations`); the loss every 50 steps and at
+    the last, each also passed to `on_step` with the number of steps taken since its previous call."""
     optimiser = torch.optim.Adam(mlp.parameters(), lr=config.elevation_lr)
     steps = config.elevation_iterations if steps is None else steps
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(
@@ -116,6 +117,7 @@ def fit_elevation(
     )
     generator = torch.Generator().manual_seed(config.seed)
     losses: list[float] = []
+    reported = 0
     for step in range(steps):
         optimiser.zero_grad()
         loss = surface_loss(mlp, points, region_xy, config, generator)
@@ -125,7 +127,8 @@ def fit_elevation(
         if step % 50 == 0 or step == steps - 1:
             losses.append(loss.item())
             if on_step is not None:
-                on_step(step, losses[-1])
+                on_step(step + 1 - reported, losses[-1])
+            reported = step + 1
     return losses
 
 

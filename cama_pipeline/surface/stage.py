@@ -133,7 +133,7 @@ def reconstruct_site(
     except NoRoadPointsError as err:
         raise NoRoadPointsError(f"site {site_id} ({poses} poses): {err}") from None
     with phases.phase("elevation", fit_steps(points, config)) as advance:
-        fitted = fit_surface(points, config, device, lambda step, loss: advance(50 if step else 1, loss))
+        fitted = fit_surface(points, config, device, advance)
     grid, mlp, point_tensor = fitted.grid, fitted.mlp, fitted.points
     mesh = new_mesh(grid, mlp, config, device)
     with phases.phase("refine", refine_steps(len(views), config)) as advance:

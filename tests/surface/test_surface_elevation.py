@@ -77,7 +77,7 @@ def test_the_curvature_prior_extrapolates_a_plane_beside_the_points() -> None:
 
 
 def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -> None:
-    from cama_pipeline.surface.fit import fit_surface
+    from cama_pipeline.surface.fit import fit_steps, fit_surface
     from cama_pipeline.surface.points import SurfacePoints
 
     strip = sloped_road(0.0)
@@ -90,7 +90,12 @@ def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -
     points = SurfacePoints(np.concatenate([strip, sfm]), len(strip), len(sfm))
     torch.manual_seed(0)
     config = SurfaceConfig(resolution_m=0.5, elevation_iterations=150, refit_iterations=100)
-    fitted = fit_surface(points, config, torch.device("cpu"))
+    progress: list[int] = []
+    fitted = fit_surface(points, config, torch.device("cpu"), lambda steps, _loss: progress.append(steps))
+    assert (
+        sum(progress) == fit_steps(points, config) == 250
+    )  # the progress bar ends at its total, not past it
+    assert len(progress) == len(fitted.losses)
     assert fitted.sfm_kept == len(on_road)
     assert len(fitted.points) == len(strip) + len(on_road)
     assert not fitted.grid.in_region(far[:, :2]).any() and fitted.grid.in_region(on_road[:, :2]).all()
