@@ -67,14 +67,23 @@ class Camera:
         return uv, cam[:, 2], cam
 
 
-def image_channels(dataset: Dataset, view: CameraView, device: torch.device) -> torch.Tensor:
-    """(9, H, W) float32: RGB, one-hot ground classes and the ground channel (see the module docstring)."""
-    image = dataset.image(view.token)
-    rgb = torch.from_numpy(image.load_rgb()).to(device).permute(2, 0, 1).float() / 255.0
-    labels = torch.from_numpy(image.load_semantic()).to(device).long()
-    classes = torch.arange(len(BEV_CLASSES), device=device)[:, None, None]
-    one_hot = (labels[None] == classes).float()
-    return torch.cat([rgb, one_hot, one_hot.sum(0, keepdim=True)], dim=0)
+def image_channels(dataset: Dataset, views: list[CameraView], device: torch.device) -> torch.Tensor:
+    """(B, 9, H, W) float32 of the views' images (all of one size): RGB, one-hot ground classes and the ground
+    channel (see the module docstring), each written straight into the batch (no per-image copies to stack)."""
+    classes = torch.arange(len(BEV_CLASSES))[:, None, None]
+    batch: torch.Tensor | None = None
+    for b, view in enumerate(views):
+        image = dataset.image(view.token)
+        rgb, labels = torch.from_numpy(image.load_rgb()), torch.from_numpy(image.load_semantic())
+        if batch is None:
+            batch = torch.empty((len(views), CHANNELS, *labels.shape))
+        batch[b, :3] = rgb.permute(2, 0, 1)
+        batch[b, 3:GROUND] = labels[None] == classes
+        torch.sum(batch[b, 3:GROUND], dim=0, out=batch[b, GROUND])
+    if batch is None:
+        raise ValueError("image_channels: no views")
+    batch[:, :3].div_(255.0)
+    return batch.to(device)
 
 
 def footprint_box(camera: Camera, range_m: float) -> tuple[float, float, float, float]:

@@ -155,7 +155,7 @@ def observe(
         for indices in batches(views, config.images_per_batch):
             cameras = [Camera.of(views[i], device) for i in indices]
             id_lists = [visible_ids(mesh, heights, camera, config) for camera in cameras]
-            images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
+            images = image_channels(dataset, [views[i] for i in indices], device)
             add_votes(class_sums, road_level, mesh, control_z, normals, cameras, id_lists, images)
             if config.curb_height_m > 0:
                 raised_z = control_z + config.curb_height_m
@@ -281,7 +281,7 @@ def _step(
         id_lists.append(ids.long().to(device))
     cameras = [Camera.of(views[i], device) for i in indices]
     batch = project_batch(mesh, control_z, normals, cameras, id_lists)
-    images = torch.stack([image_channels(dataset, views[i], device) for i in indices])
+    images = image_channels(dataset, [views[i] for i in indices], device)
     colour, semantic = _batch_loss(mesh, images, batch, config)
     loss = colour + config.semantic_weight * semantic
     anchor = torch.zeros((), device=device)

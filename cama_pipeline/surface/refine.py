@@ -177,7 +177,7 @@ def sweep(
     normals = mesh.control.normals(mesh.control_heights())
     factor = config.refine.downsample
     for indices in batches(views, config.images_per_batch):
-        images = pooled(torch.stack([image_channels(dataset, views[i], device) for i in indices]), factor)
+        images = pooled(image_channels(dataset, [views[i] for i in indices], device), factor)
         for b, i in enumerate(indices):
             ids = visible[i]
             if not len(ids):
