@@ -6,7 +6,9 @@ are compared with the site's `ground_truth/bev/` at each reconstructed cell's ce
   elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking, crosswalk),
              the median signed error (an offset of the pose frame shows there), and RMSE by distance from
              the site's keyframe trajectory (beyond the strip it is extrapolated);
-  semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters;
+  semantic   IoU per class (road, curb, lane marking, crosswalk) over cells observed in both rasters, and where
+             the curb IoU is lost (`curb_confusion`: true curb cells labelled road or background, curb labels on
+             true road or background);
   photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
   coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
@@ -18,7 +20,7 @@ are compared with the site's `ground_truth/bev/` at each reconstructed cell's ce
 Baseline in the same run, ground-truth poses: the surface without the curvature prior, the SfM gate and the
 curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`); and the last pose source again
 without the kerb step (`kerb_step.enabled false`), its ablation, and with the kerb's foot raised and relabelled
-(`kerb_step.kerb_band_m`, `--kerb-band`, off by default); and the first and the last pose source without the
+(`kerb_step.kerb_band_m`, `--kerb-band`, off by default: one width along each kerb); and the first and the last pose source without the
 multi-view refinement of the road elevation (`refine.enabled false`): the observation vote on the fitted
 elevation alone, as the stage was before the refinement. Adam on the per-vertex colours
 and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
@@ -141,6 +143,24 @@ def kerb_figures(
     }
 
 
+def curb_confusion(semantic: np.ndarray, true_sem: np.ndarray, both: np.ndarray) -> dict[str, float]:
+    """Where the curb IoU is lost: the shares of the true curb cells labelled a road class or background, and
+    of the cells labelled curb that are truly road (a curb label bleeding onto the road) or background."""
+    road_ids = list(ROAD_SURFACE_IDS)
+    true_curb = both & (true_sem == int(Semantic.CURB))
+    ours_curb = both & (semantic == int(Semantic.CURB))
+
+    def share(where: np.ndarray, of: np.ndarray) -> float:
+        return float(where.sum() / max(of.sum(), 1))
+
+    return {
+        "true_curb_labelled_road": share(true_curb & np.isin(semantic, road_ids), true_curb),
+        "true_curb_labelled_background": share(true_curb & (semantic == int(Semantic.BACKGROUND)), true_curb),
+        "curb_label_on_true_road": share(ours_curb & np.isin(true_sem, road_ids), ours_curb),
+        "curb_label_on_true_background": share(ours_curb & (true_sem == int(Semantic.BACKGROUND)), ours_curb),
+    }
+
+
 def compare(
     ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray, kerb_step: np.ndarray
 ) -> dict[str, Any]:
@@ -169,6 +189,7 @@ def compare(
         "road_cells_evaluated": int(road.sum()),
         "elevation_rmse_m_by_distance_from_trajectory_m": rmse_by_distance(ours, road, signed, trajectory_xy),
         "iou": ious,
+        "curb_confusion": curb_confusion(semantic, true_sem, both),
         "psnr_db": psnr(rgb, true_rgb),
         "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
         "cells_observed": int(observed.sum()),
@@ -234,6 +255,8 @@ def print_side_by_side(runs: list[dict[str, Any]]) -> None:
     lines["raised recall"] = [row["kerb"]["raised_recall"] for row in runs]
     for name in IOU_CLASSES:
         lines[f"IoU {name}"] = [row["iou"][name] for row in runs]
+    for name in ("true_curb_labelled_road", "curb_label_on_true_road"):
+        lines[name.replace("_", " ")[:22]] = [row["curb_confusion"][name] for row in runs]
     lines["PSNR dB"] = [row["psnr_db"] for row in runs]
     for phase in ("elevation", "refine", "observe", "optimise", "export", "total"):
         lines[f"seconds {phase}"] = [row["seconds"].get(phase, float("nan")) for row in runs]

@@ -219,7 +219,11 @@ def _surface_run(recorded: dict[str, Any], key: str) -> dict[str, Any]:
     ("first_header", "results_file", "labels"),
     [
         ("poses", "surface.json", list(SURFACE_ROWS)),
-        ("poses, site 9011", "surface_9011.json", list(SURFACE_ROWS)[:2] + list(SURFACE_ROWS)[3:5]),
+        (
+            "poses, site 9011",
+            "surface_9011.json",
+            [*list(SURFACE_ROWS)[:2], *list(SURFACE_ROWS)[3:5], "SfM, kerb foot relabelled"],
+        ),
     ],
 )
 def test_surface_tables(first_header: str, results_file: str, labels: list[str]) -> None:
@@ -612,6 +616,41 @@ def test_kerb_step_annotator_figures() -> None:
         for n in ("step", "foot", "flat")
     }
     assert maps == {"0.91"} and "proposal mAP 0.91 in all three" in text
+
+
+def test_kerb_foot_width_figures() -> None:
+    """The one-width kerb foot: its curb figures from bench/surface.py's foot variant, its end-to-end runs against
+    the refinement-on runs without it."""
+    text = " ".join(readme_text().split())
+    default, site_9011 = results("surface.json"), results("surface_9011.json")
+    sfm = _surface_run(default, "sfm")
+    foot = default["variant_kerb_foot"]
+    lost, lost_foot = sfm["curb_confusion"], foot["curb_confusion"]
+    assert (
+        f"(`curb_confusion.true_curb_labelled_road` in `bench/results/surface.json`: {lost['true_curb_labelled_road']:.2f})"
+        in text
+    )
+    assert f"brings that to {lost_foot['true_curb_labelled_road']:.2f}" in text
+    assert f"the curb IoU from {sfm['iou']['curb']:.2f} to {foot['iou']['curb']:.2f}" in text
+    assert (
+        f"spills onto {lost_foot['curb_label_on_true_road']:.2f} of true road cells instead of "
+        f"{lost['curb_label_on_true_road']:.2f}"
+    ) in text
+    speed = {
+        name: results(f"end_to_end_{name}.json")["annotator"]["speed_up"]
+        for name in ("refine_on", "kerb_foot_width", "refine_on_9011", "kerb_foot_width_9011")
+    }
+    assert f"annotator goes from {speed['refine_on']:.2f}x to {speed['kerb_foot_width']:.2f}x" in text
+    assert f"on 9011 from {speed['refine_on_9011']:.2f}x to {speed['kerb_foot_width_9011']:.2f}x" in text
+    sfm_9011, foot_9011 = _surface_run(site_9011, "sfm"), site_9011["variant_kerb_foot"]
+    assert f"{sfm_9011['iou']['curb']:.2f}" == f"{foot_9011['iou']['curb']:.2f}"
+    assert f"curb IoU ({sfm_9011['iou']['curb']:.2f} either way)" in text
+    lost_9011 = sfm_9011["curb_confusion"]
+    assert (
+        f"the curb label covers {lost_9011['curb_label_on_true_road']:.2f} of true road cells, "
+        f"{lost_9011['true_curb_labelled_background']:.2f} of the true curb cells are labelled background, only "
+        f"{lost_9011['true_curb_labelled_road']:.2f} road"
+    ) in text
 
 
 def test_element_mask_proposer_table() -> None:

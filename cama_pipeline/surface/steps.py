@@ -8,7 +8,10 @@ another patch of ground (the parallax grows with the camera's distance), so the 
 raised when its views agree better at curb height: the log ratio of the two weighted colour variances, averaged
 over the neighbouring off-road cells (a sidewalk or a kerb is a region, not a cell) and above `threshold`.
 Optionally (`kerb_band_m`) road-labelled cells next to a raised region that agree better at curb height too are
-the kerb's foot: raised and labelled curb.
+the kerb's foot: raised and labelled curb. A kerb's edge is a line, so the foot is not decided cell by cell (that
+leaves patches and a ragged road edge): along the kerb, the foot's width is the one of 0.1, 0.2, ... `kerb_band_m`
+whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb height; the cells within that
+width of the raised region are the foot, so the road's edge moves as a whole.
 
 Road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits. The BEV
 `elevation` layer stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the
@@ -42,14 +45,14 @@ class KerbStepConfig:
     min_area_m2: float = 0.5
     """Raised regions smaller than this are dropped (a kerb or sidewalk is larger)."""
     kerb_band_m: float = 0.0
-    """Road-labelled cells this close to a raised region are raised too (and labelled curb) when their own
-    views agree better at curb height: the road-level vote labels the lower part of a kerb road. 0 (off) by
-    default: on the default site 0.3 m lifts the curb IoU (SfM poses) from 0.39 to 0.55, but the relabelled
-    cells come in patches along a kerb, the road's edge turns ragged, the road-edge boundary proposals
-    gain vertices and the simulated annotator slowed from 2.02x to 1.63x (bench/surface.py, README)."""
+    """The widest kerb foot: road-labelled cells up to this far from a raised region are raised too (and
+    labelled curb) where the views along the kerb agree better at curb height (the module docstring); the
+    road-level vote labels the lower part of a kerb road. 0: no foot."""
+    foot_smoothing_m: float = 1.0
+    """Gaussian sigma (along the kerb) of the sums that choose the foot's width."""
 
     def __post_init__(self) -> None:
-        for name in ("smoothing_m", "min_area_m2", "kerb_band_m"):
+        for name in ("smoothing_m", "min_area_m2", "kerb_band_m", "foot_smoothing_m"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"KerbStepConfig.{name} must be >= 0, got {getattr(self, name)}")
 
@@ -134,15 +137,25 @@ def raised_vertices(
 def _kerb_foot(
     grid: SurfaceGrid, score: np.ndarray, road: np.ndarray, raised: np.ndarray, config: KerbStepConfig
 ) -> np.ndarray:
-    """(V,) the `road` vertices within `kerb_band_m` of a `raised` one whose own views (averaged over their
-    immediate road neighbours in the band) agree better at curb height."""
+    """(V,) the `road` vertices within the foot's width of a `raised` one: at each cell, the width (a whole
+    number of cells up to `kerb_band_m`) whose band cells' scores above `threshold`, summed with a Gaussian
+    of `foot_smoothing_m`, are largest; no foot where every width sums to <= 0."""
     rows, cols = grid.vertex_cells()
     raised_cells = np.zeros((grid.rows, grid.cols), bool)
     raised_cells[rows[raised], cols[raised]] = True
     distance = ndimage.distance_transform_edt(~raised_cells, sampling=grid.resolution_m)[rows, cols]
-    band = road & (distance <= config.kerb_band_m)
-    band_mean = _local_mean(grid, score, band, grid.resolution_m)[rows, cols]
-    return band & (band_mean > config.threshold)
+    gain = score - config.threshold
+    best_sum, best_width = np.zeros(len(rows)), np.zeros(len(rows))
+    steps = int(np.floor(config.kerb_band_m / grid.resolution_m + 1e-6))
+    for width in np.arange(1, steps + 1) * grid.resolution_m:
+        band = road & (distance <= width + 1e-6)
+        summed = np.zeros((grid.rows, grid.cols))
+        summed[rows[band], cols[band]] = gain[band]
+        summed = ndimage.gaussian_filter(summed, config.foot_smoothing_m / grid.resolution_m, mode="constant")
+        at_vertices = summed[rows, cols]
+        better = at_vertices > best_sum
+        best_sum[better], best_width[better] = at_vertices[better], width
+    return road & (distance <= best_width + 1e-6) & (best_width > 0)
 
 
 def step_summary(semantic: np.ndarray, kerb_step: np.ndarray, height_m: float) -> dict[str, float | int]:

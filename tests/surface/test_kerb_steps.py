@@ -61,6 +61,33 @@ def test_off_road_cells_agreeing_at_curb_height_are_raised_and_the_kerb_foot_wit
     assert np.array_equal(raised, sidewalk) and not foot.any()  # no foot by default
 
 
+def test_the_foot_is_a_band_of_one_width_along_the_kerb_despite_noisy_cells() -> None:
+    """A fifth of the cells near the kerb read the wrong way (foot cells agreeing at road level, road cells at
+    curb height): the foot is still exactly the two kerb columns in every row, the road's edge a straight line."""
+    road_spread, curb_spread, sidewalk = layout()
+    cols = np.tile(np.arange(COLS), ROWS)
+    flipped = (np.random.default_rng(3).random(ROWS * COLS) < 0.2) & (cols >= 9) & (cols <= 14)
+    road_spread[flipped], curb_spread[flipped] = curb_spread[flipped], road_spread[flipped]
+    config = KerbStepConfig(kerb_band_m=0.5)
+    raised, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, config)
+    assert np.array_equal(foot, (cols == 13) | (cols == 14))
+    assert np.array_equal(raised, sidewalk | foot)
+
+
+def test_the_foot_width_follows_the_kerb_where_it_changes() -> None:
+    """Rows 0-9 have a one-cell foot, rows 10-19 a three-cell one; with a short smoothing each half keeps its
+    own width away from the change."""
+    cols, rows = np.tile(np.arange(COLS), ROWS), np.repeat(np.arange(ROWS), COLS)
+    sidewalk = cols >= 15
+    kerb_foot = np.where(rows < 10, cols == 14, (cols >= 12) & (cols <= 14))
+    at_curb_height = sidewalk | kerb_foot
+    road_spread, curb_spread = np.where(at_curb_height, 0.4, 0.02), np.where(at_curb_height, 0.02, 0.4)
+    config = KerbStepConfig(kerb_band_m=0.5, foot_smoothing_m=0.1)
+    _, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, config)
+    away = (rows < 7) | (rows > 12)
+    assert np.array_equal(foot[away], kerb_foot[away])
+
+
 def test_road_far_from_a_raised_region_is_never_raised() -> None:
     road_spread, curb_spread, sidewalk = layout()
     cols = np.tile(np.arange(COLS), ROWS)
@@ -96,3 +123,5 @@ def test_step_summary_counts_the_raised_share_of_off_road_cells() -> None:
 def test_bad_config_names_the_field() -> None:
     with pytest.raises(ValueError, match="kerb_band_m"):
         KerbStepConfig(kerb_band_m=-1)
+    with pytest.raises(ValueError, match="foot_smoothing_m"):
+        KerbStepConfig(foot_smoothing_m=-0.5)
