@@ -664,6 +664,9 @@ def test_element_mask_proposer_table() -> None:
             figures = recorded["results"][condition][key]
             scored = figures["observed_truth"] if condition == "reconstructed" else figures
             assert_shows(cell, [scored["mean_ap"], figures["annotator"]["speed_up"]], f"{label} {condition}")
+    margin = recorded["map_margin_over_rule_based"]
+    text = " ".join(readme_text().split())
+    assert f"(+{margin['reconstructed']:.3f}; +{margin['degraded']:.3f} on damaged)" in text
 
 
 def test_element_mask_end_to_end_figures() -> None:
