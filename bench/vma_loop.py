@@ -18,9 +18,9 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only]
+       [--steps 300] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
-`--plot-only`: the plot from the JSON).
+`--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
 """
 
 import argparse
@@ -267,6 +267,12 @@ def main() -> None:
     parser.add_argument(
         "--plot-only", action="store_true", help="redraw the plot from the results file, measuring nothing"
     )
+    parser.add_argument(
+        "--keep-registry",
+        type=Path,
+        default=None,
+        help="copy the loop's registry (every candidate, the promoted one marked) to this new folder at the end",
+    )
     args = parser.parse_args()
     if args.plot_only:
         recorded = json.loads(args.out.read_text(encoding="utf-8"))
@@ -330,6 +336,8 @@ def main() -> None:
                 f"round {k}: {result.candidate.name} {'promoted' if result.promoted else 'kept out'} "
                 f"({retrain_s:.0f} s); held-out {summary(rounds[-1]['heldout'])}"
             )
+        if args.keep_registry is not None:
+            shutil.copytree(registry, args.keep_registry)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
