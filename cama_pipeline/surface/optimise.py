@@ -39,7 +39,8 @@ from cama_pipeline.surface.observe import (
 from cama_pipeline.surface.steps import ColourMoments, raised_vertices
 
 Advance = Callable[[int, float], None]
-"""Progress callback: images done in this call, current loss (NaN in a pass that has none)."""
+"""Progress callback: units done in this call (images; Adam steps in the elevation fit), current loss (NaN in a
+pass that has none)."""
 
 
 @dataclass(eq=False)
