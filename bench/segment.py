@@ -6,7 +6,9 @@ mask-free site with predicted masks against the same site with the generator's m
    on the day key-frame images of `--site` (refused, with an error, when the checkpoint saw that site: same
    seed, layout or location), measured after part 2 on the masks its predicted run used; the confusion of each class
    (what it is taken for), the share of true lane-marking and crosswalk instances the masks miss (under half of
-   their pixels predicted as their class), per camera, and the CPU seconds per 512x288 image on one thread.
+   their pixels predicted as their class), per camera, and the CPU seconds per 512x288 image on one thread; and
+   the resolution ceiling: the IoU of the true masks pooled to stride 2 (and 4) and upsampled, the best a network
+   whose logits stop there could reach.
 2. `cama run` twice on the site's data set, into two workspaces beside it: `--masks <site>/ground_truth` (the
    generator's masks, given as a mask folder, or the data set's own for a site made with masks) and `--masks
    predicted` (the segment stage runs the checkpoint). Both use the same data set, so the only difference is the
@@ -31,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from end_to_end import (  # bench/end_to_end.py: this script's folder is on sys.path
     elevation_figures,
     keyframe_count,
@@ -121,6 +124,20 @@ def confused_with(matrix: np.ndarray) -> dict[str, dict[str, float]]:
     return out
 
 
+def resolution_ceiling(images: list[CameraImage], stride: int) -> dict[str, float | None]:
+    """Per-class IoU of the true masks average-pooled to `stride` and upsampled bilinearly (argmax): what a
+    network whose logits stop at that stride could reach at best, whatever it learns. Lane markings and kerbs one
+    or two pixels wide are lost at stride 2, which is why the network refines its logits at stride 1."""
+    matrix = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
+    for image in images:
+        truth = image.load_semantic()
+        onehot = F.one_hot(torch.from_numpy(truth.astype(np.int64)).clamp(max=NUM_CLASSES - 1), NUM_CLASSES)
+        pooled = F.avg_pool2d(onehot.permute(2, 0, 1)[None].float(), stride, ceil_mode=True)
+        upsampled = F.interpolate(pooled, size=truth.shape, mode="bilinear", align_corners=False)
+        matrix += confusion(upsampled.argmax(dim=1)[0].numpy().astype(np.uint8), truth)
+    return iou_report(matrix, len(images))["per_class_iou"]
+
+
 def segmentation_figures(
     config: SegmentConfig, checkpoint: Checkpoint, site: Path, workspace: Workspace, device: torch.device
 ) -> dict[str, Any]:
@@ -155,6 +172,8 @@ def segmentation_figures(
         "ego_body_pixels": item.report.get("ego_body_pixels"),
         **report,
         "network_per_class_iou": score_images(checkpoint.net.to(device), images, device)["per_class_iou"],
+        "network": checkpoint.net.config.to_json(),
+        "resolution_ceiling_iou": {f"stride_{s}": resolution_ceiling(images, s) for s in (2, 4)},
         "targets": {
             name: {"target": t, "met": (report["per_class_iou"].get(name) or 0.0) >= t}
             for name, t in IOU_TARGETS.items()

@@ -1,6 +1,7 @@
 """`cama segment` (masks for a data set without its own), `cama train-segmenter` (the network behind it) and
 `cama calibrate-segmenter` (its per-class logit offsets, fitted on fresh sites)."""
 
+import dataclasses
 import logging
 from pathlib import Path
 from typing import Annotated
@@ -12,7 +13,7 @@ from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.segment.calibrate import calibrate
 from cama_pipeline.segment.checkpoint import read_meta
-from cama_pipeline.segment.config import SegmentConfig, TrainConfig
+from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.predict import resolve_device
 from cama_pipeline.segment.stage import EXECUTORS, run
 from cama_pipeline.segment.train import train
@@ -69,6 +70,15 @@ def _iou_table(title: str, per_class: dict[str, float | None]) -> Table:
     return table
 
 
+def _network_config(full_resolution_width: int | None, init: Path | None) -> NetworkConfig | None:
+    """The network `cama train-segmenter` asks for: None (the --init checkpoint's, else the default) unless
+    `--full-resolution-width` is given, then the init checkpoint's (or the default) config with that width."""
+    if full_resolution_width is None:
+        return None
+    base = NetworkConfig.from_json(read_meta(init)["network"]) if init is not None else NetworkConfig()
+    return dataclasses.replace(base, full_resolution_width=full_resolution_width)
+
+
 def train_segmenter_command(
     sites: Annotated[
         list[Path],
@@ -96,18 +106,36 @@ def train_segmenter_command(
             help="Go on training this checkpoint (its training sites count as seen by the new one)."
         ),
     ] = None,
+    full_resolution_width: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            help="Channels of the stride-1 refinement (0: none). Default: the --init checkpoint's, else "
+            f"{NetworkConfig().full_resolution_width}. A checkpoint without one may go on with one.",
+        ),
+    ] = None,
+    max_class_weight: Annotated[
+        float,
+        typer.Option(help="Cap of the cross-entropy class weights (inverse square-root frequencies)."),
+    ] = TrainConfig().max_class_weight,
 ) -> None:
     """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
     checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
     try:
         config = TrainConfig(
-            epochs=epochs, batch_size=batch_size, learning_rate=learning_rate, threads=threads, seed=seed
+            epochs=epochs,
+            batch_size=batch_size,
+            learning_rate=learning_rate,
+            threads=threads,
+            seed=seed,
+            max_class_weight=max_class_weight,
         )
         folder = train(
             config,
             sites,
             out,
             held_out=held_out or [],
+            network=_network_config(full_resolution_width, init),
             init=init,
             device=resolve_device(device),
             label=label,

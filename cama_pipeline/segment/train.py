@@ -11,6 +11,7 @@ generator's own variety. Loss: class-weighted cross-entropy (inverse square-root
 Dice term for thin classes; AdamW with a one-cycle schedule.
 """
 
+import dataclasses
 import json
 import logging
 import time
@@ -237,14 +238,29 @@ def cpu_seconds_per_image(
     return round(float(np.median(times)), 4)
 
 
-def _start(network: NetworkConfig | None, init: Path | None) -> tuple[SegmentationNet, Checkpoint | None]:
-    """A new network of `network`'s config, or the one of checkpoint `init` to go on training."""
+def initial_network(
+    network: NetworkConfig | None, init: Path | None
+) -> tuple[SegmentationNet, Checkpoint | None]:
+    """A new network of `network`'s config, or the one of checkpoint `init` to go on training. `init` without a
+    full-resolution refinement may go on as `network` with one (same config otherwise): its weights are loaded
+    and the refinement starts at zero correction."""
     if init is None:
         return SegmentationNet(network or NetworkConfig()), None
     parent = load_checkpoint(init)
-    if network is not None and network != parent.net.config:
+    if network is None or network == parent.net.config:
+        return parent.net, parent
+    gains_refinement = parent.net.config.full_resolution_width == 0 and network == dataclasses.replace(
+        parent.net.config, full_resolution_width=network.full_resolution_width
+    )
+    if not gains_refinement:
         raise CheckpointError(f"{init}: its network config {parent.net.config} is not the one asked for")
-    return parent.net, parent
+    net = SegmentationNet(network)
+    missing, unexpected = net.load_state_dict(parent.net.state_dict(), strict=False)
+    if unexpected or any(not key.startswith("refine.") for key in missing):
+        raise CheckpointError(
+            f"{init}: its weights do not fit {network} (missing {missing}, extra {unexpected})"
+        )
+    return net, parent
 
 
 def _lineage(meta: dict[str, Any], parent: Checkpoint | None) -> dict[str, Any]:
@@ -293,7 +309,7 @@ def train(
     train_sites = find_sites(sites)
     held_sites = find_sites(held_out) if held_out else []
     identities = check_training_sites(train_sites, held_sites)
-    net, parent = _start(network, init)
+    net, parent = initial_network(network, init)
     for site in held_sites:
         if parent is not None:
             ensure_unseen(parent, site)

@@ -1,6 +1,7 @@
 """The segmentation network, its checkpoints and training: shapes, a round trip, refusals to train on a
 measurement site and to be scored on a site it saw."""
 
+import dataclasses
 import hashlib
 import json
 from pathlib import Path
@@ -21,7 +22,7 @@ from cama_pipeline.segment.checkpoint import (
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
 from cama_pipeline.segment.predict import score_site
-from cama_pipeline.segment.train import check_training_sites, train
+from cama_pipeline.segment.train import check_training_sites, initial_network, train
 from cama_pipeline.site_identity import SeenSiteError, site_identity
 from cama_studio.cli import app
 from tests.conftest import GeneratedSite
@@ -60,6 +61,7 @@ def test_network_gives_logits_at_the_input_size_and_masks_at_the_image_size() ->
     [
         (lambda: NetworkConfig(widths=(8, 8)), "widths"),
         (lambda: NetworkConfig(input_width_px=500), "input_width_px"),
+        (lambda: NetworkConfig(full_resolution_width=-1), "full_resolution_width"),
         (lambda: TrainConfig(epochs=0), "epochs"),
         (lambda: TrainConfig(crop_width_px=100), "crop_height_px and crop_width_px"),
         (lambda: SegmentConfig(device="tpu"), "device"),  # type: ignore[arg-type]
@@ -159,3 +161,74 @@ def test_going_on_from_a_checkpoint_keeps_what_it_saw(
     assert meta["epochs_total"] == 2 and meta["parent"]["weights_sha256"] == parent.meta["weights_sha256"]
     with pytest.raises(SeenSiteError, match="seed 4242"):  # the parent's site stays seen
         ensure_unseen(load_checkpoint(folder), training_site)
+
+
+def _fit_stripes(net: SegmentationNet, steps: int = 120) -> float:
+    """Pixel accuracy of `net` after fitting one image of alternating one-pixel rows (road, lane marking)."""
+    torch.manual_seed(0)
+    image = torch.zeros(1, 3, 32, 64)
+    image[..., 1::2, :] = 1.0
+    target = torch.ones(1, 32, 64, dtype=torch.long)
+    target[:, 1::2, :] = 3
+    optimiser = torch.optim.Adam(net.parameters(), lr=1e-2)
+    net.train()
+    for _ in range(steps):
+        loss = torch.nn.functional.cross_entropy(net(image), target)
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    with torch.no_grad():
+        return float((net.eval()(image).argmax(dim=1) == target).float().mean())
+
+
+def test_the_full_resolution_refinement_draws_what_stride_2_logits_cannot() -> None:
+    """Rows alternating between two classes: upsampled stride-2 logits cannot alternate in sign from one pixel to
+    the next over a whole image, the refinement's per-pixel correction can."""
+    config = NetworkConfig(widths=(8, 8, 16, 16, 16), input_width_px=64, full_resolution_width=4)
+    torch.manual_seed(0)
+    plain = SegmentationNet(dataclasses.replace(config, full_resolution_width=0))
+    refined = SegmentationNet(config)
+    assert plain.refine is None and refined.refine is not None
+    assert _fit_stripes(plain) < 0.8
+    assert _fit_stripes(refined) > 0.99
+
+
+def test_a_checkpoint_goes_on_with_a_refinement_from_the_same_output(
+    training_site: Path, tmp_path: Path
+) -> None:
+    plain = dataclasses.replace(SMALL_NETWORK, full_resolution_width=0)
+    folder = train(FEW_STEPS, [training_site], tmp_path / "plain", network=plain, show_progress=False)
+    meta = json.loads((folder / META).read_text(encoding="utf-8"))
+    del meta["network"]["full_resolution_width"]  # as written before the refinement existed
+    (folder / META).write_text(json.dumps(meta), encoding="utf-8")
+    parent = load_checkpoint(folder)
+    assert parent.net.config == plain and parent.net.refine is None
+    refined = dataclasses.replace(SMALL_NETWORK, full_resolution_width=6)
+    net, loaded = initial_network(refined, folder)
+    image = torch.rand(2, 3, 64, 96)
+    with torch.no_grad():
+        assert torch.equal(net.eval()(image), parent.net.eval()(image))
+    assert loaded is not None and loaded.digest == parent.digest and net.config == refined
+    with pytest.raises(CheckpointError, match="not the one asked for"):
+        initial_network(dataclasses.replace(refined, input_width_px=128), folder)
+    result = CliRunner().invoke(
+        app,
+        [
+            "train-segmenter",
+            "--sites",
+            str(training_site),
+            "--out",
+            str(tmp_path / "next"),
+            "--init",
+            str(folder),
+            "--full-resolution-width",
+            "6",
+            "--epochs",
+            "1",
+            "--batch-size",
+            "2",
+            "--max-class-weight",
+            "0",
+        ],
+    )
+    assert result.exit_code == EXIT_BAD_INPUT and "max_class_weight" in result.output, result.output
