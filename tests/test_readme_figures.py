@@ -846,9 +846,11 @@ SEGMENT_CALIBRATION_COLUMNS = {
 }
 
 
-def test_segmenter_calibration_table() -> None:
-    t = table("class, calibration")
-    for column, (name, label) in SEGMENT_CALIBRATION_COLUMNS.items():
+def _check_segmenter_columns(title: str, columns: dict[str, tuple[str, str]]) -> None:
+    """Each column of a README segmenter table shows its results file's per-class IoU (rows named by class) and,
+    in a row starting "whole path", the predicted-minus-generator-masks differences; the checkpoint label fits."""
+    t = table(title)
+    for column, (name, label) in columns.items():
         assert_names_source(t, name, "bench/segment.py")
         index = t.header.index(column)
         recorded = results(name)
@@ -862,7 +864,11 @@ def test_segmenter_calibration_table() -> None:
                 ]
             else:
                 expected = [recorded["segmentation"]["per_class_iou"][row_label.replace(" ", "_")]]
-            assert_shows(cells[index], expected, f"calibration {column} {row_label!r}")
+            assert_shows(cells[index], expected, f"{title}: {column} {row_label!r}")
+
+
+def test_segmenter_calibration_table() -> None:
+    _check_segmenter_columns("class, calibration", SEGMENT_CALIBRATION_COLUMNS)
 
 
 def test_refinement_end_to_end_table() -> None:

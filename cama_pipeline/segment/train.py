@@ -263,14 +263,17 @@ def initial_network(
     return net, parent
 
 
+def _place(site: dict[str, Any]) -> str:
+    """A recorded training site without its folder: the same site regenerated elsewhere is one place."""
+    return json.dumps({k: v for k, v in site.items() if k != "path"}, sort_keys=True)
+
+
 def _lineage(meta: dict[str, Any], parent: Checkpoint | None) -> dict[str, Any]:
     """`meta` of a run that went on from `parent`: the sites, epochs and seconds of both, and the parent named."""
     if parent is None:
         return meta
-    seen = {json.dumps(s, sort_keys=True) for s in meta["training_sites"]}
-    earlier = [
-        s.to_json() for s in parent.training_sites if json.dumps(s.to_json(), sort_keys=True) not in seen
-    ]
+    seen = {_place(s) for s in meta["training_sites"]}
+    earlier = [s.to_json() for s in parent.training_sites if _place(s.to_json()) not in seen]
     return {
         **meta,
         "training_sites": earlier + meta["training_sites"],

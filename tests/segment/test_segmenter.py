@@ -4,6 +4,7 @@ measurement site and to be scored on a site it saw."""
 import dataclasses
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -161,6 +162,10 @@ def test_going_on_from_a_checkpoint_keeps_what_it_saw(
     assert meta["epochs_total"] == 2 and meta["parent"]["weights_sha256"] == parent.meta["weights_sha256"]
     with pytest.raises(SeenSiteError, match="seed 4242"):  # the parent's site stays seen
         ensure_unseen(load_checkpoint(folder), training_site)
+    moved = shutil.copytree(training_site, tmp_path / "regenerated-elsewhere")
+    again = train(FEW_STEPS, [moved], tmp_path / "again", init=folder, show_progress=False)
+    sites = json.loads((again / META).read_text(encoding="utf-8"))["training_sites"]
+    assert [(s["seed"], s["path"]) for s in sites] == [(5151, str(second_site)), (4242, str(moved))]
 
 
 def _fit_stripes(net: SegmentationNet, steps: int = 120) -> float:
