@@ -10,11 +10,13 @@ import numpy as np
 import torch
 
 from cama_pipeline.data import CameraImage, load_dataset
+from cama_pipeline.data.masks import has_masks
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen
 from cama_pipeline.segment.config import DeviceName
 from cama_pipeline.segment.instances import lane_instances
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
 from cama_pipeline.site_identity import site_identity
+from cama_pipeline.synthetic.generate import GROUND_TRUTH_DIR
 
 logger = logging.getLogger(__name__)
 
@@ -76,9 +78,13 @@ def iou_report(matrix: np.ndarray, images: int) -> dict[str, Any]:
 
 
 def site_images(site: Path, *, night: bool = False) -> list[CameraImage]:
-    """The camera images of a generated site's data set, without its night scenes unless `night`."""
-    dataset = load_dataset(Path(site) / DATASET_DIR)
-    return [
+    """The camera images of a generated site's data set with the generator's masks (the data set's own, or for
+    a mask-free site, `cama synth --no-masks`, those kept in `<site>/ground_truth`), without its night scenes
+    unless `night`; ValueError naming the site when it has neither."""
+    root = Path(site) / DATASET_DIR
+    truth = Path(site) / GROUND_TRUTH_DIR
+    dataset = load_dataset(root, mask_roots=None if has_masks(root) or not truth.is_dir() else (truth,))
+    images = [
         im
         for scene in dataset.scenes
         if night or "night" not in scene.description.lower()
@@ -86,6 +92,9 @@ def site_images(site: Path, *, night: bool = False) -> list[CameraImage]:
         for im in ims
         if im.semantic_mask_path is not None
     ]
+    if not images:
+        raise ValueError(f"{site}: no camera image with a semantic mask in {root} or {truth}")
+    return images
 
 
 def score_images(

@@ -13,6 +13,7 @@ import torch
 from typer.testing import CliRunner
 
 from cama_pipeline.console import EXIT_BAD_INPUT
+from cama_pipeline.data.schema import INSTANCE_DIR, SEMANTIC_DIR
 from cama_pipeline.segment.checkpoint import (
     META,
     WEIGHTS,
@@ -22,7 +23,7 @@ from cama_pipeline.segment.checkpoint import (
 )
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
-from cama_pipeline.segment.predict import score_site
+from cama_pipeline.segment.predict import score_site, site_images
 from cama_pipeline.segment.train import check_training_sites, initial_network, train
 from cama_pipeline.site_identity import SeenSiteError, site_identity
 from cama_studio.cli import app
@@ -237,3 +238,18 @@ def test_a_checkpoint_goes_on_with_a_refinement_from_the_same_output(
         ],
     )
     assert result.exit_code == EXIT_BAD_INPUT and "max_class_weight" in result.output, result.output
+
+
+def test_a_mask_free_site_is_scored_on_its_ground_truth(training_site: Path, tmp_path: Path) -> None:
+    """`cama synth --no-masks` keeps the masks in ground_truth/: held-out scores and training read them there;
+    a site with masks in neither place is named."""
+    with_masks = site_images(training_site)
+    bare = shutil.copytree(training_site, tmp_path / "bare")
+    for folder in (SEMANTIC_DIR, INSTANCE_DIR):
+        shutil.move(bare / "nuscenes" / folder, bare / "ground_truth" / folder)
+    moved = site_images(bare)
+    assert [im.token for im in moved] == [im.token for im in with_masks]
+    assert all(str(bare / "ground_truth") in str(im.semantic_mask_path) for im in moved)
+    shutil.rmtree(bare / "ground_truth" / SEMANTIC_DIR)
+    with pytest.raises(ValueError, match=f"{bare}: no camera image with a semantic mask"):
+        site_images(bare)
