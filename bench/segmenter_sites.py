@@ -17,6 +17,13 @@ which it never trained on (its checkpoint.json records v2 as its parent and thes
     .venv/bin/cama calibrate-segmenter --sites data/segmenter/calibrate --checkpoint <shipped-v2> \
         --out data/segmenter/ckpt/shipped-v3 --label shipped-v3
 
+The shipped `refined-cap2` is `shipped-v2` gone on with the full-resolution refinement (README, "Full-resolution
+refinement"), on the same training sites:
+
+    .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
+        --out data/segmenter/ckpt/refined-cap2 --init <shipped-v2> --full-resolution-width 12 \
+        --max-class-weight 2 --epochs 16 --learning-rate 1e-3 --threads 1 --seed 7
+
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """
 

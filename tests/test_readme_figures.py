@@ -871,6 +871,47 @@ def test_segmenter_calibration_table() -> None:
     _check_segmenter_columns("class, calibration", SEGMENT_CALIBRATION_COLUMNS)
 
 
+SEGMENT_REFINEMENT_COLUMNS = {
+    f"{site} {label}": (f"segment_refine_{short}_{site}.json", label)
+    for site, versions in (("9001", "v2 cap2 cap1"), ("9002", "v2 cap2 cap1"), ("9004", "v2 cap2"))
+    for short in versions.split()
+    for label in ["shipped-v2" if short == "v2" else f"refined-{short}"]
+}
+
+
+def test_segmenter_refinement_table() -> None:
+    _check_segmenter_columns("class, full-resolution refinement", SEGMENT_REFINEMENT_COLUMNS)
+
+
+def test_segmenter_refinement_ceiling_speed_and_shipped_checkpoint() -> None:
+    """The stride-2 ceilings quoted are the files', the speed is the speed bench's, and the shipped checkpoint
+    is the one measured as refined-cap2."""
+    text = " ".join(readme_text().split())
+    ceilings = {
+        site: results(f"segment_refine_cap2_{site}.json")["segmentation"]["resolution_ceiling_iou"][
+            "stride_2"
+        ]
+        for site in ("9001", "9002", "9004")
+    }
+    lane = {site: f"{c['lane_marking']:.2f}" for site, c in ceilings.items()}
+    curb = {site: f"{c['curb']:.2f}" for site, c in ceilings.items()}
+    assert (
+        f"give lane marking an IoU of {lane['9001']} and curb {curb['9001']} on site 9001, {lane['9002']} / "
+        f"{curb['9002']} on 9002 and {lane['9004']} / {curb['9004']} on 9004"
+    ) in text
+    speed = results("segment_speed.json")
+    assert speed["baseline"] == "shipped-v2"
+    ours, baseline = speed["checkpoints"]["refined-cap2"], speed["checkpoints"]["shipped-v2"]
+    assert (
+        f"It costs {ours['seconds_per_512x288_image']:.3f} s per 512x288 image on one CPU thread against "
+        f"`shipped-v2`'s {baseline['seconds_per_512x288_image']:.3f} s, {ours['ratio_to_baseline']:.2f}x"
+    ) in text
+    shipped = json.loads((ROOT / "cama_pipeline/segment/shipped/checkpoint.json").read_text(encoding="utf-8"))
+    measured = results("segment_refine_cap2_9004.json")["segmentation"]["checkpoint"]
+    assert shipped["label"] == measured["label"] == "refined-cap2"
+    assert shipped["weights_sha256"][:16] == measured["digest"] == ours["digest"]
+
+
 def test_refinement_end_to_end_table() -> None:
     t = table("end to end, site and refinement", "bench/end_to_end.py")
     for site, suffix in (("default", ""), ("9011", "_9011")):

@@ -1,0 +1,64 @@
+"""Segmenter speed (issue 23.6: <= 0.15 s per 512x288 image on one CPU core): each checkpoint's median seconds
+per image on one torch thread, measured in turn in one run, repeated, with the ratio to the first (the baseline).
+
+Usage: .venv/bin/python bench/segment_speed.py --checkpoint BASELINE_DIR --checkpoint OTHER_DIR
+       [--rounds 3] [--out bench/results/segment_speed.json]
+Run it on an otherwise idle machine: the figures are wall-clock times.
+"""
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cama_pipeline.segment.checkpoint import load_checkpoint
+from cama_pipeline.segment.network import parameter_count
+from cama_pipeline.segment.train import cpu_seconds_per_image
+
+RESULTS = Path(__file__).parent / "results"
+SECONDS_PER_IMAGE_TARGET = 0.15
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--checkpoint", type=Path, action="append", required=True, help="first: the baseline")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds over the checkpoints (interleaved)")
+    parser.add_argument("--out", type=Path, default=RESULTS / "segment_speed.json")
+    args = parser.parse_args()
+    checkpoints = [load_checkpoint(path) for path in args.checkpoint]
+    times: dict[str, list[float]] = {c.label: [] for c in checkpoints}
+    for _ in range(args.rounds):
+        for checkpoint in checkpoints:
+            times[checkpoint.label].append(cpu_seconds_per_image(checkpoint.net, repeats=15))
+    baseline = float(np.median(times[checkpoints[0].label]))
+    figures = {
+        "checkpoints": {
+            c.label: {
+                "path": str(c.path),
+                "digest": c.digest,
+                "network": c.net.config.to_json(),
+                "parameters": parameter_count(c.net),
+                "seconds_per_512x288_image_rounds": times[c.label],
+                "seconds_per_512x288_image": round(float(np.median(times[c.label])), 4),
+                "ratio_to_baseline": round(float(np.median(times[c.label])) / baseline, 2),
+                "target_met": float(np.median(times[c.label])) <= SECONDS_PER_IMAGE_TARGET,
+            }
+            for c in checkpoints
+        },
+        "baseline": checkpoints[0].label,
+        "target_s": SECONDS_PER_IMAGE_TARGET,
+        "command": "python bench/segment_speed.py " + " ".join(sys.argv[1:]),
+        "machine": {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")},
+    }
+    print(json.dumps(figures["checkpoints"], indent=1))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(figures, indent=1) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
