@@ -47,8 +47,7 @@ from app.simulation.annotator import correct_proposals, draw_from_scratch
 from app.simulation.workbench import kept_map, load_proposals, local_backend, register_synthetic_site
 from cama_pipeline.bev import read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
-from cama_pipeline.data import Dataset, Pose, load_dataset
-from cama_pipeline.data.masks import has_masks
+from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
@@ -57,6 +56,7 @@ from cama_pipeline.semantics import Semantic
 from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.synthetic.generate import truth_dataset
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
@@ -222,13 +222,6 @@ def simulated_pass(
         "speed_up": scratch.total_s / corrected.total_s if corrected.total_s else None,
     }
     return figures, kept
-
-
-def truth_dataset(site: Path) -> Dataset:
-    """The site's data set with the generator's true masks: its own, or for a mask-free site (`cama synth
-    --no-masks`) the ones kept in `ground_truth/` (the SRE is always measured against the true lane masks)."""
-    truth = site / "ground_truth"
-    return load_dataset(site / "nuscenes", mask_roots=None if has_masks(site / "nuscenes") else (truth,))
 
 
 def sre_rows(

@@ -44,7 +44,6 @@ from end_to_end import (  # bench/end_to_end.py: this script's folder is on sys.
     sfm_pose_map,
     simulated_pass,
     sre_rows,
-    truth_dataset,
 )
 from surface import IOU_CLASSES, truth_at  # bench/surface.py
 
@@ -61,6 +60,7 @@ from cama_pipeline.segment.stage import run as segment_stage
 from cama_pipeline.segment.train import cpu_seconds_per_image
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
 from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.synthetic.generate import truth_dataset
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline

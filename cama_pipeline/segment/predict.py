@@ -9,19 +9,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from cama_pipeline.data import CameraImage, load_dataset
-from cama_pipeline.data.masks import has_masks
+from cama_pipeline.data import CameraImage
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen
 from cama_pipeline.segment.config import DeviceName
 from cama_pipeline.segment.instances import lane_instances
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES, SegmentationNet
 from cama_pipeline.site_identity import site_identity
-from cama_pipeline.synthetic.generate import GROUND_TRUTH_DIR
+from cama_pipeline.synthetic.generate import DATASET_DIR, GROUND_TRUTH_DIR, truth_dataset
 
 logger = logging.getLogger(__name__)
-
-DATASET_DIR = "nuscenes"
-"""A generated site's data set folder (`cama synth` writes `<site>/nuscenes`)."""
 
 
 def resolve_device(device: DeviceName | str) -> torch.device:
@@ -81,9 +77,7 @@ def site_images(site: Path, *, night: bool = False) -> list[CameraImage]:
     """The camera images of a generated site's data set with the generator's masks (the data set's own, or for
     a mask-free site, `cama synth --no-masks`, those kept in `<site>/ground_truth`), without its night scenes
     unless `night`; ValueError naming the site when it has neither."""
-    root = Path(site) / DATASET_DIR
-    truth = Path(site) / GROUND_TRUTH_DIR
-    dataset = load_dataset(root, mask_roots=None if has_masks(root) or not truth.is_dir() else (truth,))
+    dataset = truth_dataset(site)
     images = [
         im
         for scene in dataset.scenes
@@ -93,7 +87,9 @@ def site_images(site: Path, *, night: bool = False) -> list[CameraImage]:
         if im.semantic_mask_path is not None
     ]
     if not images:
-        raise ValueError(f"{site}: no camera image with a semantic mask in {root} or {truth}")
+        raise ValueError(
+            f"{site}: no camera image with a semantic mask in {DATASET_DIR}/ or {GROUND_TRUTH_DIR}/"
+        )
     return images
 
 

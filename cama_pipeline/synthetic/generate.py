@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from cama_pipeline.bev import BevRasters, write_bev
+from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data.masks import has_masks
 from cama_pipeline.data.schema import GNSS_MESSAGE
 from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
@@ -56,6 +58,13 @@ DATASET_DIR = "nuscenes"
 GROUND_TRUTH_DIR = "ground_truth"
 MANIFEST = "manifest.json"
 SEED_SENSORS = 11
+
+
+def truth_dataset(site: Path) -> Dataset:
+    """A generated site's data set with the generator's true masks: the data set's own, or for a mask-free site
+    (`cama synth --no-masks`) those kept in `<site>/ground_truth` (benchmarks score against them)."""
+    root, truth = Path(site) / DATASET_DIR, Path(site) / GROUND_TRUTH_DIR
+    return load_dataset(root, mask_roots=None if has_masks(root) or not truth.is_dir() else (truth,))
 
 
 @dataclass(frozen=True)
