@@ -18,7 +18,8 @@ which it never trained on (its checkpoint.json records v2 as its parent and thes
         --out data/segmenter/ckpt/shipped-v3 --label shipped-v3
 
 The shipped `refined-cap2` is `shipped-v2` gone on with the full-resolution refinement (README, "Full-resolution
-refinement"), on the same training sites:
+refinement"), on the same training sites; `<shipped-v2>` is a folder with `shipped-v2`'s `model.pt` and
+`checkpoint.json` as they were at commit 3e376aa (`git show 3e376aa:cama_pipeline/segment/shipped/model.pt`):
 
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
         --out data/segmenter/ckpt/refined-cap2 --init <shipped-v2> --full-resolution-width 12 \
