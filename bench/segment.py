@@ -8,7 +8,8 @@ mask-free site with predicted masks against the same site with the generator's m
    (what it is taken for), the share of true lane-marking and crosswalk instances the masks miss (under half of
    their pixels predicted as their class), per camera, and the CPU seconds per 512x288 image on one thread; and
    the resolution ceiling: the IoU of the true masks pooled to stride 2 (and 4) and upsampled, the best a network
-   whose logits stop there could reach.
+   whose logits stop there could reach; and where the thin classes lose their IoU: on the true regions' one-pixel
+   edge or beyond it (`cama_pipeline.segment.edge_errors`).
 2. `cama run` twice on the site's data set, into two workspaces beside it: `--masks <site>/ground_truth` (the
    generator's masks, given as a mask folder, or the data set's own for a site made with masks) and `--masks
    predicted` (the segment stage runs the checkpoint). Both use the same data set, so the only difference is the
@@ -53,6 +54,7 @@ from cama_pipeline.data import CameraImage, load_dataset
 from cama_pipeline.data.masks import has_masks
 from cama_pipeline.segment.checkpoint import Checkpoint, ensure_unseen, load_checkpoint
 from cama_pipeline.segment.config import SegmentConfig
+from cama_pipeline.segment.edge_errors import EdgeErrors
 from cama_pipeline.segment.ego_clip import EgoClipConfig
 from cama_pipeline.segment.network import IMAGE_CLASSES, NUM_CLASSES
 from cama_pipeline.segment.predict import confusion, iou_report, resolve_device, score_images
@@ -143,7 +145,7 @@ def segmentation_figures(
 ) -> dict[str, Any]:
     """Part 1: IoU, confusion, missed instances and per-camera IoU, on the site's day key-frame images, of the
     masks the segment stage writes into `workspace` (run here; up to date when `cama run` made them), and the
-    IoU of the network's own per-image masks beside them."""
+    IoU of the network's own per-image masks beside them, and where the thin classes' IoU is lost (`edge_errors`)."""
     identity = ensure_unseen(checkpoint, site)
     started = time.perf_counter()
     stage = segment_stage(config, site / "nuscenes", workspace)
@@ -151,12 +153,15 @@ def segmentation_figures(
     total = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
     per_camera: dict[str, np.ndarray] = {}
     missed: dict[str, list[int]] = {}
+    edges = EdgeErrors()
     images = day_images(site)
     mask_root = workspace.masks_dir("predicted")
     predicted = load_dataset(site / "nuscenes", mask_roots=(mask_root,))
     for image in images:
         labels = predicted.image(image.token).load_semantic()
-        matrix = confusion(labels, image.load_semantic())
+        truth = image.load_semantic()
+        matrix = confusion(labels, truth)
+        edges.add(labels, truth)
         total += matrix
         per_camera.setdefault(image.channel, np.zeros_like(matrix))
         per_camera[image.channel] += matrix
@@ -179,6 +184,7 @@ def segmentation_figures(
             for name, t in IOU_TARGETS.items()
         },
         "confused_with": confused_with(total),
+        "edge_errors": edges.report(),
         "missed_instances": {
             name: {"missed": m, "total": n, "share": round(m / n, 3) if n else None}
             for name, (m, n) in missed.items()

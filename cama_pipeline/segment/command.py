@@ -118,6 +118,13 @@ def train_segmenter_command(
         float,
         typer.Option(help="Cap of the cross-entropy class weights (inverse square-root frequencies)."),
     ] = TrainConfig().max_class_weight,
+    scale_range: Annotated[
+        tuple[float, float],
+        typer.Option(
+            help="Range of the random rescale of each training image before its crop (LOW HIGH; 1 1 keeps the "
+            "images' own scale, so no mask is resampled)."
+        ),
+    ] = TrainConfig().scale_range,
 ) -> None:
     """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
     checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
@@ -129,6 +136,7 @@ def train_segmenter_command(
             threads=threads,
             seed=seed,
             max_class_weight=max_class_weight,
+            scale_range=scale_range,
         )
         folder = train(
             config,

@@ -24,7 +24,7 @@ from cama_pipeline.segment.checkpoint import (
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
 from cama_pipeline.segment.predict import score_site, site_images
-from cama_pipeline.segment.train import check_training_sites, initial_network, train
+from cama_pipeline.segment.train import augment, check_training_sites, initial_network, train
 from cama_pipeline.site_identity import SeenSiteError, site_identity
 from cama_studio.cli import app
 from tests.conftest import GeneratedSite
@@ -253,3 +253,26 @@ def test_a_mask_free_site_is_scored_on_its_ground_truth(training_site: Path, tmp
     shutil.rmtree(bare / "ground_truth" / SEMANTIC_DIR)
     with pytest.raises(ValueError, match=f"{bare}: no camera image with a semantic mask"):
         site_images(bare)
+
+
+def test_unit_scale_crops_masks_without_resampling_them() -> None:
+    """`--scale-range 1 1`: each training mask is an exact crop (maybe mirrored) of the site's own, so a thin
+    class's edge is not moved by the nearest-neighbour resampling of a rescale."""
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)
+    mask = rng.integers(0, NUM_CLASSES, (64, 96), dtype=np.uint8)
+    config = TrainConfig(crop_height_px=32, crop_width_px=64, scale_range=(1.0, 1.0))
+    for _ in range(6):
+        _, crop = augment(image, mask, config, rng)
+        windows = np.lib.stride_tricks.sliding_window_view(mask, crop.shape)
+        assert (windows == crop).all(axis=(2, 3)).any() or (windows == crop[:, ::-1]).all(axis=(2, 3)).any()
+    _, rescaled = augment(image, mask, dataclasses.replace(config, scale_range=(1.3, 1.3)), rng)
+    windows = np.lib.stride_tricks.sliding_window_view(mask, rescaled.shape)
+    assert not (windows == rescaled).all(axis=(2, 3)).any()
+
+
+def test_train_segmenter_names_a_bad_scale_range(training_site: Path, tmp_path: Path) -> None:
+    args = ["train-segmenter", "--sites", str(training_site), "--out", str(tmp_path / "c"), "--scale-range"]
+    result = CliRunner().invoke(app, [*args, "1.3", "0.7"])
+    assert result.exit_code == EXIT_BAD_INPUT and "scale_range" in result.output, result.output
+    assert not (tmp_path / "c").exists()
