@@ -62,6 +62,8 @@ class EdgeErrors:
                 **{kind: round(n / union, 4) for kind, n in counts.items()},
                 "iou": round(counts["hit"] / union, 4),
                 "iou_edge_tolerant": round(counts["hit"] / forgiven, 4) if forgiven else None,
-                "predicted_over_true": round(self.predicted[cls] / self.true[cls], 3) if self.true[cls] else None,
+                "predicted_over_true": round(self.predicted[cls] / self.true[cls], 3)
+                if self.true[cls]
+                else None,
             }
         return out
