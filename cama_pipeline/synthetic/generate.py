@@ -9,7 +9,9 @@ Output (`out_dir`):
         bev/                  true BEV rasters, a raster folder (cama_pipeline.bev) with every layer
         semantic/, lane_instance/
                               only for a site made with `masks=False` (`cama synth --no-masks`): the per-image
-                              masks, laid out as in a data set (`mask_relpath`), which then has none
+                              masks, laid out as in a data set (`mask_relpath`), which then has none; exact, as
+                              rendered: the config's mask noise (`masks`, which imitates an imperfect network's
+                              masks shipped with a data set) is not applied, and the manifest's config says so
     manifest.json             config (a randomised site's drawn config, with its `random_seed`), location,
                               fingerprint and counts; written last, so its presence means complete;
                               `images_rendered` false marks a site made with `images=False` (`cama synth
@@ -43,7 +45,7 @@ from cama_pipeline.io import atomic_write_image, atomic_write_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from cama_pipeline.synthetic import ground_truth as gt
-from cama_pipeline.synthetic.config import SynthConfig
+from cama_pipeline.synthetic.config import MaskNoiseConfig, SynthConfig
 from cama_pipeline.synthetic.motion import TrueMotion, matrix_to_quat
 from cama_pipeline.synthetic.render_jobs import render_all
 from cama_pipeline.synthetic.sensors import coarse_ego_poses, simulate_can
@@ -121,9 +123,12 @@ def run(
     `images=False` skips rendering (most of the time on big presets): tables, CAN and ground truth only, for
     work that needs poses but no pixels (the pairs benchmark). `masks=False` writes the masks into the
     ground truth instead of the data set, and `gnss=False` leaves out the GNSS CAN files (`cama synth
-    --no-masks` does both: a data set as real nuScenes is). The manifest records all three.
+    --no-masks` does both: a data set as real nuScenes is). The manifest records all three. Masks in the ground
+    truth are what the segmenter and SRE are scored against, so they are written without the config's mask noise.
     """
     out_dir = Path(out_dir)
+    if not masks:
+        cfg = dataclasses.replace(cfg, masks=MaskNoiseConfig())
     existing = _read_manifest(out_dir)
     digest = fingerprint(cfg, images=images, masks=masks, gnss=gnss)
     if existing is not None and existing.get("fingerprint") == digest and not overwrite:

@@ -3,6 +3,7 @@ no GNSS file; the masks of a normal run, byte for byte, under ground_truth/; rec
 fingerprint; and the loader reads it."""
 
 import json
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ from typer.testing import CliRunner
 
 from cama_pipeline.data.loader import load_dataset
 from cama_pipeline.data.schema import CAN_DIR, GNSS_MESSAGE, INSTANCE_DIR, SEMANTIC_DIR
+from cama_pipeline.synthetic.config import MaskNoiseConfig
 from cama_pipeline.synthetic.generate import GROUND_TRUTH_DIR, MANIFEST, SynthResult, fingerprint, run
 from cama_pipeline.synthetic.render_jobs import render_shot
 from cama_pipeline.synthetic.site_model import build_synthetic_site
@@ -96,3 +98,18 @@ def test_cli_no_masks_says_where_the_masks_are(tmp_path):
     manifest = json.loads((out / MANIFEST).read_text())
     assert manifest["masks_in_dataset"] is False and manifest["gnss"] is False
     assert not list((out / "nuscenes" / CAN_DIR).glob(f"*_{GNSS_MESSAGE}.json"))
+
+
+def test_the_ground_truth_masks_are_exact_whatever_the_mask_noise(sites, tmp_path):
+    """The config's mask noise imitates a network's masks shipped with a data set; a mask-free site's masks are
+    the truth its segmentation and SRE are scored against, so they are written as rendered."""
+    _, exact = sites
+    noisy = replace(micro_config(), masks=MaskNoiseConfig(boundary_jitter_px=2, miss_rate=0.5))
+    bare = run(noisy, tmp_path / "noisy", masks=False, gnss=False, workers=2, show_progress=False)
+    manifest = json.loads((bare.out_dir / MANIFEST).read_text())
+    assert manifest["config"]["masks"] == asdict(MaskNoiseConfig())
+    assert file_digests(bare.out_dir) == file_digests(exact.out_dir)
+    render_shot(build_synthetic_site(noisy), 0, 7, tmp_path / "with-masks")  # as a site with masks gets them
+    noisy_files, truth_files = file_digests(tmp_path / "with-masks"), file_digests(bare.ground_truth_dir)
+    masks = [path for path in noisy_files if not path.endswith(".jpg")]
+    assert len(masks) == 2 and any(noisy_files[path] != truth_files[path] for path in masks)
