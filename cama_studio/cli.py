@@ -62,7 +62,8 @@ def synth(
         bool,
         typer.Option(
             help="Masks in the data set; --no-masks writes a data set as real nuScenes is: no semantic/ and "
-            "lane_instance/ (they go to ground_truth/ for evaluation) and no GNSS CAN file."
+            "lane_instance/ (they go to ground_truth/ for evaluation, exact: no mask degradation) and no GNSS CAN "
+            "file."
         ),
     ] = True,
     image_size: Annotated[
@@ -80,6 +81,11 @@ def synth(
     if seed is not None and random_seed is not None:
         raise bad_input(
             "--seed and --random-seed exclude each other (a randomised site uses its random seed)"
+        )
+    if degrade_masks and not masks:
+        raise bad_input(
+            "--degrade-masks and --no-masks exclude each other (a mask-free site's masks are its ground truth, "
+            "written exact)"
         )
     try:
         cfg = _synth_config(preset, seed, random_seed, degrade_masks, image_size)

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.console import EXIT_BAD_INPUT
 from cama_pipeline.data.loader import load_dataset
 from cama_pipeline.data.schema import CAN_DIR, GNSS_MESSAGE, INSTANCE_DIR, SEMANTIC_DIR
 from cama_pipeline.synthetic.config import MaskNoiseConfig
@@ -113,3 +114,11 @@ def test_the_ground_truth_masks_are_exact_whatever_the_mask_noise(sites, tmp_pat
     noisy_files, truth_files = file_digests(tmp_path / "with-masks"), file_digests(bare.ground_truth_dir)
     masks = [path for path in noisy_files if not path.endswith(".jpg")]
     assert len(masks) == 2 and any(noisy_files[path] != truth_files[path] for path in masks)
+
+
+def test_cli_refuses_degraded_masks_on_a_mask_free_site(tmp_path):
+    out = tmp_path / "bare"
+    args = ["synth", "--preset", "tiny", "--no-masks", "--degrade-masks", "--no-images", "--out", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == EXIT_BAD_INPUT, result.output
+    assert "--degrade-masks and --no-masks" in result.output and not out.exists()
