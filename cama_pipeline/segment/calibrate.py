@@ -41,12 +41,25 @@ class CalibrationConfig:
     step: float = 0.25
     passes: int = 2
     pixel_stride: int = 4
+    classes: tuple[str, ...] = ()
+    """Names of the classes whose offsets are fitted (the others keep 0); empty: every class. The thin road
+    classes alone (`curb`, `lane_marking`, `crosswalk`) undo the class weights' pull without moving classes
+    whose calibration sites differ from the measured ones (night images move ego and vehicle)."""
 
     def __post_init__(self) -> None:
         if not (self.span > 0 and 0 < self.step <= self.span):
             raise ValueError(f"CalibrationConfig: need span > 0 and 0 < step <= span, got {self}")
         if self.passes < 1 or self.pixel_stride < 1:
             raise ValueError(f"CalibrationConfig: passes and pixel_stride must be >= 1, got {self}")
+        names = [c.name.lower() for c in IMAGE_CLASSES]
+        unknown = [name for name in self.classes if name not in names]
+        if unknown:
+            raise ValueError(f"CalibrationConfig.classes: unknown class {unknown[0]!r}; choose from {names}")
+
+    def fitted_classes(self) -> list[int]:
+        """Indices of the classes whose offsets are fitted."""
+        names = [c.name.lower() for c in IMAGE_CLASSES]
+        return [names.index(name) for name in self.classes] if self.classes else list(range(NUM_CLASSES))
 
 
 @dataclass(frozen=True)
@@ -100,15 +113,18 @@ def mean_iou(matrix: np.ndarray) -> float:
 def fit_logit_offsets(
     pixels: PixelLogits, config: CalibrationConfig, *, show_progress: bool = True
 ) -> np.ndarray:
-    """Per-class offsets maximising the mean IoU: for each class in turn, the best offset on a grid around
-    its current one, the others held; `config.passes` rounds. Starts at zero, so never worse than none."""
+    """Per-class offsets maximising the mean IoU: for each fitted class in turn, the best offset on a grid
+    around its current one, the others held; `config.passes` rounds. Starts at zero, so never worse than none.
+    With every class fitted the offsets are centred (only differences matter to the argmax); with some, the
+    others stay exactly 0."""
     offsets = np.zeros(NUM_CLASSES)
     best = mean_iou(confusion_of(pixels, offsets))
     grid = np.arange(-config.span, config.span + config.step / 2, config.step)
+    fitted = config.fitted_classes()
     with StageProgress("calibrate-segmenter", logger=logger, enabled=show_progress) as progress:
-        bar = progress.add_task("class offsets", total=config.passes * NUM_CLASSES)
+        bar = progress.add_task("class offsets", total=config.passes * len(fitted))
         for _ in range(config.passes):
-            for cls in range(NUM_CLASSES):
+            for cls in fitted:
                 start = offsets[cls]
                 for value in start + grid:
                     trial = offsets.copy()
@@ -117,7 +133,7 @@ def fit_logit_offsets(
                     if score > best + 1e-6:
                         best, offsets = score, trial
                 progress.advance(bar)
-    return offsets - offsets.mean()  # only differences between classes matter to the argmax
+    return offsets if config.classes else offsets - offsets.mean()
 
 
 def calibrated_network(net: SegmentationNet, offsets: np.ndarray) -> SegmentationNet:
@@ -194,6 +210,7 @@ def calibration_record(
         "sites": [s.to_json() for s in sites],
         "images": images,
         "pixel_stride": config.pixel_stride,
+        "classes_fitted": [IMAGE_CLASSES[i].name.lower() for i in config.fitted_classes()],
         "before": iou_report(confusion_of(pixels, np.zeros(NUM_CLASSES)), images),
         "after": iou_report(confusion_of(pixels, offsets), images),
         "seconds": round(time.perf_counter() - started, 1),

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
-from cama_pipeline.segment.calibrate import calibrate
+from cama_pipeline.segment.calibrate import CalibrationConfig, calibrate
 from cama_pipeline.segment.checkpoint import read_meta
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.predict import resolve_device
@@ -183,15 +183,24 @@ def calibrate_segmenter_command(
     label: Annotated[
         str | None, typer.Option(help="Name recorded in the checkpoint (default: folder).")
     ] = None,
+    classes: Annotated[
+        str,
+        typer.Option(
+            help="Comma-separated classes whose offsets are fitted, e.g. curb,lane_marking,crosswalk; the "
+            "others keep 0. Empty: every class."
+        ),
+    ] = "",
 ) -> None:
     """Fit one logit offset per class on fresh sites' images (undoing the class-weighted loss's pull toward
     thin classes) and write the calibrated checkpoint, which counts those sites as seen."""
     try:
+        config = CalibrationConfig(classes=tuple(name.strip() for name in classes.split(",") if name.strip()))
         folder = calibrate(
             sites,
             out,
             checkpoint=checkpoint,
             held_out=held_out or [],
+            config=config,
             device=resolve_device(device),
             label=label,
         )

@@ -122,3 +122,31 @@ def test_calibrate_segmenter_command_names_a_missing_site(tmp_path: Path) -> Non
     )
     assert result.exit_code == 2 and "nowhere" in result.output
     assert not (tmp_path / "out").exists()
+
+
+def test_only_the_chosen_classes_are_fitted() -> None:
+    rng = np.random.default_rng(1)
+    pixels = biased_pixels(1.5, rng)
+    only_lane = CalibrationConfig(classes=("lane_marking",))
+    offsets = fit_logit_offsets(pixels, only_lane, show_progress=False)
+    others = np.delete(offsets, LANE)
+    assert (others == 0).all() and -2.5 < offsets[LANE] < -1.0
+    only_road = fit_logit_offsets(pixels, CalibrationConfig(classes=("road",)), show_progress=False)
+    assert only_road[LANE] == 0 and only_road[1] > 0.5  # road pushed up instead, as far as helps
+
+
+def test_calibrate_segmenter_command_names_an_unknown_class(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        app,
+        [
+            "calibrate-segmenter",
+            "--sites",
+            str(tmp_path),
+            "--out",
+            str(tmp_path / "out"),
+            "--classes",
+            "curb,kerb",
+        ],
+    )
+    assert result.exit_code == 2 and "unknown class 'kerb'" in result.output, result.output
+    assert not (tmp_path / "out").exists()
