@@ -2,8 +2,8 @@
 
 Randomised tiny sites (`cama_pipeline.synthetic.randomise`) rendered at 512x288 with key frames only (sweeps at the
 sample rate) and 2.5 s moving clips: many layouts and looks for little rendering time. The shipped checkpoint
-(`cama_pipeline/segment/shipped/checkpoint.json` lists every site it saw) trained on seeds 100-111 and held out
-seed 9001 (a measurement seed, which `cama train-segmenter` refuses to train on):
+(`cama_pipeline/segment/shipped/checkpoint.json` lists every site it saw) trained first on seeds 100-111 and held
+out seed 9001 (a measurement seed, which `cama train-segmenter` refuses to train on):
 
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 100-111
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/held-out --seeds 9001
@@ -17,13 +17,25 @@ which it never trained on (its checkpoint.json records v2 as its parent and thes
     .venv/bin/cama calibrate-segmenter --sites data/segmenter/calibrate --checkpoint <shipped-v2> \
         --out data/segmenter/ckpt/shipped-v3 --label shipped-v3
 
-The shipped `refined-cap2` is `shipped-v2` gone on with the full-resolution refinement (README, "Full-resolution
+`refined-cap2` is `shipped-v2` gone on with the full-resolution refinement (README, "Full-resolution
 refinement"), on the same training sites; `<shipped-v2>` is a folder with `shipped-v2`'s `model.pt` and
-`checkpoint.json` as they were at commit 3e376aa (`git show 3e376aa:cama_pipeline/segment/shipped/model.pt`):
+`checkpoint.json` as they were at commit 3e376aa (`git show 3e376aa:cama_pipeline/segment/shipped/model.pt`);
+`refined-cap2` itself is at commit ce3738d:
 
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
         --out data/segmenter/ckpt/refined-cap2 --init <shipped-v2> --full-resolution-width 12 \
         --max-class-weight 2 --epochs 16 --learning-rate 1e-3 --threads 1 --seed 7
+
+The shipped `refined-scale1` is `refined-cap2` gone on for 8 epochs on 24 sites (seeds 100-119 and 123-126;
+120-122 are the calibration sites) with every image at its own scale, so no mask is resampled (README, "Training
+at the images' own scale"):
+
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 112-119
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 123-126
+    .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
+        --out data/segmenter/ckpt/refined-scale1 --init data/segmenter/ckpt/refined-cap2 \
+        --full-resolution-width 12 --max-class-weight 2 --epochs 8 --learning-rate 5e-4 --threads 1 --seed 9 \
+        --scale-range 1 1 --label refined-scale1
 
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """
