@@ -8,7 +8,7 @@ out seed 9001 (a measurement seed, which `cama train-segmenter` refuses to train
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 100-111
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/held-out --seeds 9001
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/segmenter/held-out/r9001 \
-        --out data/segmenter/checkpoint --epochs 22
+        --out data/segmenter/checkpoint --epochs 22 --scale-range 0.7 1.3
 
 `shipped-v3` is `shipped-v2` calibrated (`cama calibrate-segmenter`: one logit offset per class) on seeds 120-122,
 which it never trained on (its checkpoint.json records v2 as its parent and these sites among those it saw):
@@ -24,18 +24,18 @@ refinement"), on the same training sites; `<shipped-v2>` is a folder with `shipp
 
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
         --out data/segmenter/ckpt/refined-cap2 --init <shipped-v2> --full-resolution-width 12 \
-        --max-class-weight 2 --epochs 16 --learning-rate 1e-3 --threads 1 --seed 7
+        --max-class-weight 2 --epochs 16 --learning-rate 1e-3 --threads 1 --seed 7 --scale-range 0.7 1.3
 
 The shipped `refined-scale1` is `refined-cap2` gone on for 8 epochs on 24 sites (seeds 100-119 and 123-126;
 120-122 are the calibration sites) with every image at its own scale, so no mask is resampled (README, "Training
-at the images' own scale"):
+at the images' own scale"); the earlier checkpoints were trained with `--scale-range 0.7 1.3`, the default then:
 
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 112-119
     .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 123-126
     .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
         --out data/segmenter/ckpt/refined-scale1 --init data/segmenter/ckpt/refined-cap2 \
         --full-resolution-width 12 --max-class-weight 2 --epochs 8 --learning-rate 5e-4 --threads 1 --seed 9 \
-        --scale-range 1 1 --label refined-scale1
+        --scale-range 1 1 --label refined-scale1   # (1, 1) is the default now
 
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """

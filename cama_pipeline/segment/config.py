@@ -107,8 +107,11 @@ class TrainConfig:
     learning_rate: float = 3e-3
     """Peak AdamW learning rate (one-cycle schedule)."""
     weight_decay: float = 1e-4
-    scale_range: tuple[float, float] = (0.7, 1.3)
-    """Random rescale of each training image around the input scale, for robustness to image size."""
+    scale_range: tuple[float, float] = (1.0, 1.0)
+    """Random rescale (low, high) of each training image before its crop. (1, 1) keeps the images' own scale: a
+    rescale resamples the mask with nearest neighbour against an interpolated image, which moves thin classes'
+    edges by up to half a pixel per crop (trained with (0.7, 1.3), 9001's lane-marking IoU was 0.62 instead of
+    0.78; README, "Training at the images' own scale"); the network sees every image `input_width_px` wide."""
     max_class_weight: float = 6.0
     """Cross-entropy class weights are inverse square-root frequencies, capped at this."""
     images_per_epoch: int | None = None
