@@ -42,9 +42,10 @@ class CalibrationConfig:
     passes: int = 2
     pixel_stride: int = 4
     classes: tuple[str, ...] = ()
-    """Names of the classes whose offsets are fitted (the others keep 0); empty: every class. The thin road
-    classes alone (`curb`, `lane_marking`, `crosswalk`) undo the class weights' pull without moving classes
-    whose calibration sites differ from the measured ones (night images move ego and vehicle)."""
+    """Names of the classes whose offsets are fitted (the others keep 0); empty: every class. The road classes
+    and background (`background,road,curb,lane_marking,crosswalk`) undo the class weights' pull on the thin ones
+    without moving ego and vehicle, whose calibration images (night ones included) differ from the measured ones:
+    fitting every class of `refined-cap2` cost site 9001's ego 0.935 -> 0.927."""
 
     def __post_init__(self) -> None:
         if not (self.span > 0 and 0 < self.step <= self.span):

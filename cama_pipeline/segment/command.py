@@ -186,8 +186,8 @@ def calibrate_segmenter_command(
     classes: Annotated[
         str,
         typer.Option(
-            help="Comma-separated classes whose offsets are fitted, e.g. curb,lane_marking,crosswalk; the "
-            "others keep 0. Empty: every class."
+            help="Comma-separated classes whose offsets are fitted, e.g. background,road,curb,lane_marking,"
+            "crosswalk; the others keep 0. Empty: every class."
         ),
     ] = "",
 ) -> None:
