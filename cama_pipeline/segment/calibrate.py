@@ -31,6 +31,9 @@ from cama_pipeline.site_identity import site_identity
 
 logger = logging.getLogger(__name__)
 
+CLASS_NAMES = tuple(c.name.lower() for c in IMAGE_CLASSES)
+"""The image classes' names, by class id, as `--classes` and the calibration record spell them."""
+
 
 @dataclass(frozen=True)
 class CalibrationConfig:
@@ -52,15 +55,17 @@ class CalibrationConfig:
             raise ValueError(f"CalibrationConfig: need span > 0 and 0 < step <= span, got {self}")
         if self.passes < 1 or self.pixel_stride < 1:
             raise ValueError(f"CalibrationConfig: passes and pixel_stride must be >= 1, got {self}")
-        names = [c.name.lower() for c in IMAGE_CLASSES]
-        unknown = [name for name in self.classes if name not in names]
+        unknown = [name for name in self.classes if name not in CLASS_NAMES]
         if unknown:
-            raise ValueError(f"CalibrationConfig.classes: unknown class {unknown[0]!r}; choose from {names}")
+            raise ValueError(
+                f"CalibrationConfig.classes: unknown class {unknown[0]!r}; choose from {list(CLASS_NAMES)}"
+            )
 
     def fitted_classes(self) -> list[int]:
         """Indices of the classes whose offsets are fitted."""
-        names = [c.name.lower() for c in IMAGE_CLASSES]
-        return [names.index(name) for name in self.classes] if self.classes else list(range(NUM_CLASSES))
+        return (
+            [CLASS_NAMES.index(name) for name in self.classes] if self.classes else list(range(NUM_CLASSES))
+        )
 
 
 @dataclass(frozen=True)
@@ -207,11 +212,11 @@ def calibration_record(
             "path": str(parent.path),
             "weights_sha256": parent.meta["weights_sha256"],
         },
-        "offsets": {c.name.lower(): round(float(v), 3) for c, v in zip(IMAGE_CLASSES, offsets, strict=True)},
+        "offsets": {name: round(float(v), 3) for name, v in zip(CLASS_NAMES, offsets, strict=True)},
         "sites": [s.to_json() for s in sites],
         "images": images,
         "pixel_stride": config.pixel_stride,
-        "classes_fitted": [IMAGE_CLASSES[i].name.lower() for i in config.fitted_classes()],
+        "classes_fitted": [CLASS_NAMES[i] for i in config.fitted_classes()],
         "before": iou_report(confusion_of(pixels, np.zeros(NUM_CLASSES)), images),
         "after": iou_report(confusion_of(pixels, offsets), images),
         "seconds": round(time.perf_counter() - started, 1),
