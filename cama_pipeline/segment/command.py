@@ -125,6 +125,13 @@ def train_segmenter_command(
             "images' own scale, so no mask is resampled)."
         ),
     ] = TrainConfig().scale_range,
+    paint_fade_max: Annotated[
+        float,
+        typer.Option(
+            help="Extra paint wear: half the crops have their markings faded toward the road by a share drawn "
+            "in [0, this] (0: none)."
+        ),
+    ] = TrainConfig().paint_fade_max,
 ) -> None:
     """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
     checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
@@ -137,6 +144,7 @@ def train_segmenter_command(
             seed=seed,
             max_class_weight=max_class_weight,
             scale_range=scale_range,
+            paint_fade_max=paint_fade_max,
         )
         folder = train(
             config,

@@ -112,6 +112,10 @@ class TrainConfig:
     rescale resamples the mask with nearest neighbour against an interpolated image, which moves thin classes'
     edges by up to half a pixel per crop (trained with (0.7, 1.3), 9001's lane-marking IoU was 0.62 instead of
     0.78; README, "Training at the images' own scale"); the network sees every image `input_width_px` wide."""
+    paint_fade_max: float = 0.0
+    """Extra paint wear: half the training crops have their markings faded toward the surface under them by a
+    share drawn uniformly in [0, paint_fade_max] (`segment.paint_fade`), so that heavily faded paint, which few
+    randomised sites draw, is seen often. 0: none."""
     max_class_weight: float = 6.0
     """Cross-entropy class weights are inverse square-root frequencies, capped at this."""
     images_per_epoch: int | None = None
@@ -129,6 +133,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.weight_decay must be >= 0, got {self.weight_decay!r}")
         if self.crop_height_px % 32 or self.crop_width_px % 32:
             raise ValueError("TrainConfig: crop_height_px and crop_width_px must be multiples of 32")
+        if isinstance(self.paint_fade_max, bool) or not 0.0 <= self.paint_fade_max <= 1.0:
+            raise ValueError(f"TrainConfig.paint_fade_max must be in [0, 1], got {self.paint_fade_max!r}")
         low, high = self.scale_range
         if not 0 < low <= high:
             raise ValueError(f"TrainConfig.scale_range must be 0 < low <= high, got {self.scale_range!r}")

@@ -6,8 +6,8 @@ and never one sharing a seed, layout or location with a held-out site; the check
 saw, so that it can refuse to be scored on one (`checkpoint.ensure_unseen`).
 
 Images are held in memory at the network's input width; each step takes random crops after a random rescale
-and flip, with photometric changes (brightness, contrast, gamma, colour balance, blur, noise) on top of the
-generator's own variety. Loss: class-weighted cross-entropy (inverse square-root frequency, capped) plus a soft
+and flip, with extra paint fade (`segment.paint_fade`) and photometric changes (brightness, contrast, gamma,
+colour balance, blur, noise) on top of the generator's own variety. Loss: class-weighted cross-entropy (inverse square-root frequency, capped) plus a soft
 Dice term for thin classes; AdamW with a one-cycle schedule.
 """
 
@@ -40,6 +40,7 @@ from cama_pipeline.segment.config import (
     TrainConfig,
 )
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet
+from cama_pipeline.segment.paint_fade import fade_paint
 from cama_pipeline.segment.predict import score_held_out, site_images
 from cama_pipeline.site_identity import SeenSiteError, SiteIdentity, site_identity
 
@@ -134,7 +135,8 @@ def class_weights(masks: Sequence[np.ndarray], cap: float) -> torch.Tensor:
 def augment(
     image: np.ndarray, mask: np.ndarray, config: TrainConfig, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A random crop (after a random rescale and flip) with photometric changes; float32 RGB in [0, 1]."""
+    """A random crop (after a random rescale and flip), maybe with its paint faded, with photometric changes;
+    float32 RGB in [0, 1]."""
     scale = float(rng.uniform(*config.scale_range))
     height, width = image.shape[:2]
     size = (max(1, round(width * scale)), max(1, round(height * scale)))
@@ -150,6 +152,8 @@ def augment(
     image, mask = image[y : y + ch, x : x + cw], mask[y : y + ch, x : x + cw]
     if rng.uniform() < 0.5:
         image, mask = image[:, ::-1], mask[:, ::-1]
+    if config.paint_fade_max > 0 and rng.uniform() < 0.5:
+        image = fade_paint(image, mask, float(rng.uniform(0.0, config.paint_fade_max)))
     if rng.uniform() < 0.3:
         image = cv2.GaussianBlur(np.ascontiguousarray(image), (0, 0), float(rng.uniform(0.3, 1.2)))
     rgb = image.astype(np.float32) / 255.0
