@@ -81,6 +81,8 @@ PATH_TOLERANCES = {"proposal_map": 0.05, "elevation_rmse_cm": 1.0, "sre_ref_px":
 """How far the predicted-mask run may fall behind the generator-mask run (issue 23.6)."""
 SECONDS_PER_IMAGE_TARGET = 0.15
 PREDICTED_WORKSPACE = "workspace-predicted-masks"
+"""Prefix of the predicted-mask workspace in the site folder; the checkpoint's digest follows, so that runs of two
+checkpoints on one site (side by side, or one after the other) never share, or race for, one workspace."""
 INSTANCE_CLASSES = (Semantic.LANE_MARKING, Semantic.CROSSWALK)
 
 
@@ -287,7 +289,9 @@ def main() -> None:
     checkpoint = load_checkpoint(args.checkpoint)
     ensure_unseen(checkpoint, site)
     segment = SegmentConfig(checkpoint=checkpoint.path, ego_clip=EgoClipConfig(enabled=not args.no_ego_clip))
-    predicted_workspace = PREDICTED_WORKSPACE + ("-no-ego-clip" if args.no_ego_clip else "")
+    predicted_workspace = f"{PREDICTED_WORKSPACE}-{checkpoint.digest}" + (
+        "-no-ego-clip" if args.no_ego_clip else ""
+    )
     figures: dict[str, Any] = {}
     if not args.skip_pipeline:
         reference_masks = (

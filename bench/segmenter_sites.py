@@ -37,6 +37,16 @@ at the images' own scale"); the earlier checkpoints were trained with `--scale-r
         --full-resolution-width 12 --max-class-weight 2 --epochs 8 --learning-rate 5e-4 --threads 1 --seed 9 \
         --scale-range 1 1 --label refined-scale1   # (1, 1) is the default now
 
+The shipped `scale1-more` is `refined-scale1` gone on for 4 epochs on 38 sites (the 24 above and seeds 127-140),
+seed 11; `scale1-fade` is the same run with extra paint fade (`--paint-fade-max 0.4`), which did not help (README,
+"More sites, and extra paint fade"):
+
+    .venv/bin/python bench/segmenter_sites.py --out data/segmenter/train --seeds 127-140
+    .venv/bin/cama train-segmenter --sites data/segmenter/train --held-out data/synthetic/tiny-random-9001 \
+        --out data/segmenter/ckpt/scale1-more --init data/segmenter/ckpt/refined-scale1 \
+        --full-resolution-width 12 --max-class-weight 2 --epochs 4 --learning-rate 5e-4 --threads 1 --seed 11 \
+        --scale-range 1 1 --label scale1-more   # --out .../scale1-fade --label scale1-fade --paint-fade-max 0.4
+
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """
 

@@ -989,6 +989,28 @@ def test_segmenter_own_scale_tables_and_shipped_checkpoint() -> None:
     assert lane_edges[1] < lane_edges[0]
 
 
+SEGMENT_MORE_SITES_COLUMNS = {
+    f"{site} {label}": (f"segment_sites_{short}_{site}.json", label)
+    for site in ("9002", "9004", "9005", "9006")
+    for short, label in (("scale1", "refined-scale1"), ("more", "scale1-more"), ("fade", "scale1-fade"))
+}
+
+
+def test_segmenter_more_sites_and_paint_fade_table() -> None:
+    """The paint-fade A/B and the 38-site continuation on four sites; the README's reading of it (the fade lowers
+    road everywhere; more sites raise lane marking everywhere) holds, and the shipped checkpoint stayed."""
+    _check_segmenter_columns("class, more sites and paint fade", SEGMENT_MORE_SITES_COLUMNS)
+    for site in ("9002", "9004", "9005", "9006"):
+        iou = {
+            short: results(f"segment_sites_{short}_{site}.json")["segmentation"]["per_class_iou"]
+            for short in ("scale1", "more", "fade")
+        }
+        assert iou["fade"]["road"] < iou["more"]["road"], site
+        assert iou["more"]["lane_marking"] > iou["scale1"]["lane_marking"], site
+    shipped = json.loads((ROOT / "cama_pipeline/segment/shipped/checkpoint.json").read_text(encoding="utf-8"))
+    assert shipped["label"] == "refined-scale1"
+
+
 def test_refinement_end_to_end_table() -> None:
     t = table("end to end, site and refinement", "bench/end_to_end.py")
     for site, suffix in (("default", ""), ("9011", "_9011")):
