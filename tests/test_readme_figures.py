@@ -1011,6 +1011,16 @@ def test_segmenter_more_sites_and_paint_fade_table() -> None:
     assert shipped["label"] == "refined-scale1"
 
 
+def test_segmenter_calibrated_scale1_table() -> None:
+    _check_segmenter_columns(
+        "class, refined-scale1 calibrated",
+        {
+            f"{site} scale1-cal": (f"segment_sites_cal_{site}.json", "scale1-cal")
+            for site in ("9002", "9004", "9005", "9006")
+        },
+    )
+
+
 def test_refinement_end_to_end_table() -> None:
     t = table("end to end, site and refinement", "bench/end_to_end.py")
     for site, suffix in (("default", ""), ("9011", "_9011")):
