@@ -108,10 +108,12 @@ class TrainConfig:
     """Peak AdamW learning rate (one-cycle schedule)."""
     weight_decay: float = 1e-4
     scale_range: tuple[float, float] = (1.0, 1.0)
-    """Random rescale (low, high) of each training image before its crop. (1, 1) keeps the images' own scale: a
-    rescale resamples the mask with nearest neighbour against an interpolated image, which moves thin classes'
-    edges by up to half a pixel per crop (trained with (0.7, 1.3), 9001's lane-marking IoU was 0.62 instead of
-    0.78; README, "Training at the images' own scale"); the network sees every image `input_width_px` wide."""
+    """Random rescale (low, high) of each training image before its crop. (1, 1) keeps the images' own scale, so
+    no mask is resampled; the network sees every image `input_width_px` wide. A rescale resamples each class's
+    share like the image (`train.resize_labels`). The checkpoints trained with (0.7, 1.3) had their masks
+    resampled with nearest neighbour instead, which moved thin classes' edges against the image by up to half a
+    pixel per crop (9001's lane-marking IoU 0.62 instead of 0.78; README, "Training at the images' own scale");
+    a rescale with the share resampling is not measured, so (1, 1) stays the default."""
     paint_fade_max: float = 0.0
     """Extra paint wear: half the training crops have their markings faded toward the surface under them by a
     share drawn uniformly in [0, paint_fade_max] (`segment.paint_fade`), so that heavily faded paint, which few

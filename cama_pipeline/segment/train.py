@@ -103,6 +103,20 @@ def check_training_sites(train: Sequence[Path], held_out: Sequence[Path]) -> lis
     return identities
 
 
+def resize_labels(mask: np.ndarray, size: tuple[int, int], interpolation: int) -> np.ndarray:
+    """`mask` (H, W class ids) resized to `size` (width, height) as its image is: each class's indicator is
+    resampled with the image's `interpolation` and every pixel takes the class with the largest share. Nearest
+    neighbour would move a thin class's edges against the interpolated image by up to half a pixel (README,
+    "Training at the images' own scale")."""
+    classes = np.unique(mask)
+    if classes.size == 1:
+        return np.full((size[1], size[0]), classes[0], dtype=mask.dtype)
+    shares = np.stack(
+        [cv2.resize((mask == c).astype(np.float32), size, interpolation=interpolation) for c in classes]
+    )
+    return classes[shares.argmax(axis=0)].astype(mask.dtype)
+
+
 def load_training_set(sites: Sequence[Path], input_width_px: int) -> TrainingSet:
     """Every camera image of the sites with its semantic mask, rescaled to `input_width_px` wide."""
     images, masks = [], []
@@ -112,7 +126,7 @@ def load_training_set(sites: Sequence[Path], input_width_px: int) -> TrainingSet
             height = max(32, round(rgb.shape[0] * input_width_px / rgb.shape[1]))
             if rgb.shape[1] != input_width_px:
                 rgb = cv2.resize(rgb, (input_width_px, height), interpolation=cv2.INTER_AREA)
-                mask = cv2.resize(mask, (input_width_px, height), interpolation=cv2.INTER_NEAREST)
+                mask = resize_labels(mask, (input_width_px, height), cv2.INTER_AREA)
             images.append(rgb)
             masks.append(mask)
     if not images:
@@ -140,8 +154,9 @@ def augment(
     scale = float(rng.uniform(*config.scale_range))
     height, width = image.shape[:2]
     size = (max(1, round(width * scale)), max(1, round(height * scale)))
-    image = cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
-    mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST)
+    if size != (width, height):
+        image = cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
+        mask = resize_labels(mask, size, cv2.INTER_LINEAR)
     ch, cw = config.crop_height_px, config.crop_width_px
     pad_y, pad_x = max(0, ch - size[1]), max(0, cw - size[0])
     if pad_y or pad_x:

@@ -7,6 +7,7 @@ import json
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -24,7 +25,14 @@ from cama_pipeline.segment.checkpoint import (
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
 from cama_pipeline.segment.predict import score_site, site_images
-from cama_pipeline.segment.train import augment, check_training_sites, initial_network, train
+from cama_pipeline.segment.train import (
+    augment,
+    check_training_sites,
+    initial_network,
+    load_training_set,
+    resize_labels,
+    train,
+)
 from cama_pipeline.site_identity import SeenSiteError, site_identity
 from cama_studio.cli import app
 from tests.conftest import GeneratedSite
@@ -269,6 +277,46 @@ def test_unit_scale_crops_masks_without_resampling_them() -> None:
     _, rescaled = augment(image, mask, dataclasses.replace(config, scale_range=(1.3, 1.3)), rng)
     windows = np.lib.stride_tricks.sliding_window_view(mask, rescaled.shape)
     assert not (windows == rescaled).all(axis=(2, 3)).any()
+
+
+def test_resized_labels_follow_the_interpolated_image() -> None:
+    """A rescaled mask's edge lies where the interpolated image crosses half way between the two sides, for any
+    step position, where nearest neighbour moves it by up to half a pixel."""
+    nearest_misses = 0
+    for step in range(13, 22):
+        image = np.zeros((20, 40, 3), np.uint8)
+        mask = np.zeros((20, 40), np.uint8)
+        image[:, step:], mask[:, step:] = 200, 3
+        for size in ((52, 26), (29, 14)):
+            interpolation = cv2.INTER_LINEAR if size[0] > 40 else cv2.INTER_AREA
+            bright = cv2.resize(image, size, interpolation=interpolation)[..., 0] > 100
+            assert ((resize_labels(mask, size, interpolation) == 3) == bright).all(), (step, size)
+            nearest = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST) == 3
+            nearest_misses += int((nearest != bright).any())
+    assert nearest_misses > 0
+
+
+def test_resized_labels_take_the_majority_class() -> None:
+    """Halving a mask whose 2x2 blocks hold three pixels of one class and one of another keeps the three, where
+    nearest neighbour would keep the top-left one; a one-class mask stays that class."""
+    mask = np.full((8, 12), int(NUM_CLASSES - 1), np.uint8)
+    mask[::2, ::2] = 2
+    halved = resize_labels(mask, (6, 4), cv2.INTER_AREA)
+    assert (halved == NUM_CLASSES - 1).all()
+    assert (cv2.resize(mask, (6, 4), interpolation=cv2.INTER_NEAREST) == 2).all()
+    assert (resize_labels(np.full((8, 12), 4, np.uint8), (5, 3), cv2.INTER_AREA) == 4).all()
+
+
+def test_training_images_narrower_than_the_site_keep_each_class_area(training_site: Path) -> None:
+    """A site wider than the network's input is loaded with its masks resized like its images: every class keeps
+    its share of the pixels."""
+    full = load_training_set([training_site], 256)
+    half = load_training_set([training_site], 128)
+    assert half.masks[0].shape == (72, 128) and half.images[0].shape == (72, 128, 3)
+    for cls in range(NUM_CLASSES):
+        before = np.mean([(m == cls).mean() for m in full.masks])
+        after = np.mean([(m == cls).mean() for m in half.masks])
+        assert abs(after - before) <= 0.2 * before + 1e-3, cls
 
 
 def test_train_segmenter_names_a_bad_scale_range(training_site: Path, tmp_path: Path) -> None:
