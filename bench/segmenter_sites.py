@@ -47,6 +47,9 @@ seed 11; `scale1-fade` is the same run with extra paint fade (`--paint-fade-max 
         --full-resolution-width 12 --max-class-weight 2 --epochs 4 --learning-rate 5e-4 --threads 1 --seed 11 \
         --scale-range 1 1 --label scale1-more   # --out .../scale1-fade --label scale1-fade --paint-fade-max 0.4
 
+`scale1-rescale` is `scale1-more`'s run with the training masks resampled like the images (`train.resize_labels`)
+and a rescale: `--out data/segmenter/ckpt/scale1-rescale --label scale1-rescale --scale-range 0.7 1.3 --threads 2`.
+
 Each site goes to `<out>/r<seed>`; a site already there and up to date is skipped (the generator's own check).
 """
 

@@ -1021,6 +1021,16 @@ def test_segmenter_calibrated_scale1_table() -> None:
     )
 
 
+def test_segmenter_rescale_with_resampled_shares_table() -> None:
+    _check_segmenter_columns(
+        "class, rescale with resampled shares",
+        {
+            f"{site} scale1-rescale": (f"segment_sites_rescale_{site}.json", "scale1-rescale")
+            for site in ("9002", "9004", "9005", "9006")
+        },
+    )
+
+
 def test_refinement_end_to_end_table() -> None:
     t = table("end to end, site and refinement", "bench/end_to_end.py")
     for site, suffix in (("default", ""), ("9011", "_9011")):
