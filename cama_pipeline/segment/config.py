@@ -112,8 +112,9 @@ class TrainConfig:
     no mask is resampled; the network sees every image `input_width_px` wide. A rescale resamples each class's
     share like the image (`train.resize_labels`). The checkpoints trained with (0.7, 1.3) had their masks
     resampled with nearest neighbour instead, which moved thin classes' edges against the image by up to half a
-    pixel per crop (9001's lane-marking IoU 0.62 instead of 0.78; README, "Training at the images' own scale");
-    a rescale with the share resampling is not measured, so (1, 1) stays the default."""
+    pixel per crop (9001's lane-marking IoU 0.62 instead of 0.78; README, "Training at the images' own scale").
+    With the share resampling the rescale still gains nothing (README, "The rescale again"), so (1, 1) stays the
+    default."""
     paint_fade_max: float = 0.0
     """Extra paint wear: half the training crops have their markings faded toward the surface under them by a
     share drawn uniformly in [0, paint_fade_max] (`segment.paint_fade`), so that heavily faded paint, which few

@@ -1,9 +1,10 @@
 """Extra paint wear on a training image: its markings faded toward the surface they are painted on.
 
 The generator draws each site's paint fade uniformly in 0-0.45 (`synthetic.randomise`), so a training set of a
-few dozen sites holds only a handful of heavily faded ones, and a network trained on it under-finds faint
-markings on a site that draws a heavy fade. Fading the paint of a training crop makes more of them, the way the
-generator itself fades paint: the image moves from the paint toward the surface under it by a share `fade`
+few dozen sites holds only a handful of heavily faded ones. Fading the paint of a training crop makes more of
+them (`cama train-segmenter --paint-fade-max`; measured, it did not lift the lane markings of heavily faded
+sites, README "More sites, and extra paint fade", so it is off by default), the way the generator itself fades
+paint: the image moves from the paint toward the surface under it by a share `fade`
 (`synthetic.shading` scales the paint's opacity by 1 - fade). The surface under the paint is not known from the
 image, so it is filled in from the unpainted pixels around (OpenCV's fast-marching inpainting). The mask stays:
 a faded line is still the whole line, as an annotator draws it.

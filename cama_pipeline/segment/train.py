@@ -7,8 +7,8 @@ saw, so that it can refuse to be scored on one (`checkpoint.ensure_unseen`).
 
 Images are held in memory at the network's input width; each step takes random crops after a random rescale
 and flip, with extra paint fade (`segment.paint_fade`) and photometric changes (brightness, contrast, gamma,
-colour balance, blur, noise) on top of the generator's own variety. Loss: class-weighted cross-entropy (inverse square-root frequency, capped) plus a soft
-Dice term for thin classes; AdamW with a one-cycle schedule.
+colour balance, blur, noise) on top of the generator's own variety. Loss: class-weighted cross-entropy (inverse
+square-root frequency, capped) plus a soft Dice term for thin classes; AdamW with a one-cycle schedule.
 """
 
 import dataclasses
