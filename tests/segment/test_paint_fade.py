@@ -58,8 +58,7 @@ def test_bad_fades_and_sizes_are_named() -> None:
 
 def test_augment_fades_paint_but_keeps_the_mask() -> None:
     """With extra fade the crops' masks are still exact crops of the site's mask, and some crops' stripes stand
-    out from the road far less than others (the stripe's contrast with the road, which the photometric changes
-    alter by at most a third)."""
+    out from the road far less than others (measured as the stripe's contrast with the road)."""
     image, mask = _road_with_stripe()
     config = TrainConfig(crop_height_px=32, crop_width_px=64, paint_fade_max=1.0)
     rng = np.random.default_rng(5)
