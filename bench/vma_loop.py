@@ -10,7 +10,8 @@ reconstructions), the scripted annotator (`app.review_effort`, in-memory queue) 
 proposal against the truth and draws what is missing; its verdicts become corrections (accepted / fixed / drawn as
 labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
-both gates (validation mAP and the annotator's correction time on the validation sites, `--val-seeds`). After
+both gates (validation mAP and the annotator's correction time on the validation sites, `--val-seeds`); the
+element-mask network rehearses `--replay-sites` of its own training sites in `--replay-share` of its crops. After
 every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
 sites `--heldout-seeds` (Chamfer mAP clean and damaged, `models.vma.degrade`; the annotator's speed-up over
 drawing on clean rasters) and, for the element-mask network, the surface stage's reconstructed rasters of full
@@ -18,7 +19,7 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only] [--keep-registry DIR]
+       [--steps 300] [--replay-sites 4] [--replay-share 0.5] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
 """
@@ -176,11 +177,20 @@ def promoted_proposer(registry: Path) -> Proposer:
 
 
 def retrain_round(
-    registry: Path, corrections: list[Corrections], validation: list[Path], steps: int
+    registry: Path,
+    corrections: list[Corrections],
+    validation: list[Path],
+    steps: int,
+    replay: tuple[int, float],
 ) -> RetrainResult:
-    """One retraining of the registry's network on corrections, behind both gates."""
+    """One retraining of the registry's network on corrections, behind both gates; the element-mask network
+    rehearses `replay` = (sites, share) of its own training sites."""
     if checkpoint_kind(registry) == MASK_KIND:
-        config = MaskRetrainConfig(train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2))
+        config = MaskRetrainConfig(
+            train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2),
+            replay_sites=replay[0],
+            replay_share=replay[1],
+        )
         return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
     retrain = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4))
     return retrain_from_corrections(registry, corrections, validation, retrain, review=review_time)
@@ -259,6 +269,18 @@ def main() -> None:
         help="synthetic site with `cama run` done, measured on its reconstructed rasters after every round "
         + "(element-mask network; repeatable; default: data/synthetic/default and random-9001)",
     )
+    parser.add_argument(
+        "--replay-sites",
+        type=int,
+        default=MaskRetrainConfig.replay_sites,
+        help="element-mask retraining: how many of the model's own training sites it rehearses (0: none)",
+    )
+    parser.add_argument(
+        "--replay-share",
+        type=float,
+        default=MaskRetrainConfig.replay_share,
+        help="element-mask retraining: the share of crops from the rehearsed sites",
+    )
     parser.add_argument("--propose-on", choices=("clean", "damaged"), default="damaged")
     parser.add_argument("--corrections", choices=("all", "latest"), default="all")
     parser.add_argument("--site-root", type=Path, default=Path("data/vma/loop"))
@@ -317,7 +339,9 @@ def main() -> None:
             round_started = time.perf_counter()
             corrections, review_counts = corrections_of(site, propose_on(promoted_proposer(registry)))
             corrected = [*corrected, corrections] if args.corrections == "all" else [corrections]
-            result = retrain_round(registry, corrected, validation, args.steps)
+            result = retrain_round(
+                registry, corrected, validation, args.steps, (args.replay_sites, args.replay_share)
+            )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
                 {
@@ -352,6 +376,7 @@ def main() -> None:
         + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
         + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} "
         + "".join(f"--recon-site {s} " for s in recon)
+        + f"--replay-sites {args.replay_sites} --replay-share {args.replay_share} "
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,
         "rule_based": rule,

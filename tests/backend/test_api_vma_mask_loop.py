@@ -88,4 +88,15 @@ def test_retrain_fine_tunes_the_element_mask_network(
     assert checkpoint_kind(candidate) == KIND and outcome["labels"] == 1
     meta = json.loads((candidate / "checkpoint.json").read_text())
     assert meta["train_config"]["steps"] == TINY_RETRAIN["steps"] and len(meta["data"]["corrections"]) == 1
+    # it rehearsed four of the shipped network's own training sites (the job's default share)
+    assert meta["replay"]["share"] == 0.5 and len(meta["replay"]["sites"]) == 4
     assert "validation mAP" in done["message"] and "simulated annotator" in done["message"]
+
+
+@pytest.mark.parametrize("share", [1.0, -0.5])
+def test_a_replay_share_outside_0_to_1_is_refused_with_the_field_named(
+    client: TestClient, headers: Headers, site_id: int, share: float
+) -> None:
+    body = {"kind": "retrain", "params": {"replay_share": share}}
+    response = client.post(f"/api/sites/{site_id}/jobs", json=body, headers=headers["lead"])
+    assert response.status_code == 422 and "replay_share" in response.text

@@ -89,7 +89,8 @@ def test_a_retrain_moves_boundaries_to_the_corrected_convention_on_another_site(
     val = bev_sites["val"]
     before = predict_site_masks(load_mask_checkpoint(registry).model, load_site_rasters(val))
     config = MaskRetrainConfig(
-        train=MaskTrainConfig(steps=150, batch_size=4, crop_px=96, learning_rate=1e-3, damaged_copies=1)
+        train=MaskTrainConfig(steps=150, batch_size=4, crop_px=96, learning_rate=1e-3, damaged_copies=1),
+        replay_share=0.0,  # the corrections alone: rehearsing the generator's convention slows this down
     )
     result = retrain_masks_from_corrections(
         registry,
@@ -108,13 +109,15 @@ def test_a_retrain_moves_boundaries_to_the_corrected_convention_on_another_site(
         meta_data["labels"] == result.labels > 0
         and str(Path(bev_sites["train"]).absolute()) in meta_data["seen_folders"]
     )
+    assert load_mask_checkpoint(result.candidate).meta["replay"] == {"sites": [], "share": 0.0}
 
 
 @pytest.mark.slow
 def test_the_gate_keeps_a_worse_candidate_out(bev_sites: dict[str, Path], registry: Path) -> None:
     promoted_before = current_version(registry)
     config = MaskRetrainConfig(
-        train=MaskTrainConfig(steps=20, batch_size=2, crop_px=64, learning_rate=5.0, damaged_copies=0)
+        train=MaskTrainConfig(steps=20, batch_size=2, crop_px=64, learning_rate=5.0, damaged_copies=0),
+        replay_sites=0,
     )
     truth = read_vectors(vector_map_of(bev_sites["train"]))
     result = retrain_masks_from_corrections(

@@ -77,6 +77,14 @@ class RetrainParams(BaseModel):
         le=1.0,
         description="Annotator gate: promote when the correction time <= current * (1 + this).",
     )
+    replay_share: float = Field(
+        default=0.5,
+        ge=0.0,
+        lt=1.0,
+        description="Element-mask network: the share of fine-tuning crops cut from a few of its own training "
+        "sites (rehearsal, so it does not forget them); lower it when the team's drawing conventions differ "
+        "from the model's and should win sooner.",
+    )
 
 
 class RefreshParams(BaseModel):
@@ -147,6 +155,7 @@ def _retrain_child(
     validation: list[Path],
     config: "RetrainConfig",
     annotator_gate: bool,
+    replay_share: float,
     out: Path,
 ) -> None:
     """Child process body: retrain the registry's network (the MapTR-style model or the element-mask network,
@@ -169,7 +178,13 @@ def _retrain_child(
                 learning_rate=config.train.learning_rate,
                 damaged_copies=2,
             )
-            mask_config = MaskRetrainConfig(train, config.tolerance, config.time_tolerance, config.min_labels)
+            mask_config = MaskRetrainConfig(
+                train,
+                config.tolerance,
+                config.time_tolerance,
+                config.min_labels,
+                replay_share=replay_share,
+            )
             result = retrain_masks_from_corrections(
                 registry, corrections, validation, mask_config, review=review
             )
@@ -270,7 +285,14 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
         time_tolerance=params.time_tolerance,
     )
     validation = list(settings.vma_validation_sites)
-    args = (settings.vma_registry, corrections, validation, config, params.annotator_gate)
+    args = (
+        settings.vma_registry,
+        corrections,
+        validation,
+        config,
+        params.annotator_gate,
+        params.replay_share,
+    )
     out = context.workdir / RETRAIN_FILE
     outcome = _run_child(context, args, out)
     message = _gate_message(outcome)

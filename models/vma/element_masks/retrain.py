@@ -5,7 +5,8 @@ fixed line teaches the network where the line really is; rejected proposals are 
 them too, where the targets say nothing is there. Crops are centred on labelled and rejected elements (unreviewed
 elements inside a crop count as background, so correction batches should cover whole regions, as for the
 MapTR-style model). The promoted version is fine-tuned at a low rate on the corrected sites' clean and damaged
-rasters; candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
+rasters, with `replay_share` of the crops cut from a few of its own generator training sites (`replay`: without
+them later rounds forgot what the first model knew); candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
 annotator time when given); the candidate is saved either way with what it saw and promoted only if both gates
 pass (`models.vma.retrain.gate_passes`).
 """
@@ -22,6 +23,7 @@ from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.replay import replay_sites
 from models.vma.element_masks.train import fit_masks, training_site
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import SiteRasters, load_site_rasters
@@ -37,6 +39,9 @@ from models.vma.retrain import (
 )
 from models.vma.train import DAMAGE_SEED_BASE
 from models.vma.vectors import Vector, vectors_from_annotations
+
+REPLAY_FOLDER = "replay-sites"
+"""The registry's cache of the generator sites its versions rehearse (`replay`)."""
 
 
 @dataclass(frozen=True)
@@ -54,12 +59,20 @@ class MaskRetrainConfig:
     context_m: float = 10.0
     """Half the crops are centred on road cells within this distance of the reviewed elements (the rest on the
     elements): without them the network forgets that most road between elements holds nothing to draw."""
+    replay_sites: int = 4
+    """How many of the promoted version's own generator training sites are rehearsed (`replay`); 0: none."""
+    replay_share: float = 0.5
+    """The share of training crops cut from the rehearsed sites (the rest from the corrected sites)."""
 
     def __post_init__(self) -> None:
         if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1 or self.context_m < 0:
             raise ValueError(
                 "MaskRetrainConfig: tolerance, time_tolerance and context_m >= 0 and min_labels >= 1 required"
             )
+        if self.replay_sites < 0:
+            raise ValueError(f"MaskRetrainConfig.replay_sites must be >= 0, got {self.replay_sites}")
+        if not 0.0 <= self.replay_share < 1.0:
+            raise ValueError(f"MaskRetrainConfig.replay_share must be in [0, 1), got {self.replay_share}")
 
 
 def evaluate_mask_model(
@@ -83,10 +96,12 @@ def retrain_masks_from_corrections(
     config: MaskRetrainConfig | None = None,
     *,
     review: ReviewGate | None = None,
+    replay_root: Path | None = None,
     show_progress: bool = False,
 ) -> RetrainResult:
-    """Fine-tune the promoted element-mask version of `registry` on corrections; save the candidate; promote it
-    if the gates pass."""
+    """Fine-tune the promoted element-mask version of `registry` on corrections, rehearsing some of its own
+    training sites (made again under `replay_root`, default `<registry>/replay-sites`); save the candidate;
+    promote it if the gates pass."""
     config = config or MaskRetrainConfig()
     started = time.perf_counter()
     current = load_mask_checkpoint(Path(registry))
@@ -117,8 +132,29 @@ def retrain_masks_from_corrections(
             f"retrain: {num_labels} accepted/fixed annotations, need at least {config.min_labels}"
         )
     current_metrics = evaluate_mask_model(current.model, validation_sites, review)
+    rehearsed = (
+        replay_sites(
+            current,
+            replay_root or Path(registry) / REPLAY_FOLDER,
+            config.replay_sites,
+            current.model.config,
+            config.train.damaged_copies,
+            config.train.seed,
+        )
+        if config.replay_share > 0
+        else []
+    )
+    weights = [(1.0 - config.replay_share) / len(prepared)] * len(prepared) + [
+        config.replay_share / max(len(rehearsed), 1)
+    ] * len(rehearsed)
     candidate = load_mask_checkpoint(current.path).model  # a fresh copy to fine-tune
-    fit_masks(candidate, prepared, config.train, show_progress=show_progress)
+    fit_masks(
+        candidate,
+        [*prepared, *rehearsed],
+        config.train,
+        site_weights=weights if rehearsed else None,
+        show_progress=show_progress,
+    )
     candidate.cpu()
     candidate_metrics = evaluate_mask_model(candidate, validation_sites, review)
     promoted = gate_passes(current_metrics, candidate_metrics, config)
@@ -137,5 +173,5 @@ def retrain_masks_from_corrections(
         current_metrics,
         candidate_metrics,
         promoted,
-        {"kind": KIND},
+        {"kind": KIND, "replay": {"sites": [site.name for site in rehearsed], "share": config.replay_share}},
     )

@@ -10,7 +10,7 @@ just vectors, so the same `fit` trains a model from scratch and fine-tunes it on
 """
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -234,16 +234,20 @@ def fit_masks(
     sites: Sequence[MaskTrainingSite],
     config: MaskTrainConfig,
     *,
+    site_weights: Sequence[float] | None = None,
     show_progress: bool = True,
 ) -> list[float]:
-    """Train `model` in place for `config.steps` batches or `config.max_seconds`; returns each step's loss."""
+    """Train `model` in place for `config.steps` batches or `config.max_seconds`; returns each step's loss.
+    Each crop comes from a site drawn with `site_weights` (relative; default: every site alike, drawn as before
+    weights existed, so earlier seeded runs repeat exactly)."""
     if not sites:
         raise ValueError("element-mask training: no training site")
+    draw_site = site_drawer(len(sites), site_weights)
 
     def batch_loss(rng: np.random.Generator, device: torch.device) -> tuple[torch.Tensor, str]:
         crops = [
             random_crop(
-                sites[int(rng.integers(len(sites)))],
+                sites[draw_site(rng)],
                 config.crop_px,
                 config.unobserved_share,
                 rng,
@@ -256,6 +260,20 @@ def fit_masks(
         return mask_loss(model(images), targets), ""
 
     return optimise(model, batch_loss, config, label="element-mask training", show_progress=show_progress)
+
+
+def site_drawer(count: int, weights: Sequence[float] | None) -> Callable[[np.random.Generator], int]:
+    """A function drawing a site index: uniformly, or by relative `weights` (ValueError when they are not
+    `count` non-negative numbers with a positive sum)."""
+    if weights is None:
+        return lambda rng: int(rng.integers(count))
+    relative = np.asarray(weights, dtype=np.float64)
+    if relative.shape != (count,) or not np.all(relative >= 0) or not relative.sum() > 0:
+        raise ValueError(
+            f"element-mask training: site_weights must be {count} non-negative numbers, not all 0"
+        )
+    probabilities = relative / relative.sum()
+    return lambda rng: int(rng.choice(count, p=probabilities))
 
 
 def train_masks(
