@@ -738,6 +738,42 @@ def test_element_mask_loop_from_a_first_model_table() -> None:
     assert "--bootstrap-seeds" in recorded["command"]
 
 
+REHEARSAL_RUNS = {
+    "none, 4000-4002": "vma_loop_masks_no_replay.json",
+    "4 sites at 0.5, 4000-4002": "vma_loop_masks_replay.json",
+    "none, 4003-4005": "vma_loop_masks_4003_replay0.json",
+    "4 sites at 0.5, 4003-4005": "vma_loop_masks_4003_replay4.json",
+}
+
+
+def test_loop_with_and_without_rehearsal_table() -> None:
+    """Each run's promoted version after rounds 1-3, its round-2 candidate's gate figures (validation mAP and
+    correction seconds, candidate then current), and the held-out and reconstructed figures after round 3."""
+    t = table("rehearsal, new sites")
+    for label, results_file in REHEARSAL_RUNS.items():
+        assert f"bench/results/{results_file}" in t.context and "bench/vma_loop.py" in t.context
+        recorded = results(results_file)
+        replay_sites = 0 if label.startswith("none") else 4
+        assert f"--replay-sites {replay_sites} --replay-share 0.5" in recorded["command"]
+        assert f"--new-seeds {label.split(', ')[1]}" in recorded["command"]
+        cells = row(t, label)
+        rounds = recorded["rounds"]
+        assert cells[1].split(" / ") == [r["heldout"]["version"] for r in rounds[1:]], label
+        gate = rounds[2]["gate"]
+        assert_shows(
+            cells[2],
+            [
+                gate["candidate"]["mean_ap"],
+                gate["candidate"]["review"]["correction_s"],
+                gate["current"]["mean_ap"],
+                gate["current"]["review"]["correction_s"],
+            ],
+            f"{label} round-2 gate",
+        )
+        assert_shows(cells[3], _loop_figures(rounds[-1]["heldout"]), f"{label} held-out")
+        assert_shows(cells[4], _reconstructed_figures(rounds[-1]["heldout"]), f"{label} reconstructed")
+
+
 VMA_APPEARANCE_SITES = {
     "default": "data/synthetic/default",
     "9001": "data/synthetic/random-9001",

@@ -80,7 +80,7 @@ def test_retrain_fine_tunes_the_element_mask_network(
         client, headers, site_id, [{"class": "divider", "points": [[5.0, DIVIDER_Y], [95.0, DIVIDER_Y]]}]
     )
     review(client, headers, site_id, drawn[0], "fixed", "annotator")
-    job = submit(client, headers, site_id, "retrain", **TINY_RETRAIN)
+    job = submit(client, headers, site_id, "retrain", **TINY_RETRAIN, replay_share=0.5)
     done = wait_for(client, headers, job["id"], {"succeeded", "failed"}, HANG_S)
     assert done["state"] == "succeeded", done["message"]
     outcome = json.loads(client.get(done["download_url"], headers=headers["lead"]).content)
@@ -88,7 +88,7 @@ def test_retrain_fine_tunes_the_element_mask_network(
     assert checkpoint_kind(candidate) == KIND and outcome["labels"] == 1
     meta = json.loads((candidate / "checkpoint.json").read_text())
     assert meta["train_config"]["steps"] == TINY_RETRAIN["steps"] and len(meta["data"]["corrections"]) == 1
-    # it rehearsed four of the shipped network's own training sites (the job's default share)
+    # it rehearsed four of the shipped network's own training sites
     assert meta["replay"]["share"] == 0.5 and len(meta["replay"]["sites"]) == 4
     assert "validation mAP" in done["message"] and "simulated annotator" in done["message"]
 

@@ -89,8 +89,7 @@ def test_a_retrain_moves_boundaries_to_the_corrected_convention_on_another_site(
     val = bev_sites["val"]
     before = predict_site_masks(load_mask_checkpoint(registry).model, load_site_rasters(val))
     config = MaskRetrainConfig(
-        train=MaskTrainConfig(steps=150, batch_size=4, crop_px=96, learning_rate=1e-3, damaged_copies=1),
-        replay_share=0.0,  # the corrections alone: rehearsing the generator's convention slows this down
+        train=MaskTrainConfig(steps=150, batch_size=4, crop_px=96, learning_rate=1e-3, damaged_copies=1)
     )
     result = retrain_masks_from_corrections(
         registry,

@@ -78,12 +78,12 @@ class RetrainParams(BaseModel):
         description="Annotator gate: promote when the correction time <= current * (1 + this).",
     )
     replay_share: float = Field(
-        default=0.5,
+        default=0.0,
         ge=0.0,
         lt=1.0,
         description="Element-mask network: the share of fine-tuning crops cut from a few of its own training "
-        "sites (rehearsal, so it does not forget them); lower it when the team's drawing conventions differ "
-        "from the model's and should win sooner.",
+        "sites (rehearsal, so it does not forget them; 0: none). It slows the adoption of a team's own "
+        "drawing conventions where they differ from the model's.",
     )
 
 

@@ -5,8 +5,8 @@ fixed line teaches the network where the line really is; rejected proposals are 
 them too, where the targets say nothing is there. Crops are centred on labelled and rejected elements (unreviewed
 elements inside a crop count as background, so correction batches should cover whole regions, as for the
 MapTR-style model). The promoted version is fine-tuned at a low rate on the corrected sites' clean and damaged
-rasters, with `replay_share` of the crops cut from a few of its own generator training sites (`replay`: without
-them later rounds forgot what the first model knew); candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
+rasters, optionally with `replay_share` of the crops cut from a few of its own generator training sites
+(`replay`, rehearsal against forgetting what the first model knew); candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
 annotator time when given); the candidate is saved either way with what it saw and promoted only if both gates
 pass (`models.vma.retrain.gate_passes`).
 """
@@ -61,8 +61,10 @@ class MaskRetrainConfig:
     elements): without them the network forgets that most road between elements holds nothing to draw."""
     replay_sites: int = 4
     """How many of the promoted version's own generator training sites are rehearsed (`replay`); 0: none."""
-    replay_share: float = 0.5
-    """The share of training crops cut from the rehearsed sites (the rest from the corrected sites)."""
+    replay_share: float = 0.0
+    """The share of training crops cut from the rehearsed sites (the rest from the corrected sites); off by
+    default: in the loop bench it helped the held-out BEV sites and hurt the annotator on the reconstructed one
+    (README, "Rehearsal while retraining")."""
 
     def __post_init__(self) -> None:
         if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1 or self.context_m < 0:
