@@ -19,7 +19,8 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--replay-sites 4] [--replay-share 0.5] [--threads 2] [--out bench/results/vma_loop.json] [--plot-only] [--keep-registry DIR]
+       [--steps 300] [--replay-sites 4] [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
+       [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
 """

@@ -7,10 +7,12 @@ validation sites (mAP 0.984 -> 0.979, the annotator's time 308 -> 338 s). Mixing
 training data into every batch (rehearsal, as continual learning does) is meant to keep what it knew while the
 corrections move it. Measured (README, "Rehearsal while retraining"): after three rounds the held-out BEV sites
 gain with it on both sets of new sites tried, the annotator on the one reconstructed site loses, so
-`MaskRetrainConfig.replay_share` is 0 by default. The BEV-only generator sites a version trained on are named in its `data.seen_sites` by preset and
-seed, so they are written again (`models.vma.bev_sites`, deterministic, about 10 s each) under a cache folder;
-a site whose regenerated config no longer matches the recorded one (the generator changed since) is skipped
-with a warning rather than replayed as something the version never saw.
+`MaskRetrainConfig.replay_share` is 0 by default.
+
+The BEV-only generator sites a version trained on are named in its `data.seen_sites` by preset and seed, so they
+are written again (`models.vma.bev_sites`, deterministic, about 10 s each) under a cache folder; a site whose
+regenerated config no longer matches the recorded one (the generator changed since) is skipped with a warning
+rather than replayed as something the version never saw.
 """
 
 import logging

@@ -6,9 +6,9 @@ them too, where the targets say nothing is there. Crops are centred on labelled 
 elements inside a crop count as background, so correction batches should cover whole regions, as for the
 MapTR-style model). The promoted version is fine-tuned at a low rate on the corrected sites' clean and damaged
 rasters, optionally with `replay_share` of the crops cut from a few of its own generator training sites
-(`replay`, rehearsal against forgetting what the first model knew); candidate and current are scored on held-out validation sites (Chamfer-AP, and the `review` gate's
-annotator time when given); the candidate is saved either way with what it saw and promoted only if both gates
-pass (`models.vma.retrain.gate_passes`).
+(`replay`, rehearsal against forgetting what the first model knew); candidate and current are scored on
+held-out validation sites (Chamfer-AP, and the `review` gate's annotator time when given); the candidate is
+saved either way with what it saw and promoted only if both gates pass (`models.vma.retrain.gate_passes`).
 """
 
 import time
@@ -98,12 +98,11 @@ def retrain_masks_from_corrections(
     config: MaskRetrainConfig | None = None,
     *,
     review: ReviewGate | None = None,
-    replay_root: Path | None = None,
     show_progress: bool = False,
 ) -> RetrainResult:
-    """Fine-tune the promoted element-mask version of `registry` on corrections, rehearsing some of its own
-    training sites (made again under `replay_root`, default `<registry>/replay-sites`); save the candidate;
-    promote it if the gates pass."""
+    """Fine-tune the promoted element-mask version of `registry` on corrections (with `config.replay_share` > 0
+    rehearsing some of its own training sites, made again under `<registry>/replay-sites`); save the
+    candidate; promote it if the gates pass."""
     config = config or MaskRetrainConfig()
     started = time.perf_counter()
     current = load_mask_checkpoint(Path(registry))
@@ -137,7 +136,7 @@ def retrain_masks_from_corrections(
     rehearsed = (
         replay_sites(
             current,
-            replay_root or Path(registry) / REPLAY_FOLDER,
+            Path(registry) / REPLAY_FOLDER,
             config.replay_sites,
             current.model.config,
             config.train.damaged_copies,
