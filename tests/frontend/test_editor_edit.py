@@ -63,6 +63,32 @@ def test_insert_then_delete_a_vertex(page: Page, seeded: SeededServer) -> None:
     assert [p[1] for p in removed["points"]] == [66.0, 66.0, 66.0]
 
 
+SLOW_PATCH = """
+const send = window.fetch.bind(window);
+window.fetch = (input, init) =>
+  init && init.method === "PATCH"
+    ? new Promise((resolve) => setTimeout(resolve, 1500)).then(() => send(input, init))
+    : send(input, init);
+"""
+"""Every PATCH leaves the page 1.5 s late, as on a loaded server."""
+
+
+def test_a_vertex_deleted_while_its_insertion_is_still_saving_is_deleted(
+    page: Page, seeded: SeededServer
+) -> None:
+    element = divider_at(seeded, 20.0, 66.0)
+    page.add_init_script(SLOW_PATCH)
+    open_on(page, seeded, element)
+    drag(page, page_xy(page, 22.5, 66.0), page_xy(page, 22.5, 65.0))
+    page.wait_for_timeout(300)  # the drag has ended; its save is still on its way
+    assert seeded.element(element["id"])["version"] == element["version"]
+    page.keyboard.down("Alt")
+    page.mouse.click(*page_xy(page, 22.5, 65.0))
+    page.keyboard.up("Alt")
+    removed = seeded.wait_element(element["id"], lambda e: e["version"] == element["version"] + 2)
+    assert [p[1] for p in removed["points"]] == [66.0, 66.0, 66.0]
+
+
 def test_draw_a_new_divider(page: Page, seeded: SeededServer) -> None:
     open_editor(page, seeded)
     centre_on(page, 100.0, 70.0, RES_M)

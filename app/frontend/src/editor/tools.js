@@ -70,6 +70,11 @@ export class Tools extends EventTarget {
       deleteCondition: (event) => altKeyOnly(event) && singleClick(event),
     });
     this.snap = new Snap({ source: elementLayer.getSource(), pixelTolerance: 10 });
+    /** @type {Map<number, number[][]>} each feature's points when the current Modify gesture began */
+    this.beforeModify = new Map();
+    this.modify.on("modifystart", (event) => {
+      this.beforeModify = new Map(event.features.getArray().map((f) => [/** @type {number} */ (f.getId()), pointsOf(f)]));
+    });
     this.modify.on("modifyend", (event) => this.saveModified(event.features.getArray()));
     this.select.on("select", () => this.emit("selection"));
     map.addInteraction(this.select);
@@ -94,19 +99,27 @@ export class Tools extends EventTarget {
     this.emit("selection");
   }
 
-  /** Save the geometry of features the Modify interaction changed, named by what happened to the vertices. */
+  /**
+   * Save the geometry of features the Modify interaction changed, named by what happened to the vertices. The
+   * change is judged against the feature as the gesture found it, not against the server's last answer: while an
+   * earlier edit of the element is still being saved, that answer is one edit behind (an Alt-click deleting the
+   * vertex just dragged in would otherwise look like no change and be lost).
+   */
   saveModified(features) {
     const steps = [];
     let delta = 0;
     for (const feature of features) {
-      const element = this.store.get(/** @type {number} */ (feature.getId()));
+      const id = /** @type {number} */ (feature.getId());
+      const element = this.store.get(id);
+      if (!element) continue;
+      const before = this.beforeModify.get(id) || element.points;
       const points = pointsOf(feature);
-      if (!element || samePoints(points, element.points)) continue;
-      if (onlyClickInserts(points, element.points)) {
+      if (samePoints(points, before)) continue;
+      if (onlyClickInserts(points, before)) {
         this.store.upsert(element);
         continue;
       }
-      delta += points.length - element.points.length;
+      delta += points.length - before.length;
       steps.push({ op: "update", id: element.id, body: { points } });
     }
     if (!steps.length) return;
