@@ -751,7 +751,7 @@ def test_loop_with_and_without_rehearsal_table() -> None:
     correction seconds, candidate then current), and the held-out and reconstructed figures after round 3."""
     t = table("rehearsal, new sites")
     for label, results_file in REHEARSAL_RUNS.items():
-        assert f"bench/results/{results_file}" in t.context and "bench/vma_loop.py" in t.context
+        assert_names_source(t, results_file, "bench/vma_loop.py")
         recorded = results(results_file)
         replay_sites = 0 if label.startswith("none") else 4
         assert f"--replay-sites {replay_sites} --replay-share 0.5" in recorded["command"]

@@ -145,15 +145,18 @@ def retrain_masks_from_corrections(
         if config.replay_share > 0
         else []
     )
-    weights = [(1.0 - config.replay_share) / len(prepared)] * len(prepared) + [
-        config.replay_share / max(len(rehearsed), 1)
-    ] * len(rehearsed)
+    share = config.replay_share
+    weights = (
+        [(1.0 - share) / len(prepared)] * len(prepared) + [share / len(rehearsed)] * len(rehearsed)
+        if rehearsed
+        else None
+    )
     candidate = load_mask_checkpoint(current.path).model  # a fresh copy to fine-tune
     fit_masks(
         candidate,
         [*prepared, *rehearsed],
         config.train,
-        site_weights=weights if rehearsed else None,
+        site_weights=weights,
         show_progress=show_progress,
     )
     candidate.cpu()
