@@ -91,6 +91,40 @@ def test_a_vertex_deleted_while_its_insertion_is_still_saving_is_deleted(
     assert [p[1] for p in removed["points"]] == [58.0, 58.0, 58.0]
 
 
+LATE_SINGLE_CLICK = """
+const schedule = window.setTimeout.bind(window);
+window.setTimeout = (handler, delay, ...args) => schedule(handler, delay === 250 ? 20000 : delay, ...args);
+"""
+"""OpenLayers' 250 ms single-click timer fires 20 s late, as on a page kept busy: every later click pairs with the
+one before it into a double click."""
+
+
+def test_an_alt_click_paired_into_a_double_click_still_deletes(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 5.0, 50.0)  # a place of its own
+    page.add_init_script(LATE_SINGLE_CLICK)
+    open_on(page, seeded, element)  # the selecting click's single-click timer is still pending ...
+    drag(page, page_xy(page, 7.5, 50.0), page_xy(page, 7.5, 49.0))
+    seeded.wait_element(element["id"], lambda e: len(e["points"]) == 4)
+    page.keyboard.down("Alt")
+    page.mouse.click(*page_xy(page, 7.5, 49.0))  # ... so this click is the second of a double click
+    page.keyboard.up("Alt")
+    removed = seeded.wait_element(element["id"], lambda e: len(e["points"]) == 3)
+    assert [p[1] for p in removed["points"]] == [50.0, 50.0, 50.0]
+
+
+def test_an_alt_click_on_a_segment_changes_nothing(page: Page, seeded: SeededServer) -> None:
+    element = divider_at(seeded, 5.0, 46.0)
+    page.add_init_script(LATE_SINGLE_CLICK)
+    open_on(page, seeded, element)
+    page.keyboard.down("Alt")
+    for x in (11.0, 12.5):  # the second click pairs with the first into a double click
+        page.mouse.click(*page_xy(page, x, 46.0))
+    page.keyboard.up("Alt")
+    drag(page, page_xy(page, 13.5, 46.0), page_xy(page, 13.5, 47.0))  # the line still answers edits
+    moved = seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
+    assert len(moved["points"]) == 4 and near(moved["points"][2], (13.5, 47.0)), moved["points"]
+
+
 def test_draw_a_new_divider(page: Page, seeded: SeededServer) -> None:
     open_editor(page, seeded)
     centre_on(page, 100.0, 70.0, RES_M)

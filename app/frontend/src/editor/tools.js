@@ -4,7 +4,7 @@ import Draw from "ol/interaction/Draw.js";
 import Modify from "ol/interaction/Modify.js";
 import Select from "ol/interaction/Select.js";
 import Snap from "ol/interaction/Snap.js";
-import { altKeyOnly, click, shiftKeyOnly, singleClick } from "ol/events/condition.js";
+import { altKeyOnly, click, doubleClick, shiftKeyOnly, singleClick } from "ol/events/condition.js";
 import { pointsOf, samePoints } from "./elements.js";
 import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
 import { Stroke, Style, Circle, Fill } from "ol/style.js";
@@ -30,6 +30,18 @@ export function onlyClickInserts(points, old) {
     return isOld || i === 0 || i === points.length - 1 || segmentDistance(p, points[i - 1], points[i + 1]) > CLICK_INSERT_TOLERANCE_M;
   });
   return samePoints(kept, old);
+}
+
+/**
+ * Alt-click deletes a vertex. OpenLayers calls a click "single" only when no second click follows within 250 ms,
+ * and pairs any two clicks in that window into a "double" one, even with a drag between them: the click that
+ * selected a line, a quick vertex drag and an Alt-click come out as a double click when the page is busy, and the
+ * deletion was lost. So an Alt double click deletes too. An Alt press never inserts a vertex (see the Modify's
+ * insertVertexCondition), so there is no just-inserted vertex for it to remove.
+ * @param {import("ol/MapBrowserEvent.js").default} event
+ */
+function altClickDeletes(event) {
+  return altKeyOnly(event) && (singleClick(event) || doubleClick(event));
 }
 
 /** The sketch style while drawing a class. */
@@ -67,7 +79,8 @@ export class Tools extends EventTarget {
     this.modify = new Modify({
       features: this.select.getFeatures(),
       pixelTolerance: 10,
-      deleteCondition: (event) => altKeyOnly(event) && singleClick(event),
+      deleteCondition: altClickDeletes,
+      insertVertexCondition: (event) => !altKeyOnly(event),
     });
     this.snap = new Snap({ source: elementLayer.getSource(), pixelTolerance: 10 });
     /** @type {Map<number, number[][]>} each feature's points when the current Modify gesture began */
