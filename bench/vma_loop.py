@@ -10,7 +10,8 @@ reconstructions), the scripted annotator (`app.review_effort`, in-memory queue) 
 proposal against the truth and draws what is missing; its verdicts become corrections (accepted / fixed / drawn as
 labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
-both gates (validation mAP and the annotator's correction time on the validation sites, `--val-seeds`); the
+both gates (validation mAP and the annotator's correction time on the validation sites: BEV sites `--val-seeds`
+and the reconstructions of `--gate-recon-site`, as a server's CAMA_VMA_VALIDATION_RECONSTRUCTED gates); the
 element-mask network rehearses `--replay-sites` of its own training sites in `--replay-share` of its crops. After
 every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
 sites `--heldout-seeds` (Chamfer mAP clean and damaged, `models.vma.degrade`; the annotator's speed-up over
@@ -19,7 +20,8 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--replay-sites 4] [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
+       [--steps 300] [--val-seeds A-B] [--gate-recon-site SITE] [--recon-site SITE] [--replay-sites 4]
+       [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -76,6 +78,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
+from models.vma.validation import ValidationEntry, reconstruction_of  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 Proposer = Callable[[SiteRasters], list[Vector]]
@@ -180,7 +183,7 @@ def promoted_proposer(registry: Path) -> Proposer:
 def retrain_round(
     registry: Path,
     corrections: list[Corrections],
-    validation: list[Path],
+    validation: list[ValidationEntry],
     steps: int,
     replay: tuple[int, float],
 ) -> RetrainResult:
@@ -271,6 +274,14 @@ def main() -> None:
         + "(element-mask network; repeatable; default: data/synthetic/default and random-9001)",
     )
     parser.add_argument(
+        "--gate-recon-site",
+        type=Path,
+        action="append",
+        default=[],
+        help="synthetic site with `cama run` done that the gate scores on its reconstructed rasters, beside the "
+        + "--val-seeds BEV sites ('' for none); repeatable; never one of --recon-site",
+    )
+    parser.add_argument(
         "--replay-sites",
         type=int,
         default=MaskRetrainConfig.replay_sites,
@@ -310,13 +321,21 @@ def main() -> None:
     validation = ensure_bev_sites(seed_range(args.val_seeds), args.site_root)
     heldout = ensure_bev_sites(seed_range(args.heldout_seeds), args.site_root)
     recon = args.recon_site or [Path("data/synthetic/default"), Path("data/synthetic/random-9001")]
+    if set(map(Path.resolve, args.gate_recon_site)) & set(map(Path.resolve, recon)):
+        raise SystemExit("--gate-recon-site: a site the loop measures (--recon-site) cannot also validate it")
+    gate_recon = [reconstruction_of(site) for site in args.gate_recon_site]
+    if not validation and not gate_recon:
+        raise SystemExit("the gate needs validation sites: --val-seeds or --gate-recon-site")
     scratch = Path(tempfile.mkdtemp(prefix="bench-vma-loop-"))
     registry = scratch / "registry"
     started = time.perf_counter()
     if args.bootstrap_seeds:
         bootstrap_sites = ensure_bev_sites(seed_range(args.bootstrap_seeds), args.site_root)
         bootstrap_model(
-            registry, bootstrap_sites, args.bootstrap_steps, [*new_sites, *validation, *heldout, *recon]
+            registry,
+            bootstrap_sites,
+            args.bootstrap_steps,
+            [*new_sites, *validation, *heldout, *recon, *args.gate_recon_site],
         )
         start = (
             f"element-mask network trained on BEV sites {args.bootstrap_seeds}, {args.bootstrap_steps} steps"
@@ -341,7 +360,11 @@ def main() -> None:
             corrections, review_counts = corrections_of(site, propose_on(promoted_proposer(registry)))
             corrected = [*corrected, corrections] if args.corrections == "all" else [corrections]
             result = retrain_round(
-                registry, corrected, validation, args.steps, (args.replay_sites, args.replay_share)
+                registry,
+                corrected,
+                [*validation, *gate_recon],
+                args.steps,
+                (args.replay_sites, args.replay_share),
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -375,8 +398,9 @@ def main() -> None:
     report = {
         "command": f"python bench/vma_loop.py {origin} "
         + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
-        + f"--val-seeds {args.val_seeds} --heldout-seeds {args.heldout_seeds} "
+        + f"--val-seeds '{args.val_seeds}' --heldout-seeds {args.heldout_seeds} "
         + "".join(f"--recon-site {s} " for s in recon)
+        + "".join(f"--gate-recon-site {s} " for s in args.gate_recon_site)
         + f"--replay-sites {args.replay_sites} --replay-share {args.replay_share} "
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,

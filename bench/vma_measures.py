@@ -10,12 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from app.review_effort.review_time import review_time
-from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
-from cama_pipeline.site.io import read_site_ids
-from cama_pipeline.workspace import Workspace
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_sites
-from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
+from models.vma.validation import reconstruction_of, true_vectors
 from models.vma.vectors import Vector, read_vectors
 
 Proposer = Callable[[SiteRasters], list[Vector]]
@@ -30,28 +28,16 @@ def on_damaged(propose: Proposer) -> Proposer:
     return run
 
 
-def reconstructed_bev(site: Path) -> Path:
-    """The surface stage's raster folder of a synthetic site with `cama run` done (exactly one site)."""
-    workspace = Workspace.for_dataset(site / "nuscenes")
-    site_ids = read_site_ids(workspace.sites_index()) if workspace.sites_index().is_file() else []
-    found = [workspace.surface_bev(s) for s in site_ids if workspace.surface_bev(s).is_dir()]
-    if len(found) != 1:
-        raise SystemExit(
-            f"{site}: expected the surface rasters of one site (run `cama run` first), found {found}"
-        )
-    return found[0]
-
-
 def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
     """Chamfer-AP against all true vectors in the reconstructed extent and against their observed parts (over
     all `sites` and per site: one bad site hides in a mean), and the annotator's speed-up, over the
     reconstructed rasters of `sites`."""
     all_truth, observed_truth = [], []
-    for site in sites:
-        rasters = load_site_rasters(reconstructed_bev(site))
-        truths = read_vectors(site / "ground_truth" / "vector_map.json")
-        mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
-        seen = [Vector(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]
+    reconstructions = [reconstruction_of(site) for site in sites]
+    for site in reconstructions:
+        rasters = load_site_rasters(site.rasters)
+        truths = read_vectors(vector_map_of(site.site))
+        seen = true_vectors(site, rasters)
         predictions = propose(rasters)
         all_truth.append((predictions, truths, rasters.extent()))
         observed_truth.append((predictions, seen, rasters.extent()))
@@ -66,6 +52,6 @@ def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any
             **{k: v for k, v in evaluate_sites(observed_truth).items() if k in keys},
             "per_site": per_site,
         },
-        "annotator": review_time(propose, sites, rasters_of=reconstructed_bev),
+        "annotator": review_time(propose, reconstructions),
         "sites": [str(s) for s in sites],
     }

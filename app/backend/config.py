@@ -65,6 +65,9 @@ class Settings:
     A configured registry is used as it is, whichever network it holds (jobs dispatch on its `kind`)."""
     vma_validation_sites: tuple[Path, ...] = ()
     """Held-out site folders (rasters + ground-truth vector map) the retrain gate evaluates on."""
+    vma_validation_reconstructed: tuple[Path, ...] = ()
+    """Held-out synthetic sites (`cama synth`, then `cama run`) the retrain gate evaluates on the surface stage's
+    reconstructed rasters, as the product proposes, against their observed truth (`models.vma.validation`)."""
     retrain_after: int = 0
     """Start a retrain job by itself after this many new accepted/fixed corrections of a site (0: never)."""
     qa_share: float = DEFAULT_QA_SHARE
@@ -173,6 +176,7 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "vma_registry": Path,
     "vma_model": str,
     "vma_validation_sites": _paths,
+    "vma_validation_reconstructed": _paths,
     "retrain_after": int,
     "qa_share": float,
     "preaccept_threshold": float,

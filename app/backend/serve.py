@@ -51,6 +51,13 @@ def serve_command(
             help="Held-out site folder for the retrain gate; repeat for several (CAMA_VMA_VALIDATION_SITES)."
         ),
     ] = None,
+    validation_reconstructed: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="Held-out synthetic site (`cama run` done) the retrain gate scores on its reconstructed "
+            "rasters; repeat for several (CAMA_VMA_VALIDATION_RECONSTRUCTED)."
+        ),
+    ] = None,
     review_url: Annotated[
         str | None,
         typer.Option(help="The viser 3D review's URL (or :<port>) for the editor's link (CAMA_REVIEW_URL)."),
@@ -69,6 +76,9 @@ def serve_command(
                 vma_registry=vma_registry,
                 vma_model=vma_model,
                 vma_validation_sites=tuple(validation_site) if validation_site else None,
+                vma_validation_reconstructed=(
+                    tuple(validation_reconstructed) if validation_reconstructed else None
+                ),
                 review_url=review_url,
             )
         )

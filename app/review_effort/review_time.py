@@ -1,7 +1,8 @@
 """The simulated annotator's time on a proposer's output over validation sites: the second gate of VMA retraining.
 
 Chamfer mAP says how close proposals are; what the loop is for is the annotators' time. For each validation site
-(a synthetic site folder, or a BEV-only VMA site, with its true vectors), the proposer's vectors at or above
+(a synthetic site folder, or a BEV-only VMA site, with its true vectors; or a synthetic site's reconstruction,
+`models.vma.validation`), the proposer's vectors at or above
 `min_confidence` (as `cama propose` keeps them, made simple as in a proposals file) go into an in-memory queue
 (`session.MemoryQueue`, the backend's queue order) and the scripted annotator corrects them towards the true
 vectors cut to the observed cells, then draws the same truth from scratch. The figures are the seconds of both
@@ -18,6 +19,7 @@ from app.review_effort.plan import Polyline, SimulationConfig
 from app.review_effort.session import MemoryQueue, draw_from_scratch, work_queue
 from app.review_effort.truth import observed_true_polylines
 from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
+from models.vma.validation import ValidationSite, as_validation_site
 from models.vma.vectors import Vector, simple_geometry
 
 MIN_CONFIDENCE = 0.1
@@ -34,21 +36,22 @@ def review_queue(vectors: Sequence[Vector], min_confidence: float) -> tuple[list
 
 def review_time(
     propose: Callable[[SiteRasters], list[Vector]],
-    sites: Sequence[Path],
+    sites: Sequence[Path | ValidationSite],
     *,
     min_confidence: float = MIN_CONFIDENCE,
-    rasters_of: Callable[[Path], Path] = raster_dir_of,
 ) -> dict[str, Any]:
     """{"correction_s", "drawing_s", "speed_up", "sites"} of the scripted annotator on `propose`'s output over
-    the rasters `rasters_of(site)` (default: the site's own; a reconstruction's for a reconstructed site)."""
+    each site's rasters (a path: its own; a `ValidationSite`: its `rasters`, a reconstruction's for a
+    reconstructed site)."""
     if not sites:
         raise ValueError("review_time: no validation sites given")
     config, costs = SimulationConfig(), ActionCosts()
     correction_s = drawing_s = 0.0
-    for site in sites:
-        rasters = rasters_of(Path(site))
-        truths = observed_true_polylines(Path(site), rasters)
-        _, queue = review_queue(propose(load_site_rasters(rasters)), min_confidence)
+    for entry in sites:
+        site = as_validation_site(entry)
+        rasters = raster_dir_of(site.rasters)
+        truths = observed_true_polylines(site.site, rasters)
+        _, queue = review_queue(propose(load_site_rasters(site.rasters)), min_confidence)
         correction_s += work_queue(queue, truths, config, costs).total_s
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
     return {

@@ -24,6 +24,7 @@ from cama_pipeline.io import atomic_write_json
 from cama_pipeline.site_identity import SeenSiteError, SiteIdentity, ensure_not_among, site_identity
 from models.vma.config import ModelConfig, config_dict, config_fingerprint
 from models.vma.model import VmaNet
+from models.vma.validation import ValidationEntry, truth_folder
 
 logger = logging.getLogger(__name__)
 
@@ -190,12 +191,12 @@ def refuse_seen(
 
 
 def refuse_seen_validation(
-    records: dict[str, list[Any]], validation_sites: Sequence[Path], model: str
+    records: dict[str, list[Any]], validation_sites: Sequence[ValidationEntry], model: str
 ) -> None:
     """`refuse_seen` for each validation site against a new version's `seen_records`."""
     identities = [SiteIdentity.from_json(entry) for entry in records["seen_sites"]]
     for site in validation_sites:
-        refuse_seen(Path(site), identities, records["seen_folders"], model)
+        refuse_seen(truth_folder(site), identities, records["seen_folders"], model)
 
 
 def seen_records(sites: Sequence[Path], parent: VersionRecord | None) -> dict[str, list[Any]]:

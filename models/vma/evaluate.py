@@ -25,8 +25,9 @@ from cama_pipeline.evaluate.chamfer_ap import (
     chamfer_distance,
 )
 from models.vma.loop import LoopConfig, calibrate_preaccept_threshold
-from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
-from models.vma.vectors import Vector, clip_vectors, read_vectors
+from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.validation import ValidationSite, as_validation_site, true_vectors
+from models.vma.vectors import Vector, clip_vectors
 
 logger = logging.getLogger(__name__)
 
@@ -140,17 +141,19 @@ def confidence_bins(scores_a: np.ndarray, correct_a: np.ndarray, config: SiteEva
 
 def evaluate_proposer(
     propose: Callable[[SiteRasters], list[Vector]],
-    sites: Sequence[Path],
+    sites: Sequence[Path | ValidationSite],
     config: SiteEvalConfig | None = None,
 ) -> dict:
-    """Chamfer-AP (+ confidence bins, vector counts, seconds per km²) of a proposer on sites with ground truth."""
+    """Chamfer-AP (+ confidence bins, vector counts, seconds per km²) of a proposer on sites with ground truth
+    (a path: its own rasters; a `ValidationSite`: its rasters, a reconstruction's against the observed truth)."""
     if not sites:
         raise ValueError("evaluate: no validation sites given")
     triples = []
     seconds, area = 0.0, 0.0
-    for site in sites:
-        rasters = load_site_rasters(Path(site))
-        truth = read_vectors(vector_map_of(Path(site)))
+    for entry in sites:
+        site = as_validation_site(entry)
+        rasters = load_site_rasters(site.rasters)
+        truth = true_vectors(site, rasters)
         started = time.perf_counter()
         predictions = propose(rasters)
         seconds += time.perf_counter() - started

@@ -14,6 +14,7 @@ import numpy as np
 
 from cama_pipeline.bev import RasterGeoreference, is_raster_folder, layer_path, read_bev
 from cama_pipeline.semantics import BEV_CLASSES, Semantic
+from cama_pipeline.surface.outputs import is_surface_bev
 
 logger = logging.getLogger(__name__)
 
@@ -37,6 +38,9 @@ class SiteRasters:
     """(H, W, 3) uint8 RGB."""
     georeference: RasterGeoreference
     name: str = "site"
+    reconstructed: bool = False
+    """Whether these are a surface stage's rasters (`is_surface_bev`), not a generator's clean ones: proposers
+    read boundaries differently there (smeared curbs)."""
 
     def __post_init__(self) -> None:
         if (
@@ -114,7 +118,9 @@ def load_site_rasters(site: Path) -> SiteRasters:
     if not np.any(observed & (semantic != int(Semantic.BACKGROUND))):
         raise SiteInputError(f"{where}: empty site, no road or marking cell observed")
     name = Path(site).name or "site"
-    rasters = SiteRasters(semantic, bev.require("photometric"), bev.georeference, name)
+    rasters = SiteRasters(
+        semantic, bev.require("photometric"), bev.georeference, name, reconstructed=is_surface_bev(folder)
+    )
     geo = bev.georeference
     logger.info("read %s rasters %dx%d at %.2f m/px", name, geo.width, geo.height, geo.resolution)
     return rasters

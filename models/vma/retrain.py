@@ -44,6 +44,7 @@ from models.vma.patches import Sample, SiteGrid, degrade, procedural_sample, sit
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.rule_based import propose_rule_based
 from models.vma.train import Sampler, fit
+from models.vma.validation import ValidationEntry
 from models.vma.vectors import Vector, vectors_from_annotations
 
 logger = logging.getLogger(__name__)
@@ -86,7 +87,7 @@ class RetrainConfig:
 
 
 Proposer = Callable[[SiteRasters], list[Vector]]
-ReviewGate = Callable[[Proposer, Sequence[Path]], dict[str, Any]]
+ReviewGate = Callable[[Proposer, Sequence[ValidationEntry]], dict[str, Any]]
 """Scores a proposer on validation sites by review effort: {"correction_s": seconds, ...} at least."""
 
 
@@ -155,7 +156,10 @@ def model_proposer(model: VmaNet, inference: InferenceConfig) -> Proposer:
 
 
 def evaluate_model(
-    model: VmaNet, sites: Sequence[Path], inference: InferenceConfig, review: ReviewGate | None = None
+    model: VmaNet,
+    sites: Sequence[ValidationEntry],
+    inference: InferenceConfig,
+    review: ReviewGate | None = None,
 ) -> dict[str, Any]:
     """Chamfer-AP of a model's site proposals on validation sites, and their `review` figures (key "review")
     when a review gate is given."""
@@ -189,7 +193,7 @@ def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: Gate
 def retrain_from_corrections(
     registry: Path,
     corrections: Sequence[Corrections],
-    validation_sites: Sequence[Path],
+    validation_sites: Sequence[ValidationEntry],
     config: RetrainConfig | None = None,
     *,
     review: ReviewGate | None = None,
@@ -256,7 +260,7 @@ class CandidateRecord:
     """The version it was fine-tuned from."""
     train_config: dict[str, Any]
     corrections: Sequence[Corrections]
-    validation_sites: Sequence[Path]
+    validation_sites: Sequence[ValidationEntry]
     seen: dict[str, list[Any]]
     """`seen_records` of the parent and the corrected sites."""
     counts: tuple[int, int]

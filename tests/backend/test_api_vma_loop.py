@@ -33,6 +33,19 @@ def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Setti
     """Backend settings with a tiny registry, a copy of the drawn site as validation site (the retrain refuses
     to validate on the folder it trains on), auto-retrain after 2,
     pre-accept at confidence 0.9 (the rule-based proposer's clean lines score 1.0) and half of those to QA."""
+    return loop_settings(
+        tmp_path,
+        database_url,
+        vma_registry=write_registry(tmp_path / "registry"),
+        vma_validation_sites=(write_site(tmp_path / "validation").parents[1],),
+        retrain_after=2,
+        qa_share=0.5,
+        preaccept_threshold=0.9,
+    )
+
+
+def loop_settings(tmp_path: Path, database_url: str | None, **loop: Any) -> Settings:
+    """Settings of a loop test under `tmp_path` (an admin, fast password hashing) with these VMA `loop` settings."""
     return Settings(
         data_dir=tmp_path / "data",
         data_roots=(tmp_path,),
@@ -41,11 +54,7 @@ def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Setti
         extent_margin_m=10.0,
         admin_username="root",
         admin_password=PASSWORD,
-        vma_registry=write_registry(tmp_path / "registry"),
-        vma_validation_sites=(write_site(tmp_path / "validation").parents[1],),
-        retrain_after=2,
-        qa_share=0.5,
-        preaccept_threshold=0.9,
+        **loop,
     )
 
 

@@ -12,13 +12,14 @@ from app.backend.config import Settings
 from models.vma.checkpoint import checkpoint_kind
 from models.vma.element_masks.checkpoint import KIND
 from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
-from tests.backend.backend_helpers import PASSWORD, register_site
+from tests.backend.backend_helpers import register_site
 from tests.backend.test_api_vma_loop import (
     HANG_S,
     TINY_RETRAIN,
     Headers,
     bulk,
     live,
+    loop_settings,
     review,
     submit,
     wait_for,
@@ -37,14 +38,9 @@ def settings(tmp_path: Path, database_url: str | None, loop_site: Path) -> Setti
     """Settings whose registry is a copy of the shipped element-mask registry."""
     registry = tmp_path / "mask-registry"
     shutil.copytree(shipped_registry(*SHIPPED_MASK_REGISTRY), registry)
-    return Settings(
-        data_dir=tmp_path / "data",
-        data_roots=(tmp_path,),
-        database_url=database_url,
-        scrypt_n=2**4,
-        extent_margin_m=10.0,
-        admin_username="root",
-        admin_password=PASSWORD,
+    return loop_settings(
+        tmp_path,
+        database_url,
         vma_registry=registry,
         vma_validation_sites=(write_site(tmp_path / "validation").parents[1],),
     )

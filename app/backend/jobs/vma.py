@@ -37,6 +37,7 @@ from cama_pipeline.io import atomic_write_json
 
 if TYPE_CHECKING:
     from models.vma.retrain import Corrections, RetrainConfig
+    from models.vma.validation import ValidationEntry
 
 logger = logging.getLogger(__name__)
 
@@ -152,7 +153,7 @@ def step_progress(step: dict[str, Any] | None, elapsed_s: float) -> tuple[float,
 def _retrain_child(
     registry: Path,
     corrections: list["Corrections"],
-    validation: list[Path],
+    validation: list["ValidationEntry"],
     config: "RetrainConfig",
     annotator_gate: bool,
     replay_share: float,
@@ -253,6 +254,17 @@ def _speed_up(review: dict[str, Any]) -> str:
     return "n/a" if review.get("speed_up") is None else f"{review['speed_up']:.2f}x"
 
 
+def validation_sites(settings: Settings) -> list["ValidationEntry"]:
+    """The gate's validation sites: those scored on their own rasters, then the reconstructed ones (ValueError
+    naming a site whose reconstruction is missing)."""
+    from models.vma.validation import reconstruction_of
+
+    return [
+        *settings.vma_validation_sites,
+        *(reconstruction_of(s) for s in settings.vma_validation_reconstructed),
+    ]
+
+
 def run_retrain(context: JobContext, params: RetrainParams, *, settings: Settings) -> JobResult:
     """Fine-tune the promoted model on the accepted/fixed elements (rejected ones as negatives) of every site in
     the database that has any (or of the job's site alone)."""
@@ -284,7 +296,7 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
         tolerance=params.tolerance,
         time_tolerance=params.time_tolerance,
     )
-    validation = list(settings.vma_validation_sites)
+    validation = validation_sites(settings)
     args = (
         settings.vma_registry,
         corrections,
@@ -356,8 +368,11 @@ def unavailable_kinds(settings: Settings) -> dict[str, str]:
     missing: dict[str, str] = {}
     if settings.vma_registry is None:
         missing["retrain"] = "not available: no VMA checkpoint registry configured (set CAMA_VMA_REGISTRY)"
-    elif not settings.vma_validation_sites:
-        missing["retrain"] = "not available: no validation sites for the gate (set CAMA_VMA_VALIDATION_SITES)"
+    elif not settings.vma_validation_sites and not settings.vma_validation_reconstructed:
+        missing["retrain"] = (
+            "not available: no validation sites for the gate "
+            "(set CAMA_VMA_VALIDATION_SITES or CAMA_VMA_VALIDATION_RECONSTRUCTED)"
+        )
     return missing
 
 

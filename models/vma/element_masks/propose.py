@@ -91,6 +91,12 @@ class MaskInferenceConfig:
             )
 
 
+def inference_for(rasters: SiteRasters) -> MaskInferenceConfig:
+    """The product's inference settings for these rasters: on a reconstruction boundaries snap to the road's
+    edge where it is seen, on a generator's rasters they follow the network's band."""
+    return MaskInferenceConfig(boundary_evidence="road_edge" if rasters.reconstructed else "none")
+
+
 @torch.no_grad()
 def predict_probabilities(
     model: ElementMaskNet,

@@ -22,7 +22,7 @@ from models.vma.config import config_dict
 from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import predict_site_masks
+from models.vma.element_masks.propose import inference_for, predict_site_masks
 from models.vma.element_masks.replay import replay_sites
 from models.vma.element_masks.train import fit_masks, training_site
 from models.vma.evaluate import evaluate_proposer
@@ -38,6 +38,7 @@ from models.vma.retrain import (
     save_candidate,
 )
 from models.vma.train import DAMAGE_SEED_BASE
+from models.vma.validation import ValidationEntry
 from models.vma.vectors import Vector, vectors_from_annotations
 
 REPLAY_FOLDER = "replay-sites"
@@ -78,12 +79,12 @@ class MaskRetrainConfig:
 
 
 def evaluate_mask_model(
-    model: ElementMaskNet, sites: Sequence[Path], review: ReviewGate | None = None
+    model: ElementMaskNet, sites: Sequence[ValidationEntry], review: ReviewGate | None = None
 ) -> dict[str, Any]:
     """Chamfer-AP of the network's proposals on validation sites, with the `review` figures (key "review")."""
 
     def propose(rasters: SiteRasters) -> list[Vector]:
-        return predict_site_masks(model, rasters)
+        return predict_site_masks(model, rasters, inference_for(rasters))
 
     metrics = evaluate_proposer(propose, sites)
     if review is not None:
@@ -94,7 +95,7 @@ def evaluate_mask_model(
 def retrain_masks_from_corrections(
     registry: Path,
     corrections: Sequence[Corrections],
-    validation_sites: Sequence[Path],
+    validation_sites: Sequence[ValidationEntry],
     config: MaskRetrainConfig | None = None,
     *,
     review: ReviewGate | None = None,

@@ -1,0 +1,112 @@
+"""Validation sites scored on a reconstruction: the surface stage's rasters, the truth cut to what was observed,
+the product's inference settings, the seen-site refusal through them, and missing reconstructions named."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.review_effort.review_time import review_time
+from cama_pipeline.evaluate.observed import ObservedMask
+from cama_pipeline.site.io import read_site_ids
+from cama_pipeline.site_identity import SeenSiteError
+from cama_pipeline.workspace import Workspace
+from cama_studio.pipeline import PipelineResult
+from models.vma.checkpoint import refuse_seen_validation, seen_records
+from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.propose import MaskInferenceConfig, inference_for, predict_site_masks
+from models.vma.element_masks.retrain import evaluate_mask_model
+from models.vma.evaluate import evaluate_proposer
+from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters
+from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
+from models.vma.validation import (
+    ValidationSite,
+    as_validation_site,
+    reconstruction_of,
+    true_vectors,
+)
+from models.vma.vectors import Vector, read_vectors
+from tests.conftest import GeneratedSite
+
+
+@pytest.fixture(scope="module")
+def reconstructed(tiny_site: GeneratedSite, whole_path: PipelineResult) -> ValidationSite:
+    return reconstruction_of(tiny_site.result.out_dir, whole_path.workspace)
+
+
+def test_a_reconstruction_is_the_surface_stage_rasters_against_the_observed_truth(
+    tiny_site: GeneratedSite, whole_path: PipelineResult, reconstructed: ValidationSite
+) -> None:
+    workspace = Workspace(whole_path.workspace)
+    (site_id,) = read_site_ids(workspace.sites_index())
+    assert reconstructed.rasters == workspace.surface_bev(site_id) and reconstructed.reconstructed
+    assert reconstructed.site == tiny_site.result.out_dir
+    rasters = load_site_rasters(reconstructed.rasters)
+    assert rasters.reconstructed and not load_site_rasters(tiny_site.result.out_dir).reconstructed
+
+    truth = read_vectors(tiny_site.result.out_dir / "ground_truth" / "vector_map.json")
+    observed = true_vectors(reconstructed, rasters)
+    mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
+    lines = [
+        v for v in observed if v.cls != "ped_crossing"
+    ]  # a crossing's ring is kept whole when mostly seen
+    assert lines and all(mask.contains(v.points).all() for v in lines)
+    assert sum(_length(v) for v in observed) < sum(_length(v) for v in truth)
+    own = as_validation_site(tiny_site.result.out_dir)
+    whole = true_vectors(own, load_site_rasters(own.rasters))  # a site's own rasters: the whole truth
+    assert [v.cls for v in whole] == [v.cls for v in truth]
+    assert all(np.array_equal(a.points, b.points) for a, b in zip(whole, truth, strict=True))
+
+    # proposing exactly the observed truth is perfect on the reconstruction, for the mAP and the annotator
+    def observed_truth(_: SiteRasters) -> list[Vector]:
+        return [Vector(v.cls, v.points, 1.0) for v in observed]
+
+    assert evaluate_proposer(observed_truth, [reconstructed])["mean_ap"] == pytest.approx(1.0)
+    perfect, nothing = (
+        review_time(observed_truth, [reconstructed]),
+        review_time(lambda _: [], [reconstructed]),
+    )
+    assert perfect["speed_up"] > 2.0 and perfect["correction_s"] < nothing["correction_s"]
+
+
+def test_the_mask_gate_proposes_on_a_reconstruction_as_the_product_does(
+    tiny_site: GeneratedSite, reconstructed: ValidationSite
+) -> None:
+    model = load_mask_checkpoint(shipped_registry(*SHIPPED_MASK_REGISTRY)).model
+    rasters = load_site_rasters(reconstructed.rasters)
+    assert inference_for(rasters).boundary_evidence == "road_edge"
+    assert inference_for(load_site_rasters(tiny_site.result.out_dir)).boundary_evidence == "none"
+    road_edge = predict_site_masks(model, rasters, MaskInferenceConfig(boundary_evidence="road_edge"))
+    plain = predict_site_masks(model, rasters)
+    assert _boundaries(road_edge) != _boundaries(plain)  # the setting matters on this site
+
+    def product(r: SiteRasters) -> list[Vector]:
+        return predict_site_masks(model, r, MaskInferenceConfig(boundary_evidence="road_edge"))
+
+    gate, expected = evaluate_mask_model(model, [reconstructed]), evaluate_proposer(product, [reconstructed])
+    for key in ("mean_ap", "class_ap", "confidence_bins", "num_predictions", "num_ground_truth"):
+        assert gate[key] == expected[key], key
+    assert gate["sites"] == [str(reconstructed)] and "reconstructed" in gate["sites"][0]
+
+
+def test_a_checkpoint_that_saw_the_site_is_not_gated_on_its_reconstruction(
+    tiny_site: GeneratedSite, reconstructed: ValidationSite
+) -> None:
+    seen = seen_records([tiny_site.result.out_dir], None)
+    with pytest.raises(SeenSiteError):
+        refuse_seen_validation(seen, [reconstructed], "a model trained on the tiny site")
+
+
+def test_a_missing_reconstruction_is_named(tiny_site: GeneratedSite, tmp_path: Path) -> None:
+    with pytest.raises(SiteInputError, match=r"cama run .*nuscenes.* first\), found 0"):
+        reconstruction_of(tiny_site.result.out_dir, tmp_path / "empty-workspace")
+    with pytest.raises(SiteInputError, match="no ground_truth/vector_map.json"):
+        reconstruction_of(tmp_path)
+
+
+def _boundaries(vectors: list[Vector]) -> list[list[float]]:
+    return [np.round(v.points, 3).ravel().tolist() for v in vectors if v.cls == "boundary"]
+
+
+def _length(vector: Vector) -> float:
+    return float(np.linalg.norm(np.diff(vector.points, axis=0), axis=1).sum())
