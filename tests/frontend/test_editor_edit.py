@@ -91,6 +91,21 @@ def test_a_vertex_deleted_while_its_insertion_is_still_saving_is_deleted(
     assert [p[1] for p in removed["points"]] == [58.0, 58.0, 58.0]
 
 
+def test_a_click_on_a_segment_while_a_drag_is_saving_keeps_the_drag_on_the_map(
+    page: Page, seeded: SeededServer
+) -> None:
+    element = divider_at(seeded, 60.0, 50.0)  # a place of its own
+    page.add_init_script(SLOW_PATCH)
+    open_on(page, seeded, element)
+    drag(page, page_xy(page, 65.0, 50.0), page_xy(page, 65.0, 51.0))
+    page.wait_for_timeout(300)  # the drag's save is still on its way
+    page.mouse.click(*page_xy(page, 67.5, 50.5))  # a plain click on the dragged segment: a selection, no edit
+    drawn = page.evaluate("(id) => window.camaEditor.pointsOf(id)", element["id"])
+    assert len(drawn) == 3 and near(drawn[1], (65.0, 51.0)), drawn
+    saved = seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
+    assert len(saved["points"]) == 3 and near(saved["points"][1], (65.0, 51.0)), saved["points"]
+
+
 LATE_SINGLE_CLICK = """
 const schedule = window.setTimeout.bind(window);
 window.setTimeout = (handler, delay, ...args) => schedule(handler, delay === 250 ? 20000 : delay, ...args);

@@ -2,7 +2,7 @@
 // tools, autosave, undo/redo, findings and keyboard shortcuts together.
 import { h, replaceChildren, toast } from "../dom.js";
 import { ConflictBanner } from "./conflicts.js";
-import { ElementStore } from "./elements.js";
+import { ElementStore, pointsOf } from "./elements.js";
 import { Findings } from "./findings.js";
 import { History } from "./history.js";
 import { layersPanel } from "./layers-panel.js";
@@ -163,7 +163,8 @@ function focusRequested(params, store, view, tools) {
 }
 
 /**
- * A small hook for the browser tests and the bench: map pixel of a site point, element count, when the elements
+ * A small hook for the browser tests and the bench: map pixel of a site point, element count, an element's points
+ * as the map draws them, when the elements
  * were first drawn and when all visible tiles were, (while `recording`) each frame's render time in ms, and what
  * the camera panel shows.
  */
@@ -176,6 +177,10 @@ function exposeTestHook({ m, siteId, cameras }) {
     frameRenderMs: [],
     pixelOf: (x, y) => m.map.getPixelFromCoordinate([x, y]),
     elementCount: () => m.elementSource.getFeatures().length,
+    pointsOf: (id) => {
+      const feature = m.elementSource.getFeatureById(id);
+      return feature ? pointsOf(feature) : null;
+    },
     cameras: () => cameras.describe(),
     regionOutlines: () => m.regionSource.getFeatures().map((feature) => feature.getGeometry().getExtent()),
     centerOn: (x, y, resolution) => {

@@ -5,7 +5,7 @@ import Modify from "ol/interaction/Modify.js";
 import Select from "ol/interaction/Select.js";
 import Snap from "ol/interaction/Snap.js";
 import { altKeyOnly, click, doubleClick, shiftKeyOnly, singleClick } from "ol/events/condition.js";
-import { pointsOf, samePoints } from "./elements.js";
+import { geometryFor, pointsOf, samePoints } from "./elements.js";
 import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
 import { Stroke, Style, Circle, Fill } from "ol/style.js";
 
@@ -129,7 +129,7 @@ export class Tools extends EventTarget {
       const points = pointsOf(feature);
       if (samePoints(points, before)) continue;
       if (onlyClickInserts(points, before)) {
-        this.store.upsert(element);
+        feature.setGeometry(geometryFor(element.class, before)); // as the click found it, pending saves included
         continue;
       }
       delta += points.length - before.length;
