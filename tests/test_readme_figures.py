@@ -788,6 +788,7 @@ def _check_per_site_columns(
     columns: dict[str, tuple[str, str]],
     site_rows: dict[str, str],
     bev_speed: bool = False,
+    all_row: str = "all four: mAP, speed-up",
 ) -> None:
     """Each column (header -> (version, proposer)) of a per-site table of bench/vma_masks.py runs: mAP per
     reconstructed site, over all of them with the annotator's speed-up, and on the BEV sites (with their
@@ -800,9 +801,9 @@ def _check_per_site_columns(
             expected = [recon["observed_truth"]["per_site"][site]["mean_ap"]]
             assert_shows(row(t, label)[index], expected, f"{header} {label}")
         assert_shows(
-            row(t, "all four: mAP, speed-up")[index],
+            row(t, all_row)[index],
             [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
-            f"{header} all four",
+            f"{header} {all_row}",
         )
         bev: list[Expected] = [
             figures_of["clean"][proposer]["mean_ap"],
@@ -1081,3 +1082,66 @@ def test_refinement_end_to_end_table() -> None:
             expected += [counts["accept"], counts["fix"], counts["reject"], counts["drawn"]]
             expected += [recorded["elevation"]["rmse_cm"], recorded["sre"]["c1_proposals"]["sre_ref_px"]]
             assert_shows(" | ".join(row(t, f"{site}, {state}")[1:]), expected, f"refinement {site} {state}")
+
+
+GATE_RUNS = {
+    "BEV sites 3000-3002": ("vma_loop_masks_no_replay.json", "--val-seeds 3000-3002 "),
+    "reconstructions of 9007, 9011": (
+        "vma_loop_masks_recon_gate.json",
+        "--val-seeds '' --heldout-seeds 2000-2004 --recon-site data/synthetic/default --recon-site "
+        "data/synthetic/random-9001 --gate-recon-site data/synthetic/random-9007 --gate-recon-site "
+        "data/synthetic/random-9011 --replay-sites 0",
+    ),
+}
+
+
+def test_loop_gated_on_bev_sites_or_reconstructions_table() -> None:
+    """Each gate's promoted version after rounds 1-3, what its gate said of round 1's candidate, and the
+    held-out BEV figures after round 3."""
+    t = table("gate's validation sites")
+    for label, (results_file, options) in GATE_RUNS.items():
+        assert_names_source(t, results_file, "bench/vma_loop.py")
+        recorded = results(results_file)
+        assert options in recorded["command"] and "--new-seeds 4000-4002" in recorded["command"], label
+        cells = row(t, label)
+        rounds = recorded["rounds"]
+        assert cells[1].split(" / ") == [r["heldout"]["version"] for r in rounds[1:]], label
+        gate = rounds[1]["gate"]
+        assert rounds[1]["candidate"] == "v0004"
+        assert_shows(
+            cells[2],
+            [
+                gate["candidate"]["mean_ap"],
+                gate["candidate"]["review"]["correction_s"],
+                gate["current"]["mean_ap"],
+                gate["current"]["review"]["correction_s"],
+            ],
+            f"{label} round-1 gate",
+        )
+        assert_shows(cells[3], _loop_figures(rounds[-1]["heldout"]), f"{label} held-out")
+    gated = results("vma_loop_masks_recon_gate.json")["rounds"][1]["gate"]["current"]["sites"]
+    assert all("(reconstructed: " in site for site in gated), gated
+
+
+GATE_CONFIRM_SITES = {
+    "default": "data/synthetic/default",
+    **{seed: f"data/synthetic/random-{seed}" for seed in ("9001", "9013", "9017", "9019")},
+}
+
+
+def test_gate_choice_confirmation_table() -> None:
+    t = table("gate's choice, confirmed", "bench/vma_masks.py")
+    by_version = {v: results(f"vma_masks_gate_confirm_{v}.json") for v in ("v0003", "v0004", "v0006")}
+    for version, recorded in by_version.items():
+        assert_names_source(t, f"vma_masks_gate_confirm_{version}.json", "bench/vma_masks.py")
+        assert recorded["checkpoint"]["version"] == version
+        assert "--seeds 5000-5004" in recorded["command"], version
+    columns = {
+        "rule-based": ("v0003", "rule_based"),
+        "v0003 (shipped)": ("v0003", "element_masks"),
+        "v0004 (BEV gate)": ("v0004", "element_masks"),
+        "v0006 (reconstruction gate)": ("v0006", "element_masks"),
+    }
+    _check_per_site_columns(
+        t, by_version, columns, GATE_CONFIRM_SITES, bev_speed=True, all_row="all five: mAP, speed-up"
+    )
