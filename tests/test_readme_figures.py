@@ -1092,6 +1092,12 @@ GATE_RUNS = {
         "data/synthetic/random-9001 --gate-recon-site data/synthetic/random-9007 --gate-recon-site "
         "data/synthetic/random-9011 --replay-sites 0",
     ),
+    "both: BEV sites 3000-3002 and reconstructions of 9007, 9011": (
+        "vma_loop_masks_mixed_gate.json",
+        "--val-seeds '3000-3002' --heldout-seeds 2000-2004 --recon-site data/synthetic/default --recon-site "
+        "data/synthetic/random-9001 --gate-recon-site data/synthetic/random-9007 --gate-recon-site "
+        "data/synthetic/random-9011 --replay-sites 0",
+    ),
 }
 
 
@@ -1121,6 +1127,8 @@ def test_loop_gated_on_bev_sites_or_reconstructions_table() -> None:
         assert_shows(cells[3], _loop_figures(rounds[-1]["heldout"]), f"{label} held-out")
     gated = results("vma_loop_masks_recon_gate.json")["rounds"][1]["gate"]["current"]["sites"]
     assert all("(reconstructed: " in site for site in gated), gated
+    both = results("vma_loop_masks_mixed_gate.json")["rounds"][1]["gate"]["current"]["sites"]
+    assert sum("(reconstructed: " in site for site in both) == 2 and len(both) == 5, both
 
 
 GATE_CONFIRM_SITES = {

@@ -11,7 +11,6 @@ same annotator through the real backend.
 """
 
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from app.review_effort.costs import ActionCosts
@@ -19,7 +18,7 @@ from app.review_effort.plan import Polyline, SimulationConfig
 from app.review_effort.session import MemoryQueue, draw_from_scratch, work_queue
 from app.review_effort.truth import observed_true_polylines
 from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
-from models.vma.validation import ValidationSite, as_validation_site
+from models.vma.validation import ValidationEntry, as_validation_site
 from models.vma.vectors import Vector, simple_geometry
 
 MIN_CONFIDENCE = 0.1
@@ -36,7 +35,7 @@ def review_queue(vectors: Sequence[Vector], min_confidence: float) -> tuple[list
 
 def review_time(
     propose: Callable[[SiteRasters], list[Vector]],
-    sites: Sequence[Path | ValidationSite],
+    sites: Sequence[ValidationEntry],
     *,
     min_confidence: float = MIN_CONFIDENCE,
 ) -> dict[str, Any]:

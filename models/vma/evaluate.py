@@ -12,7 +12,6 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -26,7 +25,7 @@ from cama_pipeline.evaluate.chamfer_ap import (
 )
 from models.vma.loop import LoopConfig, calibrate_preaccept_threshold
 from models.vma.rasters import SiteRasters, load_site_rasters
-from models.vma.validation import ValidationSite, as_validation_site, true_vectors
+from models.vma.validation import ValidationEntry, as_validation_site, true_vectors
 from models.vma.vectors import Vector, clip_vectors
 
 logger = logging.getLogger(__name__)
@@ -141,7 +140,7 @@ def confidence_bins(scores_a: np.ndarray, correct_a: np.ndarray, config: SiteEva
 
 def evaluate_proposer(
     propose: Callable[[SiteRasters], list[Vector]],
-    sites: Sequence[Path | ValidationSite],
+    sites: Sequence[ValidationEntry],
     config: SiteEvalConfig | None = None,
 ) -> dict:
     """Chamfer-AP (+ confidence bins, vector counts, seconds per km²) of a proposer on sites with ground truth
