@@ -746,6 +746,16 @@ REHEARSAL_RUNS = {
 }
 
 
+def _gate_figures(gate: dict[str, Any]) -> list[Expected]:
+    """What a loop round's gate said: the candidate's validation mAP and correction seconds, then the current's."""
+    return [
+        gate["candidate"]["mean_ap"],
+        gate["candidate"]["review"]["correction_s"],
+        gate["current"]["mean_ap"],
+        gate["current"]["review"]["correction_s"],
+    ]
+
+
 def test_loop_with_and_without_rehearsal_table() -> None:
     """Each run's promoted version after rounds 1-3, its round-2 candidate's gate figures (validation mAP and
     correction seconds, candidate then current), and the held-out and reconstructed figures after round 3."""
@@ -759,17 +769,7 @@ def test_loop_with_and_without_rehearsal_table() -> None:
         cells = row(t, label)
         rounds = recorded["rounds"]
         assert cells[1].split(" / ") == [r["heldout"]["version"] for r in rounds[1:]], label
-        gate = rounds[2]["gate"]
-        assert_shows(
-            cells[2],
-            [
-                gate["candidate"]["mean_ap"],
-                gate["candidate"]["review"]["correction_s"],
-                gate["current"]["mean_ap"],
-                gate["current"]["review"]["correction_s"],
-            ],
-            f"{label} round-2 gate",
-        )
+        assert_shows(cells[2], _gate_figures(rounds[2]["gate"]), f"{label} round-2 gate")
         assert_shows(cells[3], _loop_figures(rounds[-1]["heldout"]), f"{label} held-out")
         assert_shows(cells[4], _reconstructed_figures(rounds[-1]["heldout"]), f"{label} reconstructed")
 
@@ -1112,18 +1112,8 @@ def test_loop_gated_on_bev_sites_or_reconstructions_table() -> None:
         cells = row(t, label)
         rounds = recorded["rounds"]
         assert cells[1].split(" / ") == [r["heldout"]["version"] for r in rounds[1:]], label
-        gate = rounds[1]["gate"]
         assert rounds[1]["candidate"] == "v0004"
-        assert_shows(
-            cells[2],
-            [
-                gate["candidate"]["mean_ap"],
-                gate["candidate"]["review"]["correction_s"],
-                gate["current"]["mean_ap"],
-                gate["current"]["review"]["correction_s"],
-            ],
-            f"{label} round-1 gate",
-        )
+        assert_shows(cells[2], _gate_figures(rounds[1]["gate"]), f"{label} round-1 gate")
         assert_shows(cells[3], _loop_figures(rounds[-1]["heldout"]), f"{label} held-out")
     gated = results("vma_loop_masks_recon_gate.json")["rounds"][1]["gate"]["current"]["sites"]
     assert all("(reconstructed: " in site for site in gated), gated
