@@ -87,6 +87,7 @@ def test_retrain_fine_tunes_the_element_mask_network(
     # it rehearsed four of the shipped network's own training sites
     assert meta["replay"]["share"] == 0.5 and len(meta["replay"]["sites"]) == 4
     assert "validation mAP" in done["message"] and "simulated annotator" in done["message"]
+    assert "on 1 validation site(s), 0 of them reconstructed" in done["message"], done["message"]
 
 
 @pytest.mark.parametrize("share", [1.0, -0.5])

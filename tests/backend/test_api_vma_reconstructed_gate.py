@@ -80,6 +80,7 @@ def test_the_gate_scores_both_networks_on_the_reconstruction(
     )
     assert meta["data"]["validation_sites"] == [site]
     assert "validation mAP" in done["message"] and "simulated annotator" in done["message"]
+    assert "on 1 validation site(s), 1 of them reconstructed" in done["message"], done["message"]
 
 
 def test_a_reconstructed_validation_site_without_a_reconstruction_fails_the_job_named(

@@ -233,10 +233,15 @@ def _count(annotations: AnnotationSet, states: tuple[str, ...]) -> int:
     return sum(e.review_state in states for e in annotations.elements)
 
 
-def _gate_message(outcome: dict[str, Any]) -> str:
-    """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured)."""
+def _gate_message(outcome: dict[str, Any], validation: list["ValidationEntry"]) -> str:
+    """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured), and
+    what the validation sites were (their own rasters or reconstructions)."""
+    from models.vma.validation import ValidationSite
+
     candidate, current = outcome["candidate_metrics"], outcome["current_metrics"]
     verdict = "promoted" if outcome["promoted"] else "kept out by the gate"
+    rebuilt = sum(isinstance(v, ValidationSite) and v.reconstructed for v in validation)
+    where = f"{len(validation)} validation site(s), {rebuilt} of them reconstructed"
     review = ""
     if "review" in candidate and "review" in current:
         new_s, old_s = candidate["review"]["correction_s"], current["review"]["correction_s"]
@@ -246,7 +251,8 @@ def _gate_message(outcome: dict[str, Any]) -> str:
         )
     return (
         f"{outcome['candidate']} {verdict}: validation mAP {candidate.get('mean_ap')} vs "
-        f"{current.get('mean_ap')} before{review}; {outcome['labels']} labels, {outcome['negatives']} negatives"
+        f"{current.get('mean_ap')} before{review} on {where}; {outcome['labels']} labels, "
+        f"{outcome['negatives']} negatives"
     )
 
 
@@ -307,7 +313,7 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
     )
     out = context.workdir / RETRAIN_FILE
     outcome = _run_child(context, args, out)
-    message = _gate_message(outcome)
+    message = _gate_message(outcome, validation)
     if outcome["promoted"] and params.refresh_after_promotion:
         message += f"; proposal refresh queued as job {context.follow_up('refresh_proposals', {})}"
     return JobResult(out, message)
