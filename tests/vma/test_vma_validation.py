@@ -1,23 +1,31 @@
 """Validation sites scored on a reconstruction: the surface stage's rasters, the truth cut to what was observed,
 the product's inference settings, the seen-site refusal through them, and missing reconstructions named."""
 
+import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from app.review_effort.review_time import review_time
 from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.site_identity import SeenSiteError
 from cama_pipeline.workspace import Workspace
+from cama_studio.cli import app
 from cama_studio.pipeline import PipelineResult
-from models.vma.checkpoint import refuse_seen_validation, seen_records
+from models.vma.checkpoint import ensure_unseen, refuse_seen_validation, seen_records
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
+from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.propose import MaskInferenceConfig, inference_for, predict_site_masks
 from models.vma.element_masks.retrain import evaluate_mask_model
+from models.vma.element_masks.targets import element_masks
+from models.vma.element_masks.train import load_mask_training_site, train_masks
 from models.vma.evaluate import evaluate_proposer
-from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters
+from models.vma.patches import site_grid
+from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, vector_map_of
 from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
 from models.vma.validation import (
     ValidationSite,
@@ -95,6 +103,48 @@ def test_a_checkpoint_that_saw_the_site_is_not_gated_on_its_reconstruction(
     seen = seen_records([tiny_site.result.out_dir], None)
     with pytest.raises(SeenSiteError):
         refuse_seen_validation(seen, [reconstructed], "a model trained on the tiny site")
+
+
+def test_training_on_a_reconstruction_draws_the_observed_truth_and_records_the_site(
+    tiny_site: GeneratedSite, reconstructed: ValidationSite, tmp_path: Path
+) -> None:
+    config = MaskModelConfig(base_channels=4)
+    on_reconstruction = load_mask_training_site(reconstructed, config, damaged_copies=0)
+    rasters = load_site_rasters(reconstructed.rasters)
+    grid = site_grid(rasters, config)
+    observed = element_masks(true_vectors(reconstructed, rasters), grid, config)
+    whole = element_masks(read_vectors(vector_map_of(tiny_site.result.out_dir)), grid, config)
+    assert np.array_equal(on_reconstruction.targets, observed)
+    assert observed.sum() < whole.sum()  # the unseen parts of the truth are not targets
+    assert np.array_equal(
+        on_reconstruction.images[0], grid.image
+    )  # the surface stage's rasters are the input
+
+    registry = tmp_path / "registry"
+    train = MaskTrainConfig(steps=2, batch_size=2, crop_px=64, damaged_copies=1, threads=1)
+    folder = train_masks(config, train, [reconstructed], registry, show_progress=False)
+    data = json.loads((folder / "checkpoint.json").read_text())["data"]
+    assert data["sites"] == [str(tiny_site.result.out_dir)]
+    assert data["reconstructions"] == [str(reconstructed.rasters)]
+    checkpoint = load_mask_checkpoint(registry)
+    for scored in (tiny_site.result.out_dir, reconstructed.site):
+        with pytest.raises(SeenSiteError):
+            ensure_unseen(checkpoint, scored)
+    with pytest.raises(SeenSiteError):  # nor may it gate on the site it trains on
+        train_masks(config, train, [reconstructed], tmp_path / "other", validation_sites=[reconstructed])
+    assert not (tmp_path / "other").exists()
+
+
+def test_train_masks_names_a_site_without_a_reconstruction(tiny_site: GeneratedSite, tmp_path: Path) -> None:
+    copy = tmp_path / "site"
+    (copy / "ground_truth").mkdir(parents=True)
+    shutil.copy(tiny_site.result.out_dir / "ground_truth" / "vector_map.json", copy / "ground_truth")
+    registry = tmp_path / "registry"
+    result = CliRunner().invoke(
+        app, ["train-masks", "--registry", str(registry), "--reconstructed-site", str(copy), "--steps", "1"]
+    )
+    assert result.exit_code == 2 and f"cama run {copy / 'nuscenes'}" in result.output
+    assert not registry.exists()
 
 
 def test_a_missing_reconstruction_is_named(tiny_site: GeneratedSite, tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from models.vma.commands import BevRoot, BevSeeds, TrainingSites, seed_range
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.train import train_masks
+from models.vma.validation import ValidationEntry, reconstruction_of
 
 
 def train_masks_command(
@@ -21,6 +22,13 @@ def train_masks_command(
     site: TrainingSites = None,
     bev_seeds: BevSeeds = "",
     bev_root: BevRoot = Path("data/vma/train"),
+    reconstructed_site: Annotated[
+        list[Path] | None,
+        typer.Option(
+            help="Also train on the surface stage's rasters of this synthetic site (`cama synth`, then `cama run`), "
+            "against the truth its cameras observed (repeatable)."
+        ),
+    ] = None,
     init: Annotated[Path | None, typer.Option(help="Continue from this element-mask checkpoint.")] = None,
     steps: Annotated[int, typer.Option(help="Training batches.")] = 3000,
     max_minutes: Annotated[
@@ -33,7 +41,8 @@ def train_masks_command(
 ) -> None:
     """Train the element-mask VMA network (BEV segmentation, vectorised afterwards) as a new promoted version."""
     try:
-        sites = list(site or []) + ensure_bev_sites(seed_range(bev_seeds), bev_root)
+        sites: list[ValidationEntry] = [*(site or []), *ensure_bev_sites(seed_range(bev_seeds), bev_root)]
+        sites += [reconstruction_of(path) for path in reconstructed_site or []]
         parent = load_mask_checkpoint(init) if init is not None else None
         folder = train_masks(
             parent.model.config if parent is not None else MaskModelConfig(),

@@ -30,9 +30,16 @@ from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.targets import element_masks
 from models.vma.patches import site_grid
-from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters, vector_map_of
+from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters
 from models.vma.train import DAMAGE_SEED_BASE, optimise
-from models.vma.vectors import Vector, read_vectors
+from models.vma.validation import (
+    ValidationEntry,
+    ValidationSite,
+    as_validation_site,
+    true_vectors,
+    truth_folder,
+)
+from models.vma.vectors import Vector
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,12 +160,19 @@ def training_site(
     return MaskTrainingSite(name, images, element_masks(vectors, grid, config), np.stack([rows, cols]))
 
 
-def load_mask_training_site(path: Path, config: MaskModelConfig, damaged_copies: int) -> MaskTrainingSite:
-    """A generated site folder's rasters and ground-truth vectors as a training site (errors name the file)."""
-    rasters = load_site_rasters(path)
-    vectors = read_vectors(vector_map_of(path))
+def load_mask_training_site(
+    entry: ValidationEntry, config: MaskModelConfig, damaged_copies: int
+) -> MaskTrainingSite:
+    """A generated site's rasters and ground-truth vectors as a training site (errors name the file): a path
+    trains on the site's own rasters, a reconstruction (`models.vma.validation.reconstruction_of`) on the surface
+    stage's rasters of its data set against the truth its cameras observed, which is what the product proposes
+    on."""
+    site = as_validation_site(entry)
+    rasters = load_site_rasters(site.rasters)
+    vectors = true_vectors(site, rasters)
+    name = str(site if site.reconstructed else site.site)
     return training_site(
-        str(path), rasters, vectors, config, damaged_copies, DAMAGE_SEED_BASE + sum(str(path).encode())
+        name, rasters, vectors, config, damaged_copies, DAMAGE_SEED_BASE + sum(name.encode())
     )
 
 
@@ -279,20 +293,21 @@ def site_drawer(count: int, weights: Sequence[float] | None) -> Callable[[np.ran
 def train_masks(
     model_config: MaskModelConfig,
     train_config: MaskTrainConfig,
-    sites: Sequence[Path],
+    sites: Sequence[ValidationEntry],
     registry: Path,
     *,
     parent: MaskCheckpoint | None = None,
-    validation_sites: Sequence[Path] = (),
+    validation_sites: Sequence[ValidationEntry] = (),
     promote_result: bool = True,
     show_progress: bool = True,
 ) -> Path:
-    """Train (or, from `parent`, continue) the network on generated `sites`; save a new version of `registry`
-    that records every site it and its parents saw (refusing `validation_sites` among them)."""
+    """Train (or, from `parent`, continue) the network on generated `sites` (their own rasters, or their
+    reconstructions); save a new version of `registry` that records every site it and its parents saw (refusing
+    `validation_sites` among them)."""
     started = time.perf_counter()
-    seen = seen_records(sites, parent)
+    seen = seen_records([truth_folder(s) for s in sites], parent)
     refuse_seen_validation(seen, validation_sites, "the element-mask model being trained")
-    training = [load_mask_training_site(Path(p), model_config, train_config.damaged_copies) for p in sites]
+    training = [load_mask_training_site(s, model_config, train_config.damaged_copies) for s in sites]
     model = parent.model if parent is not None else ElementMaskNet(model_config)
     losses = fit_masks(model, training, train_config, show_progress=show_progress)
     model.cpu()
@@ -307,7 +322,10 @@ def train_masks(
         "train_config": config_dict(train_config),
         "metrics": metrics,
         "data": {
-            "sites": [str(p) for p in sites],
+            "sites": [str(truth_folder(s)) for s in sites],
+            "reconstructions": [
+                str(s.rasters) for s in sites if isinstance(s, ValidationSite) and s.reconstructed
+            ],
             **seen,
             "damaged_copies": train_config.damaged_copies,
             "samples_seen": len(losses) * train_config.batch_size,
