@@ -109,16 +109,15 @@ def test_training_on_a_reconstruction_draws_the_observed_truth_and_records_the_s
     tiny_site: GeneratedSite, reconstructed: ValidationSite, tmp_path: Path
 ) -> None:
     config = MaskModelConfig(base_channels=4)
-    on_reconstruction = load_mask_training_site(reconstructed, config, damaged_copies=0)
+    on_reconstruction = load_mask_training_site(reconstructed, config, damaged_copies=2)
     rasters = load_site_rasters(reconstructed.rasters)
     grid = site_grid(rasters, config)
     observed = element_masks(true_vectors(reconstructed, rasters), grid, config)
     whole = element_masks(read_vectors(vector_map_of(tiny_site.result.out_dir)), grid, config)
     assert np.array_equal(on_reconstruction.targets, observed)
     assert observed.sum() < whole.sum()  # the unseen parts of the truth are not targets
-    assert np.array_equal(
-        on_reconstruction.images[0], grid.image
-    )  # the surface stage's rasters are the input
+    # the surface stage's rasters are the input, as they are: no simulated damage on top of the real thing
+    assert len(on_reconstruction.images) == 1 and np.array_equal(on_reconstruction.images[0], grid.image)
 
     registry = tmp_path / "registry"
     train = MaskTrainConfig(steps=2, batch_size=2, crop_px=64, damaged_copies=1, threads=1)

@@ -164,16 +164,15 @@ def load_mask_training_site(
     entry: ValidationEntry, config: MaskModelConfig, damaged_copies: int
 ) -> MaskTrainingSite:
     """A generated site's rasters and ground-truth vectors as a training site (errors name the file): a path
-    trains on the site's own rasters, a reconstruction (`models.vma.validation.reconstruction_of`) on the surface
-    stage's rasters of its data set against the truth its cameras observed, which is what the product proposes
-    on."""
+    trains on the site's own rasters and `damaged_copies` damaged versions, a reconstruction
+    (`models.vma.validation.reconstruction_of`) on the surface stage's rasters of its data set as they are (the
+    damage only imitates them) against the truth its cameras observed, which is what the product proposes on."""
     site = as_validation_site(entry)
     rasters = load_site_rasters(site.rasters)
     vectors = true_vectors(site, rasters)
     name = str(site if site.reconstructed else site.site)
-    return training_site(
-        name, rasters, vectors, config, damaged_copies, DAMAGE_SEED_BASE + sum(name.encode())
-    )
+    copies = 0 if site.reconstructed else damaged_copies
+    return training_site(name, rasters, vectors, config, copies, DAMAGE_SEED_BASE + sum(name.encode()))
 
 
 def jitter_appearance(image: np.ndarray, rng: np.random.Generator) -> None:
