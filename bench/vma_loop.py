@@ -6,7 +6,8 @@ registry, or, with `--bootstrap-seeds A-B`, an element-mask network trained from
 truth of those few BEV sites (`--bootstrap-steps` batches): a team's first model, before any correction. Round k
 (1..N) takes a new BEV site (seed `--new-seeds`, one per round, never seen by any model here): the current model
 proposes on it (`--propose-on damaged`: on its rasters with reconstruction-like damage, as the product proposes on
-reconstructions), the scripted annotator (`app.review_effort`, in-memory queue) accepts, fixes or rejects each
+reconstructions), or, with `--new-recon-site`, a synthetic site's reconstruction (`cama run` done), proposed on as it
+is with the product's settings and corrected against the truth its cameras observed; the scripted annotator (`app.review_effort`, in-memory queue) accepts, fixes or rejects each
 proposal against the truth and draws what is missing; its verdicts become corrections (accepted / fixed / drawn as
 labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
@@ -20,7 +21,7 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--val-seeds A-B] [--gate-recon-site SITE] [--recon-site SITE] [--replay-sites 4]
+       [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE] [--recon-site SITE] [--replay-sites 4]
        [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
@@ -47,7 +48,7 @@ from app.review_effort.costs import ActionCosts
 from app.review_effort.plan import SimulationConfig
 from app.review_effort.review_time import MIN_CONFIDENCE, review_queue, review_time
 from app.review_effort.session import work_queue
-from app.review_effort.truth import true_polylines
+from app.review_effort.truth import observed_true_polylines, true_polylines
 from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import checkpoint_kind, current_version, ensure_unseen, load_checkpoint, promote
 from models.vma.commands import seed_range
@@ -56,12 +57,12 @@ from models.vma.element_masks.checkpoint import KIND as MASK_KIND
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks
+from models.vma.element_masks.propose import MaskInferenceConfig, inference_for, predict_site_masks
 from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
 from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig
-from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
 from models.vma.retrain import (
     Corrections,
     RetrainConfig,
@@ -78,17 +79,30 @@ import matplotlib.pyplot as plt  # noqa: E402
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
-from models.vma.validation import ValidationEntry, reconstruction_of  # noqa: E402
+from models.vma.validation import (  # noqa: E402
+    ValidationEntry,
+    as_validation_site,
+    reconstruction_of,
+    truth_folder,
+)
 
 RESULTS = Path(__file__).parent / "results"
 Proposer = Callable[[SiteRasters], list[Vector]]
 
 
-def corrections_of(site: Path, propose: Proposer) -> tuple[Corrections, dict[str, int]]:
-    """The scripted annotator's review of `propose`'s output on `site`, as retraining's corrections."""
-    rasters = load_site_rasters(site)
+def corrections_of(entry: ValidationEntry, propose: Proposer) -> tuple[Corrections, dict[str, int]]:
+    """The scripted annotator's review of `propose`'s output on a new site, as retraining's corrections: on a BEV
+    site's rasters against its truth, or on a reconstruction's against the truth its cameras observed (the
+    corrections then name the reconstruction's rasters, which the retrain trains on)."""
+    site = as_validation_site(entry)
+    rasters = load_site_rasters(site.rasters)
     vectors, queue = review_queue(propose(rasters), MIN_CONFIDENCE)
-    log = work_queue(queue, true_polylines(site), SimulationConfig(), ActionCosts())
+    truth = (
+        observed_true_polylines(site.site, raster_dir_of(site.rasters))
+        if site.reconstructed
+        else true_polylines(site.site)
+    )
+    log = work_queue(queue, truth, SimulationConfig(), ActionCosts())
     reviewed: list[tuple[Vector, str]] = []
     for index, decision in queue.verdicts.items():
         proposal = vectors[index]
@@ -99,11 +113,11 @@ def corrections_of(site: Path, propose: Proposer) -> tuple[Corrections, dict[str
             reviewed.append((proposal, {"accept": "accepted", "reject": "rejected"}[decision.kind]))
     reviewed += [(Vector(t.cls, t.points, 1.0), "accepted") for t in queue.drawn]
     georeference = Georeference.of(rasters.georeference, site_origin_xy=rasters.origin_xy)
-    labelled = proposals_as_annotations([v for v, _ in reviewed], georeference, site.name, "annotator")
+    labelled = proposals_as_annotations([v for v, _ in reviewed], georeference, site.site.name, "annotator")
     states = [state for v, state in reviewed if simple_geometry(v) is not None]
     elements = [e.with_changes(review_state=s) for e, s in zip(labelled.elements, states, strict=True)]
     counts = {k: int(v) for k, v in log.counts.items()}
-    return Corrections(site, labelled.model_copy(update={"elements": elements})), counts
+    return Corrections(site.rasters, labelled.model_copy(update={"elements": elements})), counts
 
 
 def measure(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
@@ -174,9 +188,11 @@ def bootstrap_model(registry: Path, sites: list[Path], steps: int, refused: list
 
 
 def promoted_proposer(registry: Path) -> Proposer:
-    """The registry's promoted model as the product proposes with it."""
+    """The registry's promoted model as the product proposes with it (the element-mask network with the
+    product's settings for the rasters: `inference_for`)."""
     if checkpoint_kind(registry) == MASK_KIND:
-        return mask_proposer(load_mask_checkpoint(registry).model)
+        model = load_mask_checkpoint(registry).model
+        return lambda rasters: predict_site_masks(model, rasters, inference_for(rasters))
     return model_proposer(load_checkpoint(registry).model, InferenceConfig())
 
 
@@ -264,6 +280,14 @@ def main() -> None:
         "--steps", type=int, default=300, help="fine-tuning batches per round (the job's default)"
     )
     parser.add_argument("--new-seeds", default="4000-4002", help="one new site per round ('A-B')")
+    parser.add_argument(
+        "--new-recon-site",
+        type=Path,
+        action="append",
+        default=[],
+        help="synthetic site with `cama run` done, one per round in place of --new-seeds: proposed on and corrected "
+        + "on its reconstructed rasters, as the product does (repeatable)",
+    )
     parser.add_argument("--val-seeds", default="3000-3002", help="the gate's validation sites")
     parser.add_argument("--heldout-seeds", default="2000-2004", help="measured after every round")
     parser.add_argument(
@@ -313,16 +337,19 @@ def main() -> None:
         plot(recorded["rounds"], recorded["rule_based"], plot_path(args.out))
         return
     torch.set_num_threads(args.threads)
-    new_sites = ensure_bev_sites(seed_range(args.new_seeds), args.site_root)[: args.rounds]
+    new_sites: list[ValidationEntry] = [reconstruction_of(site) for site in args.new_recon_site]
+    if not new_sites:
+        new_sites += ensure_bev_sites(seed_range(args.new_seeds), args.site_root)
+    new_sites = new_sites[: args.rounds]
     if len(new_sites) < args.rounds:
-        raise SystemExit(
-            f"--new-seeds {args.new_seeds} gives {len(new_sites)} sites for {args.rounds} rounds"
-        )
+        raise SystemExit(f"the new sites ({len(new_sites)}) are fewer than the {args.rounds} rounds")
     validation = ensure_bev_sites(seed_range(args.val_seeds), args.site_root)
     heldout = ensure_bev_sites(seed_range(args.heldout_seeds), args.site_root)
     recon = args.recon_site or [Path("data/synthetic/default"), Path("data/synthetic/random-9001")]
     if set(map(Path.resolve, args.gate_recon_site)) & set(map(Path.resolve, recon)):
         raise SystemExit("--gate-recon-site: a site the loop measures (--recon-site) cannot also validate it")
+    if set(map(Path.resolve, args.new_recon_site)) & set(map(Path.resolve, [*recon, *args.gate_recon_site])):
+        raise SystemExit("--new-recon-site: a site the loop corrects cannot also measure or validate it")
     gate_recon = [reconstruction_of(site) for site in args.gate_recon_site]
     if not validation and not gate_recon:
         raise SystemExit("the gate needs validation sites: --val-seeds or --gate-recon-site")
@@ -335,7 +362,7 @@ def main() -> None:
             registry,
             bootstrap_sites,
             args.bootstrap_steps,
-            [*new_sites, *validation, *heldout, *recon, *args.gate_recon_site],
+            [*map(truth_folder, new_sites), *validation, *heldout, *recon, *args.gate_recon_site],
         )
         start = (
             f"element-mask network trained on BEV sites {args.bootstrap_seeds}, {args.bootstrap_steps} steps"
@@ -348,7 +375,10 @@ def main() -> None:
         start = str(shipped)
     if checkpoint_kind(registry) != MASK_KIND:
         recon = []  # the reconstructed condition is measured for the element-mask network only
-    propose_on = on_damaged if args.propose_on == "damaged" else (lambda propose: propose)
+    damage = (
+        args.propose_on == "damaged" and not args.new_recon_site
+    )  # a reconstruction is proposed on as it is
+    propose_on = on_damaged if damage else (lambda propose: propose)
     rule = measure_rule_based(heldout, recon)
     print(f"rule-based: {summary(rule)}")
     rounds: list[dict[str, Any]] = [{"round": 0, "heldout": measure_model(registry, heldout, recon)}]
@@ -397,7 +427,12 @@ def main() -> None:
     )
     report = {
         "command": f"python bench/vma_loop.py {origin} "
-        + f"--rounds {args.rounds} --steps {args.steps} --new-seeds {args.new_seeds} "
+        + f"--rounds {args.rounds} --steps {args.steps} "
+        + (
+            "".join(f"--new-recon-site {s} " for s in args.new_recon_site)
+            if args.new_recon_site
+            else f"--new-seeds {args.new_seeds} "
+        )
         + f"--val-seeds '{args.val_seeds}' --heldout-seeds {args.heldout_seeds} "
         + "".join(f"--recon-site {s} " for s in recon)
         + "".join(f"--gate-recon-site {s} " for s in args.gate_recon_site)

@@ -127,6 +127,8 @@ def test_appearance_jitter_recolours_seen_cells_only_and_keeps_paint_brighter(
     assert max(looks) - min(looks) > 0.2, "exposures should vary widely from crop to crop"
     with pytest.raises(ValueError, match="appearance_share"):
         MaskTrainConfig(appearance_share=1.5)
+    with pytest.raises(ValueError, match="threads"):
+        MaskTrainConfig(threads=0)
 
 
 def test_a_trained_version_records_its_sites_and_is_refused_on_them(

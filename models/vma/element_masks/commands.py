@@ -38,6 +38,7 @@ def train_masks_command(
         int, typer.Option(help="Damaged copies of every site beside the clean one.")
     ] = 3,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    threads: Annotated[int, typer.Option(help="CPU threads torch trains with.")] = 2,
 ) -> None:
     """Train the element-mask VMA network (BEV segmentation, vectorised afterwards) as a new promoted version."""
     try:
@@ -47,7 +48,11 @@ def train_masks_command(
         folder = train_masks(
             parent.model.config if parent is not None else MaskModelConfig(),
             MaskTrainConfig(
-                steps=steps, max_seconds=max_minutes * 60, damaged_copies=damaged_copies, seed=seed
+                steps=steps,
+                max_seconds=max_minutes * 60,
+                damaged_copies=damaged_copies,
+                seed=seed,
+                threads=threads,
             ),
             sites,
             registry,

@@ -68,3 +68,5 @@ class MaskTrainConfig:
             )
         if not self.max_seconds > 0:
             raise ValueError(f"MaskTrainConfig.max_seconds must be > 0, got {self.max_seconds}")
+        if self.threads < 1:
+            raise ValueError(f"MaskTrainConfig.threads must be >= 1, got {self.threads}")
