@@ -237,3 +237,15 @@ def test_correction_crops_centre_on_the_elements_and_the_road_between_them(drawn
     extra_rows, extra_cols = with_road.road[:, 6:] * CONFIG.resolution_m
     # within 5 m of the divider (y = 20 m, x 20..30 m) and on road (y 12..28 m)
     assert ((extra_cols > 14.5) & (extra_cols < 35.5) & (extra_rows > 11.9) & (extra_rows < 28.1)).all()
+
+
+def test_an_element_reaching_the_rasters_last_cell_centres_crops_inside_the_grid(drawn_site: Path) -> None:
+    # a point on the raster's far edge (x 59.95 m) lies half a cell of the network's coarser grid past the last
+    # cell's centre, where rounding once gave a column one past the grid (the retrain job failed, IndexError)
+    rasters = load_site_rasters(drawn_site)
+    divider = Vector("divider", np.array([global_xy(50, 20), global_xy(59.95, 20)]))
+    site = training_site("drawn", rasters, [divider], CONFIG, 0, 1, centres_on=[divider], context_m=5.0)
+    rows, cols = site.road
+    assert rows.size and (rows >= 0).all() and (cols >= 0).all()
+    assert (rows < site.targets.shape[1]).all() and (cols < site.targets.shape[2]).all()
+    assert cols.max() == site.targets.shape[2] - 1  # the end point's own cell is a crop centre

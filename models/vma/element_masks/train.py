@@ -142,8 +142,9 @@ def training_site(
     else:
         points = [resample_spacing(v.points, 2.0) for v in centres_on]
         colrow = grid.pixel_from_global(np.vstack(points)) if points else np.zeros((0, 2))
-        inside = (colrow >= 0).all(axis=1) & (colrow[:, 0] < grid.shape[1]) & (colrow[:, 1] < grid.shape[0])
-        cols, rows = np.rint(colrow[inside]).astype(int).T
+        size, edge = np.array([grid.shape[1], grid.shape[0]]), 0.5 + 1e-6  # a cell's edge, to float precision
+        inside = ((colrow >= -edge) & (colrow <= size - 1 + edge)).all(axis=1)
+        cols, rows = np.clip(np.rint(colrow[inside]), 0, size - 1).astype(int).T
         if context_m > 0 and rows.size:
             points_mask = np.zeros(grid.shape, np.uint8)
             points_mask[rows, cols] = 1
