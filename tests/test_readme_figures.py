@@ -1143,3 +1143,38 @@ def test_gate_choice_confirmation_table() -> None:
     _check_per_site_columns(
         t, by_version, columns, GATE_CONFIRM_SITES, bev_speed=True, all_row="all five: mAP, speed-up"
     )
+
+
+RECON_TRAINED_SITES = {
+    "default": "data/synthetic/default",
+    **{seed: f"data/synthetic/random-{seed}" for seed in ("9001", "9013", "9017", "9019", "9021")},
+}
+
+
+def test_training_on_reconstructions_confirmation_table() -> None:
+    t = table("trained on reconstructions, confirmed", "bench/vma_masks.py")
+    files = {
+        "v0003": "vma_masks_recon_trained_confirm_v0003.json",
+        "bev only": "vma_masks_recon_trained_confirm_bev_only.json",
+        "reconstructions": "vma_masks_recon_trained_confirm.json",
+    }
+    by_version = {key: results(name) for key, name in files.items()}
+    for key, name in files.items():
+        assert_names_source(t, name, "bench/vma_masks.py")
+        assert "--seeds 5000-5004" in by_version[key]["command"], key
+    assert by_version["v0003"]["checkpoint"]["version"] == "v0003"
+    assert by_version["bev only"]["checkpoint"]["data"]["reconstructions"] == []
+    assert len(by_version["reconstructions"]["checkpoint"]["data"]["reconstructions"]) == 12
+    shipped = ROOT / "models" / "vma" / "element_masks" / "checkpoints"
+    assert json.loads((shipped / "current.json").read_text())["version"] == "v0004"
+    shipped_data = json.loads((shipped / "v0004" / "checkpoint.json").read_text())["data"]
+    assert by_version["reconstructions"]["checkpoint"]["data"] == shipped_data  # the measured one is shipped
+    columns = {
+        "rule-based": ("v0003", "rule_based"),
+        "v0003": ("v0003", "element_masks"),
+        "BEV only, 1,200 more steps": ("bev only", "element_masks"),
+        "BEV and 12 reconstructions, 1,200 more steps (v0004, shipped)": ("reconstructions", "element_masks"),
+    }
+    _check_per_site_columns(
+        t, by_version, columns, RECON_TRAINED_SITES, bev_speed=True, all_row="all six: mAP, speed-up"
+    )
