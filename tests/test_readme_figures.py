@@ -1178,3 +1178,24 @@ def test_training_on_reconstructions_confirmation_table() -> None:
     _check_per_site_columns(
         t, by_version, columns, RECON_TRAINED_SITES, bev_speed=True, all_row="all six: mAP, speed-up"
     )
+
+
+def test_training_on_reconstructions_at_the_gates_sites() -> None:
+    text = " ".join(readme_text().split())
+    ours, v0003 = (
+        results(f"vma_masks_recon_trained_validation{suffix}.json")["results"] for suffix in ("", "_v0003")
+    )
+
+    def shown(figures: dict[str, Any], condition: str, key: str) -> str:
+        scored = figures[condition]["element_masks"]
+        if key == "speed_up":
+            return f"{scored['annotator']['speed_up']:.2f}x"
+        return f"{(scored['observed_truth'] if condition == 'reconstructed' else scored)['mean_ap']:.3f}"
+
+    expected = (
+        f"reconstructions {shown(ours, 'reconstructed', 'map')} against {shown(v0003, 'reconstructed', 'map')}, "
+        f"{shown(ours, 'reconstructed', 'speed_up')} against {shown(v0003, 'reconstructed', 'speed_up')}; "
+        f"BEV {shown(ours, 'clean', 'map')} against {shown(v0003, 'clean', 'map')}, "
+        f"{shown(ours, 'clean', 'speed_up')} against {shown(v0003, 'clean', 'speed_up')}"
+    )
+    assert expected in text
