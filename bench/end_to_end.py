@@ -7,7 +7,8 @@
 2. Camera pose error of the coarse WIGO poses and of the SfM poses against the true poses (absolute, and
    gauge-free after the best similarity).
 3. Elevation RMSE of the reconstructed raster over cells that are road in the ground truth and observed.
-4. Chamfer-AP (0.5 / 1.0 / 1.5 m) of the VMA proposals against the true vectors inside the reconstructed extent,
+4. Which model proposed (`proposed_by`: the elements' authors, e.g. `vma-masks-v0004`), and Chamfer-AP (0.5 / 1.0 /
+   1.5 m) of the VMA proposals against the true vectors inside the reconstructed extent,
    and against the true vectors cut to the observed cells (the clips drove only part of the generated roads).
 5. The paper's comparison table on known truth: SRE / precision / recall / F1 of lane dividers against the image
    lane masks for (a) the true 3D map with true poses, (b) the baseline 2D map with coarse poses, (c1) the
@@ -389,6 +390,7 @@ def main() -> None:
         "poses": pose_figures(site, views, workspace, site_id),
     }
     figures["elevation"], error_map = elevation_figures(site, rasters)
+    figures["proposed_by"] = sorted({e.author for e in AnnotationSet.read_json(proposals).elements})
     figures["proposals_ap"] = proposals_ap(site, rasters, proposals)
     figures["annotator"], corrected = simulated_pass(site, proposals, rasters)
     truth = site / "ground_truth"

@@ -692,6 +692,27 @@ def test_element_mask_end_to_end_figures() -> None:
         f"{counts['drawn']})"
     )
     assert shown_v3 in text
+    today = {v: results(f"end_to_end_masks_{v}.json") for v in ("v0004", "v0003_today")}
+    for version, recorded in today.items():
+        assert recorded["proposed_by"] == [f"vma-masks-{version.split('_')[0]}"]
+    (v4, v3_today) = (
+        (
+            f"{r['proposals_ap']['observed_truth']['mean_ap']:.3f} and",
+            f"{r['annotator']['speed_up']:.2f}x",
+            r["annotator"]["corrected"]["counts"],
+        )
+        for r in today.values()
+    )
+    assert f"v0004 gives proposal mAP {v4[0]} the speed-up {v4[1]}" in text
+    assert (
+        f"{v4[2]['accept']} accepted, {v4[2]['fix']} fixed, {v4[2]['reject']} rejected, {v4[2]['drawn']} drawn"
+        in text
+    )
+    assert f"and v0003 {v3_today[0]} {v3_today[1]}" in text
+    c = v3_today[2]
+    assert (
+        f"end_to_end_masks_v0003_today.json`: {c['accept']}, {c['fix']}, {c['reject']}, {c['drawn']})" in text
+    )
 
 
 def _reconstructed_figures(figures: dict[str, Any]) -> list[Expected]:
@@ -1127,13 +1148,22 @@ GATE_CONFIRM_SITES = {
 }
 
 
+def _confirmation_runs(t: MarkdownTable, files: dict[str, str]) -> dict[str, dict[str, Any]]:
+    """The bench/vma_masks.py runs (key -> results file) a confirmation table names, each on BEV sites 5000-5004."""
+    runs = {key: results(name) for key, name in files.items()}
+    for key, name in files.items():
+        assert_names_source(t, name, "bench/vma_masks.py")
+        assert "--seeds 5000-5004" in runs[key]["command"], key
+    return runs
+
+
 def test_gate_choice_confirmation_table() -> None:
     t = table("gate's choice, confirmed", "bench/vma_masks.py")
-    by_version = {v: results(f"vma_masks_gate_confirm_{v}.json") for v in ("v0003", "v0004", "v0006")}
+    by_version = _confirmation_runs(
+        t, {v: f"vma_masks_gate_confirm_{v}.json" for v in ("v0003", "v0004", "v0006")}
+    )
     for version, recorded in by_version.items():
-        assert_names_source(t, f"vma_masks_gate_confirm_{version}.json", "bench/vma_masks.py")
         assert recorded["checkpoint"]["version"] == version
-        assert "--seeds 5000-5004" in recorded["command"], version
     columns = {
         "rule-based": ("v0003", "rule_based"),
         "v0003 (shipped)": ("v0003", "element_masks"),
@@ -1158,10 +1188,7 @@ def test_training_on_reconstructions_confirmation_table() -> None:
         "bev only": "vma_masks_recon_trained_confirm_bev_only.json",
         "reconstructions": "vma_masks_recon_trained_confirm.json",
     }
-    by_version = {key: results(name) for key, name in files.items()}
-    for key, name in files.items():
-        assert_names_source(t, name, "bench/vma_masks.py")
-        assert "--seeds 5000-5004" in by_version[key]["command"], key
+    by_version = _confirmation_runs(t, files)
     assert by_version["v0003"]["checkpoint"]["version"] == "v0003"
     assert by_version["bev only"]["checkpoint"]["data"]["reconstructions"] == []
     assert len(by_version["reconstructions"]["checkpoint"]["data"]["reconstructions"]) == 12
