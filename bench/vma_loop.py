@@ -317,7 +317,12 @@ def main() -> None:
         default=MaskRetrainConfig.replay_share,
         help="element-mask retraining: the share of crops from the rehearsed sites",
     )
-    parser.add_argument("--propose-on", choices=("clean", "damaged"), default="damaged")
+    parser.add_argument(
+        "--propose-on",
+        choices=("clean", "damaged"),
+        default="damaged",
+        help="the new BEV sites' rasters as they are or damaged (reconstructions are proposed on as they are)",
+    )
     parser.add_argument("--corrections", choices=("all", "latest"), default="all")
     parser.add_argument("--site-root", type=Path, default=Path("data/vma/loop"))
     parser.add_argument("--threads", type=int, default=2)

@@ -1226,3 +1226,25 @@ def test_training_on_reconstructions_at_the_gates_sites() -> None:
         f"{shown(ours, 'clean', 'speed_up')} against {shown(v0003, 'clean', 'speed_up')}"
     )
     assert expected in text
+
+
+def test_loop_on_reconstructions_table() -> None:
+    """Each round's promoted version, retrain seconds, what the gate said and the held-out figures after it."""
+    t = table("round on reconstructions", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds.json")
+    assert "--new-recon-site data/synthetic/random-9113" in recorded["command"]
+    for entry in recorded["rounds"]:
+        label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
+        cells = row(t, label)
+        heldout = entry["heldout"]
+        assert cells[1].split(" ")[0] == heldout["version"], label
+        if entry["round"]:
+            assert_shows(cells[2], [round(entry["retrain_seconds"])], f"{label} seconds")
+            assert_shows(cells[3], _gate_figures(entry["gate"]), f"{label} gate")
+            assert (entry["candidate"] + " kept out" in cells[1]) != entry["promoted"], label
+        assert_shows(cells[4], _loop_figures(heldout), f"{label} held-out")
+        recon = heldout["reconstructed"]
+        assert_shows(
+            cells[5], [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]], f"{label} recon"
+        )
