@@ -6,9 +6,10 @@ registry, or, with `--bootstrap-seeds A-B`, an element-mask network trained from
 truth of those few BEV sites (`--bootstrap-steps` batches): a team's first model, before any correction. Round k
 (1..N) takes a new BEV site (seed `--new-seeds`, one per round, never seen by any model here): the current model
 proposes on it (`--propose-on damaged`: on its rasters with reconstruction-like damage, as the product proposes on
-reconstructions), or, with `--new-recon-site`, a synthetic site's reconstruction (`cama run` done), proposed on as it
-is with the product's settings and corrected against the truth its cameras observed; the scripted annotator (`app.review_effort`, in-memory queue) accepts, fixes or rejects each
-proposal against the truth and draws what is missing; its verdicts become corrections (accepted / fixed / drawn as
+reconstructions), or, with `--new-recon-site`, a synthetic site's reconstruction (`cama run` done), proposed on as
+it is with the product's settings and corrected against the truth its cameras observed; the scripted annotator
+(`app.review_effort`, in-memory queue) accepts, fixes or rejects each proposal against the truth and draws what is
+missing; its verdicts become corrections (accepted / fixed / drawn as
 labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
 both gates (validation mAP and the annotator's correction time on the validation sites: BEV sites `--val-seeds`
@@ -21,8 +22,8 @@ synthetic sites (`--recon-site`, as `bench/vma_masks.py` scores them). The rule-
 it once. A checkpoint is refused on a held-out or validation site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
-       [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE] [--recon-site SITE] [--replay-sites 4]
-       [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
+       [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE]
+       [--recon-site SITE] [--replay-sites 4] [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -380,9 +381,8 @@ def main() -> None:
         start = str(shipped)
     if checkpoint_kind(registry) != MASK_KIND:
         recon = []  # the reconstructed condition is measured for the element-mask network only
-    damage = (
-        args.propose_on == "damaged" and not args.new_recon_site
-    )  # a reconstruction is proposed on as it is
+    # only new BEV sites are damaged: a reconstruction is proposed on as it is
+    damage = args.propose_on == "damaged" and not args.new_recon_site
     propose_on = on_damaged if damage else (lambda propose: propose)
     rule = measure_rule_based(heldout, recon)
     print(f"rule-based: {summary(rule)}")
