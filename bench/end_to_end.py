@@ -23,6 +23,7 @@ Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-cou
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
 
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|masks|rule]
+       [--checkpoint REGISTRY_OR_VERSION]
        [--masks auto|dataset|predicted|DIR] [--out bench/results/end_to_end.json] [--measure-only]
 """
 
@@ -334,6 +335,12 @@ def main() -> None:
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
     parser.add_argument("--site-id", default="site-001")
     parser.add_argument("--proposer", choices=("learned", "masks", "rule"), default="learned")
+    parser.add_argument(
+        "--checkpoint",
+        type=Path,
+        default=None,
+        help="VMA registry or version folder to propose with (default: the shipped one of the proposer's kind)",
+    )
     parser.add_argument("--max-features", type=int, default=None)
     parser.add_argument(
         "--masks",
@@ -351,10 +358,10 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
-    if args.proposer == "learned":  # SeenSiteError when the shipped VMA trained on this site
-        ensure_unseen(load_checkpoint(resolve_checkpoint(None)), site)
-    if args.proposer == "masks":  # the same for the shipped element-mask network
-        ensure_unseen(load_mask_checkpoint(resolve_checkpoint(None, SHIPPED_MASK_REGISTRY)), site)
+    if args.proposer == "learned":  # SeenSiteError when the VMA model trained on this site
+        ensure_unseen(load_checkpoint(resolve_checkpoint(args.checkpoint)), site)
+    if args.proposer == "masks":  # the same for the element-mask network
+        ensure_unseen(load_mask_checkpoint(resolve_checkpoint(args.checkpoint, SHIPPED_MASK_REGISTRY)), site)
     workspace = Workspace.for_dataset(site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:
@@ -366,7 +373,9 @@ def main() -> None:
         result = run_pipeline(
             site / "nuscenes",
             workspace.root,
-            PipelineConfig(proposer=args.proposer, features=features, masks=args.masks),
+            PipelineConfig(
+                proposer=args.proposer, checkpoint=args.checkpoint, features=features, masks=args.masks
+            ),
             on_stage=lambda s: print(f"== {s}", flush=True),
         )
         stage_seconds = {k: round(v, 1) for k, v in result.seconds.items()}
