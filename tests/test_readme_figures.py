@@ -711,7 +711,7 @@ def test_element_mask_end_to_end_figures() -> None:
     assert f"and v0003 {v3_today[0]} {v3_today[1]}" in text
     c = v3_today[2]
     assert (
-        f"end_to_end_masks_v0003_today.json`: {c['accept']}, {c['fix']}, {c['reject']}, {c['drawn']})" in text
+        f"end_to_end_masks_v0003_today.json`: {c['accept']}, {c['fix']}, {c['reject']}, {c['drawn']};" in text
     )
 
 
