@@ -1248,3 +1248,31 @@ def test_loop_on_reconstructions_table() -> None:
         assert_shows(
             cells[5], [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]], f"{label} recon"
         )
+
+
+def test_more_reconstructions_not_shipped() -> None:
+    text = " ".join(readme_text().split())
+    candidate = results("vma_masks_recon_trained_validation_v0005.json")["results"]
+    current = results("vma_masks_recon_trained_validation.json")["results"]
+
+    def correction_s(figures: dict[str, Any]) -> float:
+        return sum(
+            figures[c]["element_masks"]["annotator"]["correction_s"] for c in ("clean", "reconstructed")
+        )
+
+    recon_map = [
+        f["reconstructed"]["element_masks"]["observed_truth"]["mean_ap"] for f in (candidate, current)
+    ]
+    bev_map = [f["clean"]["element_masks"]["mean_ap"] for f in (candidate, current)]
+    assert f"reconstructions ({recon_map[0]:.3f} against {recon_map[1]:.3f})" in text
+    assert f"on BEV ({bev_map[0]:.3f} against {bev_map[1]:.3f})" in text
+    assert f"both is {correction_s(candidate):.0f} s against {correction_s(current):.0f} s" in text
+    assert correction_s(candidate) > correction_s(current)  # what keeps it out
+    confirm = results("vma_masks_recon_trained_confirm_v0005.json")
+    assert len(confirm["checkpoint"]["data"]["reconstructions"]) == 27
+    shown = confirm["results"]["reconstructed"]["element_masks"]
+    ours = results("vma_masks_recon_trained_confirm.json")["results"]["reconstructed"]["element_masks"]
+    assert (
+        f"it is {shown['observed_truth']['mean_ap']:.3f} and {shown['annotator']['speed_up']:.2f}x against v0004's "
+        f"{ours['observed_truth']['mean_ap']:.3f} and {ours['annotator']['speed_up']:.2f}x"
+    ) in text
