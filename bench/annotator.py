@@ -28,12 +28,13 @@ from app.simulation.annotator import correct_proposals, draw_from_scratch
 from app.simulation.workbench import load_proposals, local_backend, register_synthetic_site
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
+from models.vma.rasters import load_site_rasters
 
 RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
 
 def run(site: Path, proposal_files: list[Path], rasters: Path | None = None) -> dict[str, Any]:
-    truths = observed_true_polylines(site, rasters) if rasters else true_polylines(site)
+    truths = observed_true_polylines(site, load_site_rasters(rasters)) if rasters else true_polylines(site)
     with local_backend(site) as (admin, annotator):
         started = time.perf_counter()
         scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)

@@ -211,7 +211,7 @@ def simulated_pass(
 ) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     """The scripted annotator on the proposals and on an empty site, both working towards the observed parts of
     the true vectors; the corrected map (global 2D)."""
-    truths = observed_true_polylines(site, rasters_folder)
+    truths = observed_true_polylines(site, load_site_rasters(rasters_folder))
     with local_backend(site) as (admin, annotator):
         corrected_site = register_synthetic_site(admin, site, "corrected")
         load_proposals(admin, corrected_site, proposals)

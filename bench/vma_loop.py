@@ -63,7 +63,7 @@ from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_fr
 from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
 from models.vma.infer import InferenceConfig
-from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
+from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.retrain import (
     Corrections,
     RetrainConfig,
@@ -98,11 +98,7 @@ def corrections_of(entry: ValidationEntry, propose: Proposer) -> tuple[Correctio
     site = as_validation_site(entry)
     rasters = load_site_rasters(site.rasters)
     vectors, queue = review_queue(propose(rasters), MIN_CONFIDENCE)
-    truth = (
-        observed_true_polylines(site.site, raster_dir_of(site.rasters))
-        if site.reconstructed
-        else true_polylines(site.site)
-    )
+    truth = observed_true_polylines(site.site, rasters) if site.reconstructed else true_polylines(site.site)
     log = work_queue(queue, truth, SimulationConfig(), ActionCosts())
     reviewed: list[tuple[Vector, str]] = []
     for index, decision in queue.verdicts.items():

@@ -17,7 +17,7 @@ from app.review_effort.costs import ActionCosts
 from app.review_effort.plan import Polyline, SimulationConfig
 from app.review_effort.session import MemoryQueue, draw_from_scratch, work_queue
 from app.review_effort.truth import observed_true_polylines
-from models.vma.rasters import SiteRasters, load_site_rasters, raster_dir_of
+from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.validation import ValidationEntry, as_validation_site
 from models.vma.vectors import Vector, simple_geometry
 
@@ -48,9 +48,9 @@ def review_time(
     correction_s = drawing_s = 0.0
     for entry in sites:
         site = as_validation_site(entry)
-        rasters = raster_dir_of(site.rasters)
+        rasters = load_site_rasters(site.rasters)
         truths = observed_true_polylines(site.site, rasters)
-        _, queue = review_queue(propose(load_site_rasters(site.rasters)), min_confidence)
+        _, queue = review_queue(propose(rasters), min_confidence)
         correction_s += work_queue(queue, truths, config, costs).total_s
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
     return {

@@ -7,7 +7,7 @@ import numpy as np
 from app.review_effort.plan import Polyline
 from cama_pipeline.evaluate.inputs import load_vector_map
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
-from models.vma.rasters import load_site_rasters, vector_map_of
+from models.vma.rasters import SiteRasters, vector_map_of
 
 
 def true_polylines(site: Path) -> list[Polyline]:
@@ -16,10 +16,9 @@ def true_polylines(site: Path) -> list[Polyline]:
     return [Polyline(e.cls, np.asarray(e.points)[:, :2]) for e in elements]
 
 
-def observed_true_polylines(site: Path, rasters_folder: Path) -> list[Polyline]:
-    """The site's true vectors cut to the cells a reconstruction's rasters observed (nobody draws road that no
-    camera saw)."""
-    rasters = load_site_rasters(rasters_folder)
+def observed_true_polylines(site: Path, rasters: SiteRasters) -> list[Polyline]:
+    """The site's true vectors cut to the cells `rasters` (a reconstruction's, loaded by the caller, who proposes on
+    them too) observed (nobody draws road that no camera saw)."""
     mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
     return [
         Polyline(t.cls, part)
