@@ -8,6 +8,7 @@ reconstruction of a synthetic site (`cama synth` then `cama run`): the rasters a
 is the generator's, cut to the cells the cameras observed (nobody can propose or draw what no image shows).
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,6 +64,11 @@ def reconstruction_of(site: Path, workspace: Path | None = None) -> ValidationSi
 
 ValidationEntry = Path | ValidationSite
 """A validation site as the gates take it: a path is scored on its own rasters."""
+
+
+def reconstructions(entries: Sequence[ValidationEntry]) -> list[ValidationSite]:
+    """The entries whose rasters are a reconstruction (a path is its own rasters)."""
+    return [entry for entry in entries if isinstance(entry, ValidationSite) and entry.reconstructed]
 
 
 def as_validation_site(entry: ValidationEntry) -> ValidationSite:

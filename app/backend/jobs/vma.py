@@ -236,12 +236,11 @@ def _count(annotations: AnnotationSet, states: tuple[str, ...]) -> int:
 def _gate_message(outcome: dict[str, Any], validation: list["ValidationEntry"]) -> str:
     """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured), and
     what the validation sites were (their own rasters or reconstructions)."""
-    from models.vma.validation import ValidationSite
+    from models.vma.validation import reconstructions
 
     candidate, current = outcome["candidate_metrics"], outcome["current_metrics"]
     verdict = "promoted" if outcome["promoted"] else "kept out by the gate"
-    rebuilt = sum(isinstance(v, ValidationSite) and v.reconstructed for v in validation)
-    where = f"{len(validation)} validation site(s), {rebuilt} of them reconstructed"
+    where = f"{len(validation)} validation site(s), {len(reconstructions(validation))} of them reconstructed"
     review = ""
     if "review" in candidate and "review" in current:
         new_s, old_s = candidate["review"]["correction_s"], current["review"]["correction_s"]

@@ -34,8 +34,8 @@ from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters
 from models.vma.train import DAMAGE_SEED_BASE, optimise
 from models.vma.validation import (
     ValidationEntry,
-    ValidationSite,
     as_validation_site,
+    reconstructions,
     true_vectors,
     truth_folder,
 )
@@ -323,9 +323,7 @@ def train_masks(
         "metrics": metrics,
         "data": {
             "sites": [str(truth_folder(s)) for s in sites],
-            "reconstructions": [
-                str(s.rasters) for s in sites if isinstance(s, ValidationSite) and s.reconstructed
-            ],
+            "reconstructions": [str(s.rasters) for s in reconstructions(sites)],
             **seen,
             "damaged_copies": train_config.damaged_copies,
             "samples_seen": len(losses) * train_config.batch_size,
