@@ -55,6 +55,7 @@ Each site goes to `<out>/r<seed>`; a site already there and up to date is skippe
 
 import argparse
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -82,18 +83,33 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
+def make_site(seed: int, out: Path, workers: int = 1) -> str:
+    """Site `seed` generated into `out/r<seed>` (skipped when up to date); a line saying how long it took."""
+    started = time.perf_counter()
+    result = run(training_site_config(seed), out / f"r{seed}", workers=workers, show_progress=False)
+    return f"seed {seed}: {result.images} images in {time.perf_counter() - started:.0f} s"
+
+
+def make_sites(seeds: list[int], out: Path, *, workers: int = 1, processes: int = 1) -> None:
+    """Every site of `seeds` into `out`: one after another with `workers` render workers each, or `processes`
+    sites at a time with one each (a many-core machine)."""
+    if processes <= 1:
+        for seed in seeds:
+            print(make_site(seed, out, workers), flush=True)
+        return
+    with ProcessPoolExecutor(processes) as pool:
+        for line in pool.map(make_site, seeds, [out] * len(seeds)):
+            print(line, flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="folder for the sites (r<seed> each)")
     parser.add_argument("--seeds", type=parse_seeds, required=True, help="e.g. 100-111 or 9001")
-    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=1, help="render workers of each site")
+    parser.add_argument("--processes", type=int, default=1, help="sites made at a time (one worker each)")
     args = parser.parse_args()
-    for seed in args.seeds:
-        started = time.perf_counter()
-        result = run(
-            training_site_config(seed), args.out / f"r{seed}", workers=args.workers, show_progress=False
-        )
-        print(f"seed {seed}: {result.images} images in {time.perf_counter() - started:.0f} s", flush=True)
+    make_sites(args.seeds, args.out, workers=args.workers, processes=args.processes)
 
 
 if __name__ == "__main__":

@@ -132,6 +132,25 @@ def train_segmenter_command(
             "in [0, this] (0: none)."
         ),
     ] = TrainConfig().paint_fade_max,
+    crop: Annotated[
+        tuple[int, int],
+        typer.Option(
+            help="Training crop HEIGHT WIDTH in pixels (multiples of 32) of the input-width images."
+        ),
+    ] = (TrainConfig().crop_height_px, TrainConfig().crop_width_px),
+    loader_workers: Annotated[
+        int,
+        typer.Option(
+            min=0, help="Processes making the augmented crops beside training (0: the loop itself)."
+        ),
+    ] = 0,
+    time_budget: Annotated[
+        float | None,
+        typer.Option(
+            help="Seconds to train for instead of --epochs passes (the schedule fills them; the checkpoint "
+            "records the passes made)."
+        ),
+    ] = None,
 ) -> None:
     """Train the segmentation network on randomised generator sites (never on a measurement site) and write a
     checkpoint that records its config, the sites it saw and its per-class IoU on the held-out sites."""
@@ -145,6 +164,10 @@ def train_segmenter_command(
             max_class_weight=max_class_weight,
             scale_range=scale_range,
             paint_fade_max=paint_fade_max,
+            crop_height_px=crop[0],
+            crop_width_px=crop[1],
+            loader_workers=loader_workers,
+            time_budget_s=time_budget,
         )
         folder = train(
             config,

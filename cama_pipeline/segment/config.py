@@ -126,6 +126,14 @@ class TrainConfig:
     seed: int = 0
     threads: int = 2
     """torch CPU threads (the machine is shared)."""
+    loader_workers: int = 0
+    """Processes that make the augmented crops beside the training loop, each drawing its own from the seed and
+    its worker id (a GPU trains faster than one CPU core augments). 0: the loop makes them itself, as every
+    checkpoint trained on the CPU did; a run repeats exactly for a given seed and worker count."""
+    time_budget_s: float | None = None
+    """Train for about this many seconds instead of `epochs` passes: the first steps measure the speed and the
+    one-cycle schedule runs over the steps the rest holds. The checkpoint records the passes it made. None:
+    `epochs` passes."""
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size", "crop_height_px", "crop_width_px", "threads"):
@@ -143,6 +151,16 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.scale_range must be 0 < low <= high, got {self.scale_range!r}")
         if self.images_per_epoch is not None:
             _positive_int("TrainConfig", "images_per_epoch", self.images_per_epoch)
+        if (
+            isinstance(self.loader_workers, bool)
+            or not isinstance(self.loader_workers, int)
+            or self.loader_workers < 0
+        ):
+            raise ValueError(
+                f"TrainConfig.loader_workers must be an integer >= 0, got {self.loader_workers!r}"
+            )
+        if self.time_budget_s is not None:
+            _positive_float("TrainConfig", "time_budget_s", self.time_budget_s)
 
     def to_json(self) -> dict[str, Any]:
         out = dataclasses.asdict(self)

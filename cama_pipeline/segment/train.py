@@ -15,7 +15,7 @@ import dataclasses
 import json
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,6 +48,8 @@ logger = logging.getLogger(__name__)
 
 IGNORE = 255
 """Label of padding pixels (no loss)."""
+ONE_CYCLE_DIV_FACTOR = 25.0
+"""The one-cycle schedule starts at the peak learning rate over this (torch's default)."""
 NAMED_PRESETS = ("tiny", "default", "large")
 
 
@@ -199,40 +201,129 @@ def _batches(count: int, batch_size: int, rng: np.random.Generator, steps: int) 
     return [order[i * batch_size : (i + 1) * batch_size] for i in range(steps)]
 
 
+def _augmented_batches(
+    data: TrainingSet, config: TrainConfig, rng: np.random.Generator, steps_per_epoch: int
+) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
+    """Endless (images (B, 3, H, W) float, labels (B, H, W) int64) batches of augmented crops, one epoch's
+    image order drawn from `rng` at a time (lazily: a consumer that stops draws no more)."""
+    while True:
+        for batch in _batches(len(data.images), config.batch_size, rng, steps_per_epoch):
+            pairs = [augment(data.images[i], data.masks[i], config, rng) for i in batch]
+            x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2)
+            y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64))
+            yield x, y
+
+
+class _LoaderStream(torch.utils.data.IterableDataset[tuple[torch.Tensor, torch.Tensor]]):
+    """`_augmented_batches` in loader worker processes, each with its own generator seeded by the training seed
+    and its worker id (the loader takes their batches in turn, so a run is repeatable for a worker count)."""
+
+    def __init__(self, data: TrainingSet, config: TrainConfig, steps_per_epoch: int):
+        self.data, self.config, self.steps_per_epoch = data, config, steps_per_epoch
+
+    def __iter__(self) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
+        worker = torch.utils.data.get_worker_info()
+        rng = np.random.default_rng([self.config.seed, 0 if worker is None else worker.id])
+        return _augmented_batches(self.data, self.config, rng, self.steps_per_epoch)
+
+
+def _batch_source(
+    data: TrainingSet, config: TrainConfig, steps_per_epoch: int, device: torch.device
+) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
+    """The training batches: made in the training loop from one generator (`loader_workers` 0, the crops of
+    every checkpoint trained on the CPU), or by `loader_workers` processes, which keep a GPU fed."""
+    if config.loader_workers == 0:
+        return _augmented_batches(data, config, np.random.default_rng(config.seed), steps_per_epoch)
+    loader = torch.utils.data.DataLoader(
+        _LoaderStream(data, config, steps_per_epoch),
+        batch_size=None,
+        num_workers=config.loader_workers,
+        pin_memory=device.type == "cuda",
+        prefetch_factor=4,
+        multiprocessing_context="fork",  # the workers share the images in memory instead of pickling them
+    )
+    return iter(loader)
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """What a training run did: the mean loss of each pass over the training images (the last one partial when
+    a time budget ended it), its steps, and the crops per second it ran at."""
+
+    losses: list[float]
+    steps: int
+    passes: float
+    crops_per_second: float
+
+
+PROBE_STEPS = 40
+"""Steps a time-budgeted run takes at the schedule's starting rate to measure its speed (the first 10 untimed:
+allocator and kernel selection)."""
+
+
 def fit(
     net: SegmentationNet, data: TrainingSet, config: TrainConfig, device: torch.device, *, show_progress: bool
-) -> list[float]:
-    """Train `net` in place; the mean loss of each epoch."""
-    rng = np.random.default_rng(config.seed)
+) -> FitRecord:
+    """Train `net` in place for `config.epochs` passes, or with `config.time_budget_s` for as many steps as fit in
+    that time: the first `PROBE_STEPS` (at the one-cycle schedule's starting rate) measure the speed, and the
+    schedule then runs over the steps the rest of the budget holds."""
+    started = time.perf_counter()
     weights = class_weights(data.masks, config.max_class_weight).to(device)
     steps_per_epoch = max(1, (config.images_per_epoch or len(data.images)) // config.batch_size)
+    batches = _batch_source(data, config, steps_per_epoch, device)
     optimiser = torch.optim.AdamW(net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, max_lr=config.learning_rate, total_steps=config.epochs * steps_per_epoch, pct_start=0.15
-    )
-    losses = []
     # channels-last: mkldnn convolutions run faster so on the CPU (the stubs lack `to`'s memory_format)
     net.to(memory_format=torch.channels_last).train()  # type: ignore[call-overload]
+    epoch_losses: list[float] = []
+    losses: list[float] = []
+
+    def step(schedule: torch.optim.lr_scheduler.LRScheduler | None) -> None:
+        x, y = next(batches)
+        x = x.to(device, non_blocking=True).contiguous(memory_format=torch.channels_last)
+        loss = loss_fn(net(x), y.to(device, non_blocking=True), weights)
+        optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        optimiser.step()
+        if schedule is not None:
+            schedule.step()
+        epoch_losses.append(float(loss.detach()))
+        if len(epoch_losses) == steps_per_epoch:
+            losses.append(round(float(np.mean(epoch_losses)), 4))
+            logger.info("pass %d: loss %.4f", len(losses), losses[-1])
+            epoch_losses.clear()
+
     with StageProgress("train-segmenter", logger=logger, enabled=show_progress) as progress:
-        bar = progress.add_task("steps", total=config.epochs * steps_per_epoch)
-        for epoch in range(config.epochs):
-            total = 0.0
-            batches = _batches(len(data.images), config.batch_size, rng, steps_per_epoch)
-            for batch in batches:
-                pairs = [augment(data.images[i], data.masks[i], config, rng) for i in batch]
-                x = torch.from_numpy(np.stack([p[0] for p in pairs])).permute(0, 3, 1, 2).to(device)
-                x = x.contiguous(memory_format=torch.channels_last)
-                y = torch.from_numpy(np.stack([p[1] for p in pairs]).astype(np.int64)).to(device)
-                loss = loss_fn(net(x), y, weights)
-                optimiser.zero_grad(set_to_none=True)
-                loss.backward()
-                optimiser.step()
-                schedule.step()
-                total += float(loss.detach())
+        total = config.epochs * steps_per_epoch
+        probe, timed_from = 0, started
+        bar = progress.add_task("steps", total=PROBE_STEPS if config.time_budget_s else total)
+        if config.time_budget_s:
+            for group in optimiser.param_groups:
+                group["lr"] = config.learning_rate / ONE_CYCLE_DIV_FACTOR
+            for probe in range(1, PROBE_STEPS + 1):
+                if probe == 11:
+                    timed_from = time.perf_counter()
+                step(None)
                 progress.advance(bar)
-            losses.append(round(total / max(1, len(batches)), 4))
-            logger.info("epoch %d/%d: loss %.4f", epoch + 1, config.epochs, losses[-1])
-    return losses
+            seconds_per_step = (time.perf_counter() - timed_from) / (PROBE_STEPS - 10)
+            left = config.time_budget_s - (time.perf_counter() - started)
+            total = PROBE_STEPS + max(1, int(left / seconds_per_step))
+            progress.update(bar, total=total)
+        schedule = torch.optim.lr_scheduler.OneCycleLR(
+            optimiser,
+            max_lr=config.learning_rate,
+            total_steps=total - probe,
+            pct_start=0.15,
+            div_factor=ONE_CYCLE_DIV_FACTOR,
+        )
+        for _ in range(total - probe):
+            step(schedule)
+            progress.advance(bar)
+    if epoch_losses:
+        losses.append(round(float(np.mean(epoch_losses)), 4))
+    seconds = time.perf_counter() - started
+    return FitRecord(
+        losses, total, round(total / steps_per_epoch, 2), round(total * config.batch_size / seconds, 1)
+    )
 
 
 def cpu_seconds_per_image(
@@ -337,16 +428,22 @@ def train(
             ensure_unseen(parent, site)
     data = load_training_set(train_sites, net.config.input_width_px)
     logger.info("training on %d images of %d sites", len(data.images), len(train_sites))
-    losses = fit(net.to(device), data, config, device, show_progress=show_progress)
+    record = fit(net.to(device), data, config, device, show_progress=show_progress)
     net.eval()
-    metrics: dict[str, Any] = {"loss": losses, "cpu_seconds_per_512x288": cpu_seconds_per_image(net)}
+    metrics: dict[str, Any] = {
+        "loss": record.losses,
+        "steps": record.steps,
+        "crops_per_second": record.crops_per_second,
+        "cpu_seconds_per_512x288": cpu_seconds_per_image(net),
+    }
     if held_sites:
         metrics["held_out"] = score_held_out(net, held_sites, device)
     meta = {
         "label": label or Path(out).name,
         "train": config.to_json(),
-        "epochs": config.epochs,
+        "epochs": record.passes if config.time_budget_s else config.epochs,
         "images": len(data.images),
+        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
         "seconds": round(time.perf_counter() - started, 1),
         "training_sites": [identity.to_json() for identity in identities],
         "held_out_sites": [site_identity(site).to_json() for site in held_sites],

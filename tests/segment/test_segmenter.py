@@ -26,6 +26,7 @@ from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConf
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
 from cama_pipeline.segment.predict import score_site, site_images
 from cama_pipeline.segment.train import (
+    PROBE_STEPS,
     augment,
     check_training_sites,
     initial_network,
@@ -74,6 +75,8 @@ def test_network_gives_logits_at_the_input_size_and_masks_at_the_image_size() ->
         (lambda: NetworkConfig(full_resolution_width=-1), "full_resolution_width"),
         (lambda: TrainConfig(epochs=0), "epochs"),
         (lambda: TrainConfig(crop_width_px=100), "crop_height_px and crop_width_px"),
+        (lambda: TrainConfig(loader_workers=-1), "loader_workers"),
+        (lambda: TrainConfig(time_budget_s=0.0), "time_budget_s"),
         (lambda: SegmentConfig(device="tpu"), "device"),  # type: ignore[arg-type]
         (lambda: SegmentConfig(batch_size=0), "batch_size"),
     ],
@@ -324,3 +327,34 @@ def test_train_segmenter_names_a_bad_scale_range(training_site: Path, tmp_path: 
     result = CliRunner().invoke(app, [*args, "1.3", "0.7"])
     assert result.exit_code == EXIT_BAD_INPUT and "scale_range" in result.output, result.output
     assert not (tmp_path / "c").exists()
+
+
+def test_loader_workers_repeat_a_run_and_differ_from_the_loops_own_crops(
+    training_site: Path, tmp_path: Path
+) -> None:
+    """Crops made by loader processes (what keeps a GPU fed) train the same weights twice for a seed and worker
+    count; they are drawn per worker, so they are not the crops the training loop makes itself."""
+    in_workers = dataclasses.replace(FEW_STEPS, loader_workers=2)
+    digests = [
+        json.loads(
+            (
+                train(c, [training_site], tmp_path / name, network=SMALL_NETWORK, show_progress=False) / META
+            ).read_text(encoding="utf-8")
+        )["weights_sha256"]
+        for c, name in ((in_workers, "a"), (in_workers, "b"), (FEW_STEPS, "loop"))
+    ]
+    assert digests[0] == digests[1] != digests[2]
+
+
+def test_a_time_budget_fills_its_seconds_and_records_the_passes(training_site: Path, tmp_path: Path) -> None:
+    """With `time_budget_s` the run measures its speed and trains for about the budget, not for `epochs`
+    passes; the checkpoint records the steps and the (fractional) passes it made."""
+    config = dataclasses.replace(FEW_STEPS, epochs=1, time_budget_s=4.0)
+    folder = train(config, [training_site], tmp_path / "budget", network=SMALL_NETWORK, show_progress=False)
+    meta = json.loads((folder / META).read_text(encoding="utf-8"))
+    steps_per_pass = FEW_STEPS.images_per_epoch // FEW_STEPS.batch_size  # type: ignore[operator]
+    assert meta["metrics"]["steps"] > PROBE_STEPS > steps_per_pass
+    assert meta["epochs"] == round(meta["metrics"]["steps"] / steps_per_pass, 2)
+    assert len(meta["metrics"]["loss"]) == -(-meta["metrics"]["steps"] // steps_per_pass)
+    assert meta["device"] == "cpu" and meta["metrics"]["crops_per_second"] > 0
+    assert 3.5 < meta["seconds"] < 120.0  # the budget, not the one pass `epochs` asks for
