@@ -3,21 +3,29 @@ then train for the time that is left, with the crops made by loader workers.
 
 The lent GPU machines give a session minutes, not hours, and start bare: the sites are rendered there
 (`segmenter_sites.training_site_config`, one site per process) and the training fills whatever of the deadline the
-rendering and loading leave (`TrainConfig.time_budget_s`). The run that made `gpu-long` (README, "Training on a
-GPU"), with the wheels of shapely and pydantic carried there:
+rendering and loading leave (`TrainConfig.time_budget_s`). The runs that made `gpu-long` and the shipped
+`gpu-long2` (README, "Training on a GPU"), with the wheels of shapely and pydantic carried there and
+`OMP_NUM_THREADS=1`; the second ran on the same machine, with `gpu-long` carried to `.ckpt/gpu-long`:
 
-    python3 bench/segmenter_gpu.py --work /tmp/seg --seeds 100-119,123-199 --init cama_pipeline/segment/shipped \\
-        --out $OUT/gpu-long --label gpu-long --finish-within 500
+    python3 bench/segmenter_gpu.py --work /tmp/seg --seeds 100-119,123-179 --init cama_pipeline/segment/shipped \\
+        --out $OUT/gpu-long --label gpu-long --finish-within 510
+    python3 bench/segmenter_gpu.py --work /tmp/seg --seeds 100-119,123-179 --init .ckpt/gpu-long \\
+        --out $OUT/gpu-long2 --label gpu-long2 --learning-rate 5e-4 --finish-within 215
 
-It writes the checkpoint and, beside it, `gpu_run.json`: the seconds of every phase and the machine.
+It writes the checkpoint and, beside it, `gpu_run.json` (`run_report`): the seconds of every phase, the machine,
+the steps and the checkpoint's lineage. The two runs of `gpu-long` and `gpu-long2` are in
+`bench/results/segmenter_gpu_runs.json` (their reports, written before `run_report` also recorded the lineage, with
+it filled in from the checkpoints they returned).
 """
 
 import argparse
 import json
 import logging
 import os
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import torch
 from segmenter_sites import (  # bench/segmenter_sites.py: this script's folder is on sys.path
@@ -32,6 +40,29 @@ from cama_pipeline.segment.train import train
 LOAD_AND_SCORE_RESERVE_S = 60.0
 """Seconds kept from the deadline for what `train` does around the training itself: decoding every training
 image (about 1.5 ms each), scoring the held-out site and saving."""
+
+
+def run_report(meta: dict[str, Any], sites_s: float, total_s: float, device: torch.device) -> dict[str, Any]:
+    """What a run did, from its checkpoint record: the seconds of each phase, the machine, the steps and passes,
+    the held-out IoU, and the checkpoint with the one it went on from (label and weights digest)."""
+    parent = meta.get("parent") or {}
+    return {
+        "label": meta["label"],
+        "weights_sha256": meta["weights_sha256"],
+        "parent": {"label": parent.get("label"), "weights_sha256": parent.get("weights_sha256")},
+        "train": meta["train"],
+        "training_seeds": sorted(site["seed"] for site in meta["training_sites"]),
+        "sites_seconds": round(sites_s, 1),
+        "train_call_seconds": meta["seconds"],
+        "total_seconds": round(total_s, 1),
+        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
+        "cpu_count": os.cpu_count(),
+        "torch": torch.__version__,
+        "steps": meta["metrics"]["steps"],
+        "passes": meta["epochs"],
+        "crops_per_second": meta["metrics"]["crops_per_second"],
+        "held_out": meta["metrics"].get("held_out", {}).get("per_class_iou"),
+    }
 
 
 def main() -> None:
@@ -90,18 +121,8 @@ def main() -> None:
         show_progress=False,
     )
     meta = json.loads((folder / "checkpoint.json").read_text(encoding="utf-8"))
-    report = {
-        "sites_seconds": round(sites_s, 1),
-        "train_call_seconds": meta["seconds"],
-        "total_seconds": round(time.perf_counter() - started, 1),
-        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
-        "cpu_count": os.cpu_count(),
-        "torch": torch.__version__,
-        "steps": meta["metrics"]["steps"],
-        "passes": meta["epochs"],
-        "crops_per_second": meta["metrics"]["crops_per_second"],
-        "held_out": meta["metrics"].get("held_out", {}).get("per_class_iou"),
-    }
+    report = run_report(meta, sites_s, time.perf_counter() - started, device)
+    report["command"] = " ".join(["python3", *sys.argv])
     (folder.parent / "gpu_run.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     print(json.dumps(report, indent=2), flush=True)
 
