@@ -1080,7 +1080,7 @@ SEGMENT_GPU_COLUMNS = {
         )
     },
     "9003 refined-scale1": ("segment_exact_scale1_9003.json", "refined-scale1"),
-    "9003 gpu-long2": ("segment_gpu_9003.json", "gpu-long2"),
+    "9003 gpu-long2": ("segment_gpu_path_9003.json", "gpu-long2"),
 }
 
 
@@ -1105,12 +1105,16 @@ def test_segmenter_trained_on_a_gpu_table_and_shipped_checkpoint() -> None:
         after = results(SEGMENT_GPU_COLUMNS[f"{site} gpu-long2"][0])["segmentation"]["per_class_iou"]
         for cls in ("road", "lane_marking", "crosswalk", "curb", "vehicle", "ego"):
             assert after[cls] > before[cls], (site, cls)
-    for site in ("9002", "9004", "9005", "9006"):
+    for site in ("9002", "9004", "9005", "9006", "9003"):
         differences = results(f"segment_gpu_path_{site}.json")["differences"]
         assert all(differences[key]["met"] for key in ("proposal_map", "elevation_rmse_cm", "sre_ref_px")), (
             site
         )
     text = " ".join(readme_text().split())
+    for site in ("9004", "9005", "9006", "9003"):
+        speed_up = results(f"segment_gpu_path_{site}.json")["differences"]["annotator_speed_up"]
+        shown = f"{speed_up['reference']:.2f}x -> {speed_up['predicted']:.2f}x"
+        assert f"{site} {shown}" in text or f"on {site} ({shown})" in text, (site, shown)
     assert (
         f"the sites took {first['sites_seconds']:.0f} s on {first['cpu_count']} cores, the training "
         f"{first['train']['time_budget_s']:.0f} s, {first['steps']:,} steps ({first['passes']:.1f} passes, "
