@@ -20,7 +20,7 @@ mask-free site with predicted masks against the same site with the generator's m
 Make the site first, e.g. a randomised one of the default size without masks or GNSS, as real nuScenes is:
     .venv/bin/cama synth --preset default --random-seed 9001 --no-masks --out data/synthetic/random-9001
 Usage: .venv/bin/python bench/segment.py --site data/synthetic/random-9001 [--checkpoint DIR]
-       [--out bench/results/segment.json] [--skip-pipeline] [--no-ego-clip]
+       [--out bench/results/segment.json] [--skip-pipeline] [--no-ego-clip] [--flip-average]
 """
 
 import argparse
@@ -192,7 +192,10 @@ def segmentation_figures(
             for name, (m, n) in missed.items()
         },
         "per_camera_iou": {cam: iou_report(m, 0)["per_class_iou"] for cam, m in sorted(per_camera.items())},
-        "cpu_seconds_per_512x288_image_one_thread": cpu_seconds_per_image(checkpoint.net),
+        "flip_average": config.flip_average,
+        "cpu_seconds_per_512x288_image_one_thread": cpu_seconds_per_image(
+            checkpoint.net, flip_average=config.flip_average
+        ),
         "cpu_target_s": SECONDS_PER_IMAGE_TARGET,
     }
 
@@ -283,14 +286,25 @@ def main() -> None:
         action="store_true",
         help="ablation: the network's per-image ego pixels as they are (predicted workspace *-no-ego-clip)",
     )
+    parser.add_argument(
+        "--flip-average",
+        action="store_true",
+        help="each image's probabilities averaged with its mirror image's (predicted workspace *-flip)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site = args.site
     checkpoint = load_checkpoint(args.checkpoint)
     ensure_unseen(checkpoint, site)
-    segment = SegmentConfig(checkpoint=checkpoint.path, ego_clip=EgoClipConfig(enabled=not args.no_ego_clip))
-    predicted_workspace = f"{PREDICTED_WORKSPACE}-{checkpoint.digest}" + (
-        "-no-ego-clip" if args.no_ego_clip else ""
+    segment = SegmentConfig(
+        checkpoint=checkpoint.path,
+        ego_clip=EgoClipConfig(enabled=not args.no_ego_clip),
+        flip_average=args.flip_average,
+    )
+    predicted_workspace = (
+        f"{PREDICTED_WORKSPACE}-{checkpoint.digest}"
+        + ("-no-ego-clip" if args.no_ego_clip else "")
+        + ("-flip" if args.flip_average else "")
     )
     figures: dict[str, Any] = {}
     if not args.skip_pipeline:

@@ -36,6 +36,12 @@ def segment_command(
     ] = "local",
     workers: Annotated[int, typer.Option(min=1, help="Processes segmenting at once (CPU).")] = 2,
     device: DeviceOpt = "auto",
+    flip_average: Annotated[
+        bool,
+        typer.Option(
+            help="Average each image's class probabilities with its mirror image's (twice the cost)."
+        ),
+    ] = SegmentConfig().flip_average,
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Predict semantic masks and lane instances for every image the pipeline uses, into the workspace's
@@ -43,7 +49,12 @@ def segment_command(
     try:
         if executor not in EXECUTORS:
             raise ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
-        config = SegmentConfig(checkpoint=checkpoint, batch_size=batch_size, device=device)  # type: ignore[arg-type]
+        config = SegmentConfig(
+            checkpoint=checkpoint,
+            batch_size=batch_size,
+            device=device,  # type: ignore[arg-type]
+            flip_average=flip_average,
+        )
         result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err

@@ -120,9 +120,13 @@ class SegmentationNet(nn.Module):
         return F.interpolate(self.head(x), size=size, mode="bilinear", align_corners=False)
 
     @torch.inference_mode()
-    def predict(self, images: list[np.ndarray], device: torch.device | None = None) -> list[np.ndarray]:
+    def predict(
+        self, images: list[np.ndarray], device: torch.device | None = None, *, flip_average: bool = False
+    ) -> list[np.ndarray]:
         """(H, W) uint8 class ids of each (H, W, 3) RGB uint8 image (sizes may differ; same-size images are
-        run as one batch)."""
+        run as one batch). `flip_average`: the class probabilities of the image and of its mirror image averaged
+        (twice the cost; the network trained on mirrored crops, and the two views' errors on thin paint and kerbs
+        differ)."""
         device = device or next(self.parameters()).device
         out: list[np.ndarray | None] = [None] * len(images)
         by_size: dict[tuple[int, int], list[int]] = {}
@@ -132,9 +136,13 @@ class SegmentationNet(nn.Module):
             by_size.setdefault(image.shape[:2], []).append(i)
         for (height, width), indices in by_size.items():
             batch = torch.from_numpy(np.stack([images[i] for i in indices])).to(device)
-            logits = self.logits_at_size(batch.permute(0, 3, 1, 2).float() / 255.0, (height, width))
+            rgb = batch.permute(0, 3, 1, 2).float() / 255.0
+            scores = self.logits_at_size(rgb, (height, width))
+            if flip_average:
+                mirrored = self.logits_at_size(rgb.flip(-1), (height, width)).flip(-1)
+                scores = scores.softmax(dim=1) + mirrored.softmax(dim=1)
             labels = (
-                logits.max(dim=1).indices.to(torch.uint8).cpu().numpy()
+                scores.max(dim=1).indices.to(torch.uint8).cpu().numpy()
             )  # argmax(dim=1) is ~8x slower on CPU
             for k, i in enumerate(indices):
                 out[i] = labels[k]

@@ -32,10 +32,11 @@ def resolve_device(device: DeviceName | str) -> torch.device:
 
 
 def segment_images(
-    net: SegmentationNet, images: Sequence[np.ndarray], device: torch.device
+    net: SegmentationNet, images: Sequence[np.ndarray], device: torch.device, *, flip_average: bool = False
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(semantic uint8, lane instance uint16) masks of RGB uint8 images, in one network call per image size."""
-    semantic = net.predict(list(images), device)
+    """(semantic uint8, lane instance uint16) masks of RGB uint8 images, in one network call per image size
+    (two with `flip_average`: `SegmentationNet.predict`)."""
+    semantic = net.predict(list(images), device, flip_average=flip_average)
     return [(labels, lane_instances(labels)) for labels in semantic]
 
 

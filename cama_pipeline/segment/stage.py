@@ -65,6 +65,7 @@ class Chunk:
     dataset_root: str
     mask_root: str
     filenames: tuple[str, ...]
+    flip_average: bool
 
 
 def image_filename(dataset: Dataset, path: Path) -> str:
@@ -108,7 +109,9 @@ def segment_chunk(chunk: Chunk) -> tuple[str, ...]:
         images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
     root = Path(chunk.mask_root)
     for name, (semantic, instances) in zip(
-        chunk.filenames, segment_images(net, images, torch.device(chunk.device)), strict=True
+        chunk.filenames,
+        segment_images(net, images, torch.device(chunk.device), flip_average=chunk.flip_average),
+        strict=True,
     ):
         atomic_write_image(root / mask_relpath(SEMANTIC_DIR, name), semantic)
         atomic_write_image(root / mask_relpath(INSTANCE_DIR, name), instances.astype(np.uint16))
@@ -271,7 +274,11 @@ def run(
     device = resolve_device(config.device)
     images = needed_images(dataset, ws)
     made_with = fingerprint(
-        "segment", code_version("cama_pipeline.segment"), checkpoint.digest, config.ego_clip.to_json()
+        "segment",
+        code_version("cama_pipeline.segment"),
+        checkpoint.digest,
+        config.ego_clip.to_json(),
+        config.flip_average,
     )
     digest = fingerprint(made_with, images)
     mask_root, manifest_path = ws.masks_dir(SOURCE), ws.masks_manifest(SOURCE)
@@ -294,6 +301,7 @@ def run(
             str(dataset.root),
             str(mask_root.absolute()),
             tuple(todo[i : i + config.batch_size]),
+            config.flip_average,
         )
         for i in range(0, len(todo), config.batch_size)
     ]
@@ -320,6 +328,7 @@ def run(
             "checkpoint": checkpoint.label,
             "checkpoint_path": str(Path(checkpoint_dir).absolute()),
             "weights_digest": checkpoint.digest,
+            "flip_average": config.flip_average,
             "made_with": made_with,
         },
         images=tuple(images),

@@ -327,9 +327,10 @@ def fit(
 
 
 def cpu_seconds_per_image(
-    net: SegmentationNet, width: int = 512, height: int = 288, repeats: int = 5
+    net: SegmentationNet, width: int = 512, height: int = 288, repeats: int = 5, *, flip_average: bool = False
 ) -> float:
-    """Median seconds one CPU thread takes to segment one `width` x `height` image (the stage's cost)."""
+    """Median seconds one CPU thread takes to segment one `width` x `height` image (the stage's cost; with
+    `flip_average` as the stage's default runs it)."""
     cpu = SegmentationNet(net.config)
     cpu.load_state_dict(net.state_dict())
     cpu.eval()
@@ -337,11 +338,11 @@ def cpu_seconds_per_image(
     torch.set_num_threads(1)
     try:
         image = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
-        cpu.predict([image], torch.device("cpu"))
+        cpu.predict([image], torch.device("cpu"), flip_average=flip_average)
         times = []
         for _ in range(repeats):
             started = time.perf_counter()
-            cpu.predict([image], torch.device("cpu"))
+            cpu.predict([image], torch.device("cpu"), flip_average=flip_average)
             times.append(time.perf_counter() - started)
     finally:
         torch.set_num_threads(threads)

@@ -188,3 +188,22 @@ def test_a_mask_of_another_size_in_a_camera_is_named(
         stage.run(config(checkpoint), root, ws, workers=1, show_progress=False)
     assert Path(first).stem in str(error.value)
     assert not ws.masks_manifest("predicted").exists()
+
+
+def test_mirror_averaging_is_a_setting_of_the_masks(
+    tiny_site: GeneratedSite, checkpoint: Path, tmp_path: Path
+) -> None:
+    """Masks made with and without mirror averaging are not each other's: switching the setting makes them again,
+    and the masks' manifest says which made them."""
+    root = tiny_site.result.dataset_root
+    ws = Workspace(tmp_path / "ws")
+    made_with = set()
+    for flip in (False, True, False):
+        item = stage.run(
+            replace(config(checkpoint), flip_average=flip), root, ws, workers=1, show_progress=False
+        )
+        assert not item.items[0].skipped, flip
+        made_by = read_mask_manifest(ws.masks_manifest("predicted")).made_by
+        assert made_by["flip_average"] is flip
+        made_with.add(made_by["made_with"])
+    assert len(made_with) == 2

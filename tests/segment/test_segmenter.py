@@ -21,6 +21,7 @@ from cama_pipeline.segment.checkpoint import (
     CheckpointError,
     ensure_unseen,
     load_checkpoint,
+    shipped_checkpoint,
 )
 from cama_pipeline.segment.config import NetworkConfig, SegmentConfig, TrainConfig
 from cama_pipeline.segment.network import NUM_CLASSES, SegmentationNet, parameter_count
@@ -67,6 +68,19 @@ def test_network_gives_logits_at_the_input_size_and_masks_at_the_image_size() ->
         net.predict([np.zeros((10, 10), np.uint8)])
 
 
+def test_mirror_averaged_masks_mirror_with_the_image(tiny_site: GeneratedSite) -> None:
+    """With `flip_average` the masks of a mirrored image are the mirrored masks, to the pixel (the two views'
+    probabilities are summed either way); the shipped network's plain masks are not, and differ from them."""
+    net = load_checkpoint(shipped_checkpoint()).net.eval()
+    image = site_images(tiny_site.result.out_dir)[0].load_rgb()
+    mirrored = np.ascontiguousarray(image[:, ::-1])
+    averaged, of_mirror = net.predict([image, mirrored], flip_average=True)
+    assert np.array_equal(of_mirror, averaged[:, ::-1])
+    plain, plain_of_mirror = net.predict([image, mirrored])
+    assert not np.array_equal(plain_of_mirror, plain[:, ::-1])
+    assert not np.array_equal(plain, averaged)
+
+
 @pytest.mark.parametrize(
     ("make", "field"),
     [
@@ -79,6 +93,7 @@ def test_network_gives_logits_at_the_input_size_and_masks_at_the_image_size() ->
         (lambda: TrainConfig(time_budget_s=0.0), "time_budget_s"),
         (lambda: SegmentConfig(device="tpu"), "device"),  # type: ignore[arg-type]
         (lambda: SegmentConfig(batch_size=0), "batch_size"),
+        (lambda: SegmentConfig(flip_average="yes"), "flip_average"),  # type: ignore[arg-type]
     ],
 )
 def test_configs_name_the_bad_field(make: object, field: str) -> None:
@@ -358,3 +373,20 @@ def test_a_time_budget_fills_its_seconds_and_records_the_passes(training_site: P
     assert len(meta["metrics"]["loss"]) == -(-meta["metrics"]["steps"] // steps_per_pass)
     assert meta["device"] == "cpu" and meta["metrics"]["crops_per_second"] > 0
     assert 3.5 < meta["seconds"] < 120.0  # the budget, not the one pass `epochs` asks for
+
+
+@pytest.mark.parametrize(
+    ("option", "field"),
+    [
+        (["--time-budget", "0"], "time_budget_s"),
+        (["--crop", "100", "64"], "crop_height_px and crop_width_px"),
+        (["--loader-workers", "-1"], "loader-workers"),
+    ],
+)
+def test_train_segmenter_names_a_bad_gpu_option(
+    training_site: Path, tmp_path: Path, option: list[str], field: str
+) -> None:
+    args = ["train-segmenter", "--sites", str(training_site), "--out", str(tmp_path / "c"), *option]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == EXIT_BAD_INPUT and field in result.output, result.output
+    assert not (tmp_path / "c").exists()
