@@ -28,6 +28,11 @@ def _positive_int(owner: str, name: str, value: object) -> None:
         raise ValueError(f"{owner}.{name} must be an integer >= 1, got {value!r}")
 
 
+def _non_negative_int(owner: str, name: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ValueError(f"{owner}.{name} must be an integer >= 0, got {value!r}")
+
+
 def _positive_float(owner: str, name: str, value: object) -> None:
     if (
         isinstance(value, bool)
@@ -60,14 +65,7 @@ class NetworkConfig:
         for i, width in enumerate(self.widths):
             _positive_int("NetworkConfig", f"widths[{i}]", width)
         _positive_int("NetworkConfig", "input_width_px", self.input_width_px)
-        if (
-            isinstance(self.full_resolution_width, bool)
-            or not isinstance(self.full_resolution_width, int)
-            or self.full_resolution_width < 0
-        ):
-            raise ValueError(
-                f"NetworkConfig.full_resolution_width must be an integer >= 0, got {self.full_resolution_width!r}"
-            )
+        _non_negative_int("NetworkConfig", "full_resolution_width", self.full_resolution_width)
         if self.input_width_px % 32:
             raise ValueError(
                 f"NetworkConfig.input_width_px must be a multiple of 32, got {self.input_width_px}"
@@ -151,14 +149,7 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.scale_range must be 0 < low <= high, got {self.scale_range!r}")
         if self.images_per_epoch is not None:
             _positive_int("TrainConfig", "images_per_epoch", self.images_per_epoch)
-        if (
-            isinstance(self.loader_workers, bool)
-            or not isinstance(self.loader_workers, int)
-            or self.loader_workers < 0
-        ):
-            raise ValueError(
-                f"TrainConfig.loader_workers must be an integer >= 0, got {self.loader_workers!r}"
-            )
+        _non_negative_int("TrainConfig", "loader_workers", self.loader_workers)
         if self.time_budget_s is not None:
             _positive_float("TrainConfig", "time_budget_s", self.time_budget_s)
 
