@@ -1135,6 +1135,44 @@ def test_segmenter_trained_on_a_gpu_table_and_shipped_checkpoint() -> None:
     assert first["device"] == second["device"] == "NVIDIA H200"
 
 
+def test_segmenter_mirror_averaging_table() -> None:
+    """Mirror averaging beside the plain GPU-trained checkpoint on the same five sites, the whole path too; the
+    README's reading (every class but ego better, the tolerances kept) and the cost hold."""
+    sites = ("9002", "9004", "9005", "9006", "9003")
+    _check_segmenter_columns(
+        "class, mirror averaging",
+        {
+            f"{site} {column}": (name, "gpu-long2")
+            for site in sites
+            for column, name in (
+                ("gpu-long2", f"segment_gpu_path_{site}.json"),
+                ("mirrored", f"segment_gpu_flip_path_{site}.json"),
+            )
+        },
+    )
+    text = " ".join(readme_text().split())
+    for site in sites:
+        plain = results(f"segment_gpu_path_{site}.json")
+        mirrored = results(f"segment_gpu_flip_path_{site}.json")
+        assert mirrored["segmentation"]["flip_average"] is True and "--flip-average" in mirrored["command"]
+        assert "flip_average" not in plain["segmentation"] and "--flip-average" not in plain["command"]
+        before, after = plain["segmentation"]["per_class_iou"], mirrored["segmentation"]["per_class_iou"]
+        for cls in ("road", "lane_marking", "crosswalk", "curb", "vehicle"):
+            assert after[cls] > before[cls], (site, cls)
+        differences = mirrored["differences"]
+        assert all(differences[key]["met"] for key in ("proposal_map", "elevation_rmse_cm", "sre_ref_px")), (
+            site
+        )
+        speed_ups = [run["differences"]["annotator_speed_up"]["predicted"] for run in (plain, mirrored)]
+        assert f"{site} {speed_ups[0]:.2f}x -> {speed_ups[1]:.2f}x" in text
+    speed = results("segment_speed_flip.json")["checkpoints"]["gpu-long2"]
+    assert not speed["flip_average_target_met"] and speed["target_met"]
+    assert (
+        f"{speed['flip_average_seconds']:.3f} s per 512x288 image on one thread against "
+        f"{speed['seconds_per_512x288_image']:.3f} s plain, {speed['flip_average_ratio_to_plain']:.2f}x"
+    ) in text
+
+
 def test_segmenter_calibrated_scale1_table() -> None:
     _check_segmenter_columns(
         "class, refined-scale1 calibrated",
