@@ -1111,6 +1111,16 @@ def test_segmenter_trained_on_a_gpu_table_and_shipped_checkpoint() -> None:
             site
         )
     text = " ".join(readme_text().split())
+    runs = results("segment_gpu_path_9003.json")["runs"]
+    bev = [
+        f"{runs[kind]['bev_iou'][cls]:.3f}"
+        for cls in ("road", "lane_marking", "crosswalk", "curb")
+        for kind in ("predicted_masks", "generator_masks")
+    ]
+    assert (
+        f"road ({bev[0]} against {bev[1]}) and lane marking ({bev[2]} against {bev[3]}), under it for crosswalk "
+        f"({bev[4]} against {bev[5]}) and above it for curb ({bev[6]} against {bev[7]};"
+    ) in text
     for site in ("9004", "9005", "9006", "9003"):
         speed_up = results(f"segment_gpu_path_{site}.json")["differences"]["annotator_speed_up"]
         shown = f"{speed_up['reference']:.2f}x -> {speed_up['predicted']:.2f}x"
