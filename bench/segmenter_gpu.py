@@ -42,7 +42,7 @@ LOAD_AND_SCORE_RESERVE_S = 60.0
 image (about 1.5 ms each), scoring the held-out site and saving."""
 
 
-def run_report(meta: dict[str, Any], sites_s: float, total_s: float, device: torch.device) -> dict[str, Any]:
+def run_report(meta: dict[str, Any], sites_s: float, total_s: float) -> dict[str, Any]:
     """What a run did, from its checkpoint record: the seconds of each phase, the machine, the steps and passes,
     the held-out IoU, and the checkpoint with the one it went on from (label and weights digest)."""
     parent = meta.get("parent") or {}
@@ -55,7 +55,7 @@ def run_report(meta: dict[str, Any], sites_s: float, total_s: float, device: tor
         "sites_seconds": round(sites_s, 1),
         "train_call_seconds": meta["seconds"],
         "total_seconds": round(total_s, 1),
-        "device": torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu",
+        "device": meta["device"],
         "cpu_count": os.cpu_count(),
         "torch": torch.__version__,
         "steps": meta["metrics"]["steps"],
@@ -109,19 +109,18 @@ def main() -> None:
         loader_workers=args.loader_workers,
         time_budget_s=budget,
     )
-    device = resolve_device(args.device)
     folder = train(
         config,
         [args.work / "train"],
         args.out,
         held_out=[args.work / "held-out" / f"r{args.held_out_seed}"],
         init=args.init,
-        device=device,
+        device=resolve_device(args.device),
         label=args.label,
         show_progress=False,
     )
     meta = json.loads((folder / "checkpoint.json").read_text(encoding="utf-8"))
-    report = run_report(meta, sites_s, time.perf_counter() - started, device)
+    report = run_report(meta, sites_s, time.perf_counter() - started)
     report["command"] = " ".join(["python3", *sys.argv])
     (folder.parent / "gpu_run.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     print(json.dumps(report, indent=2), flush=True)

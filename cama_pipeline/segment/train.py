@@ -257,8 +257,9 @@ class FitRecord:
 
 
 PROBE_STEPS = 40
-"""Steps a time-budgeted run takes at the schedule's starting rate to measure its speed (the first 10 untimed:
-allocator and kernel selection)."""
+"""Steps a time-budgeted run takes at the schedule's starting rate to measure its speed."""
+PROBE_UNTIMED_STEPS = 10
+"""The first probe steps, left out of the timing: allocator and kernel selection."""
 
 
 def fit(
@@ -300,11 +301,11 @@ def fit(
             for group in optimiser.param_groups:
                 group["lr"] = config.learning_rate / ONE_CYCLE_DIV_FACTOR
             for probe in range(1, PROBE_STEPS + 1):
-                if probe == 11:
+                if probe == PROBE_UNTIMED_STEPS + 1:
                     timed_from = time.perf_counter()
                 step(None)
                 progress.advance(bar)
-            seconds_per_step = (time.perf_counter() - timed_from) / (PROBE_STEPS - 10)
+            seconds_per_step = (time.perf_counter() - timed_from) / (PROBE_STEPS - PROBE_UNTIMED_STEPS)
             left = config.time_budget_s - (time.perf_counter() - started)
             total = PROBE_STEPS + max(1, int(left / seconds_per_step))
             progress.update(bar, total=total)
@@ -330,7 +331,7 @@ def cpu_seconds_per_image(
     net: SegmentationNet, width: int = 512, height: int = 288, repeats: int = 5, *, flip_average: bool = False
 ) -> float:
     """Median seconds one CPU thread takes to segment one `width` x `height` image (the stage's cost; with
-    `flip_average` as the stage's default runs it)."""
+    `flip_average` as the stage runs with that setting)."""
     cpu = SegmentationNet(net.config)
     cpu.load_state_dict(net.state_dict())
     cpu.eval()
