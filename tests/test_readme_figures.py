@@ -15,6 +15,8 @@ from typing import Any
 
 import pytest
 
+from cama_pipeline.surface import SurfaceConfig
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 RESULTS = ROOT / "bench" / "results"
@@ -1390,3 +1392,46 @@ def test_more_reconstructions_not_shipped() -> None:
         f"it is {shown['observed_truth']['mean_ap']:.3f} and {shown['annotator']['speed_up']:.2f}x against v0004's "
         f"{ours['observed_truth']['mean_ap']:.3f} and {ours['annotator']['speed_up']:.2f}x"
     ) in text
+
+
+def test_kerb_foot_with_the_shipped_network_table() -> None:
+    """Each cell of the foot's table (off, on) against its end-to-end and confirmation results, and the
+    figures the paragraph below it quotes."""
+    t = table("kerb foot, v0004 proposing", "bench/vma_masks.py")
+    variants = {"off (the default)": "off_v0004", "on (`kerb_band_m = 0.3`)": "v0004"}
+    for label, suffix in variants.items():
+        cells = row(t, label)
+        for index, site_suffix in ((1, ""), (2, "_9011")):
+            name = f"end_to_end_kerb_foot_{suffix}{site_suffix}.json"
+            assert_names_source(t, name, "bench/end_to_end.py")
+            figures_of = results(name)
+            expected = [
+                figures_of["proposals_ap"]["observed_truth"]["mean_ap"],
+                figures_of["annotator"]["speed_up"],
+            ]
+            assert_shows(cells[index], expected, f"{label} {name}")
+        name = f"vma_masks_kerb_foot_confirm_{suffix}.json"
+        assert_names_source(t, name, "bench/vma_masks.py")
+        confirm = results(name)
+        assert confirm["checkpoint"]["version"] == "v0004"
+        scored = confirm["results"]["reconstructed"]["element_masks"]
+        assert_shows(cells[3], [scored["observed_truth"]["mean_ap"], scored["annotator"]["speed_up"]], label)
+    off, on = (results(f"vma_masks_kerb_foot_confirm_{s}.json") for s in ("off_v0004", "v0004"))
+    shipped = results("vma_masks_recon_trained_confirm.json")["results"]["reconstructed"]["element_masks"]
+    baseline = off["results"]["reconstructed"]["element_masks"]
+    # the baseline repeats the v0004 column of the training table
+    assert baseline["observed_truth"]["mean_ap"] == pytest.approx(shipped["observed_truth"]["mean_ap"])
+    assert baseline["annotator"]["speed_up"] == pytest.approx(shipped["annotator"]["speed_up"])
+    assert "/foot/" in on["command"] and "/foot/" not in off["command"]
+    correction = [
+        r["results"]["reconstructed"]["element_masks"]["annotator"]["correction_s"] for r in (on, off)
+    ]
+    text = " ".join(readme_text().split())
+    assert f"spends {correction[0]:.0f} s instead of {correction[1]:.0f} s" in text
+    assert correction[0] > correction[1]  # what keeps the foot off
+    boundary = [
+        results(f"end_to_end_kerb_foot_{s}.json")["proposals_ap"]["observed_truth"]["class_ap"]["boundary"]
+        for s in ("off_v0004", "v0004")
+    ]
+    assert f"boundary AP goes from {boundary[0]:.3f} to {boundary[1]:.3f}" in text
+    assert SurfaceConfig().kerb_step.kerb_band_m == 0.0  # the foot is off by default, as README says
