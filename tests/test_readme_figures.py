@@ -1395,14 +1395,22 @@ def test_more_reconstructions_not_shipped() -> None:
 
 
 def test_kerb_foot_with_the_shipped_network_table() -> None:
-    """Each cell of the foot's table (off, on) against its end-to-end and confirmation results, and the
-    figures the paragraph below it quotes."""
-    t = table("kerb foot, v0004 proposing", "bench/vma_masks.py")
-    variants = {"off (the default)": "off_v0004", "on (`kerb_band_m = 0.3`)": "v0004"}
-    for label, suffix in variants.items():
+    """Each cell of the foot's table against its end-to-end and confirmation results, and the figures the
+    paragraph below it quotes."""
+    t = table("kerb foot and the network proposing", "bench/vma_masks.py")
+    variants = {
+        "off, v0004 (the defaults)": ("off_v0004", "off_v0004"),
+        "on (`kerb_band_m = 0.3`), v0004": ("v0004", "v0004"),
+        "on, v0004 trained on rasters with the foot": ("foot_trained", "foot_trained"),
+        "off, v0004 trained on rasters with the foot": (None, "off_foot_trained"),
+    }
+    for label, (end_to_end, confirmation) in variants.items():
         cells = row(t, label)
         for index, site_suffix in ((1, ""), (2, "_9011")):
-            name = f"end_to_end_kerb_foot_{suffix}{site_suffix}.json"
+            if end_to_end is None:
+                assert cells[index] == "not run", label
+                continue
+            name = f"end_to_end_kerb_foot_{end_to_end}{site_suffix}.json"
             assert_names_source(t, name, "bench/end_to_end.py")
             figures_of = results(name)
             expected = [
@@ -1410,25 +1418,36 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
                 figures_of["annotator"]["speed_up"],
             ]
             assert_shows(cells[index], expected, f"{label} {name}")
-        name = f"vma_masks_kerb_foot_confirm_{suffix}.json"
+        name = f"vma_masks_kerb_foot_confirm_{confirmation}.json"
         assert_names_source(t, name, "bench/vma_masks.py")
         confirm = results(name)
-        assert confirm["checkpoint"]["version"] == "v0004"
+        trained_on_foot = any("/foot/" in path for path in confirm["checkpoint"]["data"]["reconstructions"])
+        assert trained_on_foot == ("trained" in label), label
+        # the rasters with the foot are the sites' copies; without it, the sites themselves
+        assert ("--recon-site data/synthetic/default" in confirm["command"]) == label.startswith("off"), label
         scored = confirm["results"]["reconstructed"]["element_masks"]
         assert_shows(cells[3], [scored["observed_truth"]["mean_ap"], scored["annotator"]["speed_up"]], label)
     off, on = (results(f"vma_masks_kerb_foot_confirm_{s}.json") for s in ("off_v0004", "v0004"))
+    assert off["checkpoint"]["version"] == on["checkpoint"]["version"] == "v0004"
     shipped = results("vma_masks_recon_trained_confirm.json")["results"]["reconstructed"]["element_masks"]
     baseline = off["results"]["reconstructed"]["element_masks"]
     # the baseline repeats the v0004 column of the training table
     assert baseline["observed_truth"]["mean_ap"] == pytest.approx(shipped["observed_truth"]["mean_ap"])
     assert baseline["annotator"]["speed_up"] == pytest.approx(shipped["annotator"]["speed_up"])
-    assert "/foot/" in on["command"] and "/foot/" not in off["command"]
     correction = [
         r["results"]["reconstructed"]["element_masks"]["annotator"]["correction_s"] for r in (on, off)
     ]
     text = " ".join(readme_text().split())
     assert f"spends {correction[0]:.0f} s instead of {correction[1]:.0f} s" in text
     assert correction[0] > correction[1]  # what keeps the foot off
+    trained = results("vma_masks_kerb_foot_confirm_foot_trained.json")["results"]["reconstructed"][
+        "element_masks"
+    ]
+    assert (
+        f"at {trained['observed_truth']['mean_ap']:.3f} mAP and {trained['annotator']['correction_s']:.0f} s of "
+        "correction"
+    ) in text
+    assert trained["annotator"]["correction_s"] > correction[1]  # what keeps the network trained on it out
     boundary = [
         results(f"end_to_end_kerb_foot_{s}.json")["proposals_ap"]["observed_truth"]["class_ap"]["boundary"]
         for s in ("off_v0004", "v0004")
