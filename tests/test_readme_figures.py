@@ -1453,4 +1453,15 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
         for s in ("off_v0004", "v0004")
     ]
     assert f"boundary AP goes from {boundary[0]:.3f} to {boundary[1]:.3f}" in text
+    per_site = [
+        r["results"]["reconstructed"]["element_masks"]["observed_truth"]["per_site"] for r in (off, on)
+    ]
+    for site, cls, where in (
+        ("random-9001", "boundary", "boundary AP"),
+        ("random-9021", "divider", "dividers"),
+    ):
+        ap = [next(v for k, v in s.items() if k.endswith(site))["class_ap"][cls] for s in per_site]
+        assert (
+            f"{where} {ap[0]:.3f} -> {ap[1]:.3f}" in text or f"{where} ({ap[0]:.3f} -> {ap[1]:.3f})" in text
+        )
     assert SurfaceConfig().kerb_step.kerb_band_m == 0.0  # the foot is off by default, as README says
