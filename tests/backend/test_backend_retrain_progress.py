@@ -1,9 +1,15 @@
-"""Retrain progress: the child's step log records become a progress file, and the job's progress and message."""
+"""Retrain progress: the child's step log records become a progress file, and the job's progress and message; a
+cancelled child ends even when SIGTERM does not end it."""
 
 import logging
+import signal
+import time
 from pathlib import Path
 
-from app.backend.jobs.vma import FIT_SPAN, StepReporter, read_step, step_progress
+import pytest
+
+from app.backend.jobs.runner import JobCancelled
+from app.backend.jobs.vma import FIT_SPAN, StepReporter, _run_child, read_step, step_progress
 
 
 def emit_step(logger: logging.Logger, step: int, total: int, loss: float) -> None:
@@ -44,3 +50,32 @@ def test_unreadable_progress_file_reads_as_no_step(tmp_path: Path) -> None:
     assert read_step(path) is None
     path.write_text('{"step": 3}')
     assert read_step(path) is None
+
+
+def sigterm_ignoring_child(out: Path) -> None:
+    """A retraining child that SIGTERM does not end, as one deadlocked with it blocked in CPython's resource
+    tracker was (ignored here, which holds in every thread of the child)."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    out.with_name("child_started").touch()
+    time.sleep(120)
+
+
+class CancelOnceStarted:
+    """The job context of a job whose cancel is asked for once the child has started."""
+
+    def __init__(self, started: Path) -> None:
+        self.started = started
+
+    def report(self, progress: float, message: str | None = None, *, force: bool = False) -> None:
+        if self.started.is_file():
+            raise JobCancelled("cancel requested")
+
+
+def test_a_cancelled_child_that_sigterm_does_not_end_is_killed(tmp_path: Path) -> None:
+    out = tmp_path / "retrain.json"
+    context = CancelOnceStarted(tmp_path / "child_started")
+    began = time.monotonic()
+    with pytest.raises(JobCancelled):
+        _run_child(context, (), out, target=sigterm_ignoring_child)  # type: ignore[arg-type]
+    assert time.monotonic() - began < 100  # killed after the grace, not left to sleep its 120 s
+    assert not out.exists()

@@ -20,6 +20,7 @@ import json
 import logging
 import multiprocessing
 import time
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -49,6 +50,10 @@ FIT_SPAN = (0.1, 0.9)
 """Job progress at the first and the last training step."""
 PROPOSALS_FILE = "proposals.json"
 POLL_S = 0.5
+TERMINATE_GRACE_S = 5.0
+"""How long a cancelled retraining child has to end on SIGTERM before it is killed: a child can hold SIGTERM
+blocked (CPython's multiprocessing resource tracker blocks it while it starts its server, and a child was seen
+deadlocked there, every thread waiting on a lock), and a join without a limit then never returns."""
 LOOP_USER = "vma-loop"
 """Edit-log username of loop changes when the proposer names no author."""
 
@@ -204,13 +209,14 @@ def _retrain_child(
     atomic_write_json(out, payload, indent=2)
 
 
-def _run_child(context: JobContext, args: tuple[Any, ...], out: Path) -> dict[str, Any]:
-    """Run `_retrain_child` in a spawned process, reporting its steps while it runs; terminate it on cancel."""
+def _run_child(
+    context: JobContext, args: tuple[Any, ...], out: Path, target: Callable[..., None] = _retrain_child
+) -> dict[str, Any]:
+    """Run `target` (`_retrain_child`) in a spawned process, reporting its steps while it runs; on cancel, end it
+    (SIGTERM, then SIGKILL after `TERMINATE_GRACE_S`)."""
     progress_file = out.parent / PROGRESS_FILE
     progress_file.unlink(missing_ok=True)
-    process = multiprocessing.get_context("spawn").Process(
-        target=_retrain_child, args=(*args, out), daemon=True
-    )
+    process = multiprocessing.get_context("spawn").Process(target=target, args=(*args, out), daemon=True)
     process.start()
     started = time.monotonic()
     try:
@@ -219,7 +225,13 @@ def _run_child(context: JobContext, args: tuple[Any, ...], out: Path) -> dict[st
             context.report(*step_progress(read_step(progress_file), time.monotonic() - started))
     except JobCancelled:
         process.terminate()
-        process.join()
+        process.join(TERMINATE_GRACE_S)
+        if process.is_alive():
+            logger.warning(
+                "retraining process %s ignored SIGTERM for %.0f s; killing it", process.pid, TERMINATE_GRACE_S
+            )
+            process.kill()
+            process.join()
         raise
     if not out.is_file():
         raise RuntimeError(f"the retraining process ended without a result (exit code {process.exitcode})")
