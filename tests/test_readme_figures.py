@@ -1403,6 +1403,7 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
         "on (`kerb_band_m = 0.3`), v0004": ("v0004", "v0004"),
         "on, v0004 trained on rasters with the foot": ("foot_trained", "foot_trained"),
         "off, v0004 trained on rasters with the foot": (None, "off_foot_trained"),
+        "on, paint kept out of the foot and the foot labelled curb, v0004": ("curb_v0004", "curb_v0004"),
     }
     for label, (end_to_end, confirmation) in variants.items():
         cells = row(t, label)
@@ -1418,7 +1419,11 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
                 figures_of["annotator"]["speed_up"],
             ]
             assert_shows(cells[index], expected, f"{label} {name}")
-        name = f"vma_masks_kerb_foot_confirm_{confirmation}.json"
+        name = (
+            "vma_masks_kerb_foot_curb_confirm_v0004.json"
+            if confirmation == "curb_v0004"
+            else f"vma_masks_kerb_foot_confirm_{confirmation}.json"
+        )
         assert_names_source(t, name, "bench/vma_masks.py")
         confirm = results(name)
         trained_on_foot = any("/foot/" in path for path in confirm["checkpoint"]["data"]["reconstructions"])
@@ -1464,4 +1469,33 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
         assert (
             f"{where} {ap[0]:.3f} -> {ap[1]:.3f}" in text or f"{where} ({ap[0]:.3f} -> {ap[1]:.3f})" in text
         )
+    fixed = results("vma_masks_kerb_foot_curb_confirm_v0004.json")["results"]["reconstructed"][
+        "element_masks"
+    ]
+    assert (
+        f"correction time is {fixed['annotator']['correction_s']:.0f} s, against {correction[0]:.0f} s with the foot "
+        f"as it was and {correction[1]:.0f} s without"
+    ) in text
+    assert fixed["annotator"]["correction_s"] > correction[1]  # what still keeps the changed foot off
+    sites = fixed["observed_truth"]["per_site"]
+    ap = [
+        next(v for k, v in sites.items() if k.endswith(s))["class_ap"][c]
+        for s, c in (("9001", "boundary"), ("9021", "divider"))
+    ]
+    assert f"9001's boundary AP {ap[0]:.3f}, 9021's divider AP {ap[1]:.3f}" in text
+    before, after = (
+        results(name)["variant_kerb_foot"] for name in ("surface.json", "surface_kerb_foot_paint_curb.json")
+    )
+    no_foot = results("surface_kerb_foot_paint_curb.json")["runs"][-1]
+    assert (
+        before["kerb_band_m"] == after["kerb_band_m"] == 0.3 and no_foot["poses"] == after["poses"] == "sfm"
+    )
+    assert (
+        f"crosswalk IoU {no_foot['iou']['crosswalk']:.3f} without the foot, {before['iou']['crosswalk']:.3f} with it"
+    ) in text
+    assert (
+        f"curb IoU is {after['iou']['curb']:.3f}, up from {before['iou']['curb']:.3f} in `bench/results/surface.json`, "
+        f"crosswalk IoU is {after['iou']['crosswalk']:.3f}, as without the foot, and road IoU is {after['iou']['road']:.3f}"
+    ) in text
+    assert f"{after['iou']['crosswalk']:.3f}" == f"{no_foot['iou']['crosswalk']:.3f}"
     assert SurfaceConfig().kerb_step.kerb_band_m == 0.0  # the foot is off by default, as README says

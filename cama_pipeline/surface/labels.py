@@ -15,6 +15,8 @@ import torch
 from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
 
 OFF_ROAD = (Semantic.BACKGROUND, Semantic.CURB)
+PAINT = (Semantic.LANE_MARKING, Semantic.CROSSWALK)
+"""The paint on the road: never a kerb's foot (`steps`)."""
 EPSILON = 1e-3
 """Floor of the class frequencies before the logarithm (logits stay finite)."""
 
@@ -56,3 +58,11 @@ def curb_height_logits(raised: torch.Tensor) -> torch.Tensor:
     """(V, 5) logits of cells seen at curb height from their (V, 5) class votes there: off-road classes only
     (curb height may only give curb or background)."""
     return torch.log(_off_road_votes(shares(raised)) + EPSILON)
+
+
+def curb_logits(count: int, device: torch.device) -> torch.Tensor:
+    """(count, 5) logits of cells that are curb whatever their votes: a kerb's foot (`steps`), which the road-level
+    vote calls road and the curb-height vote may call sidewalk."""
+    shares = torch.zeros((count, len(BEV_CLASSES)), device=device)
+    shares[:, BEV_CLASSES.index(Semantic.CURB)] = 1.0
+    return torch.log(shares + EPSILON)

@@ -26,7 +26,7 @@ from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, surface_loss
 from cama_pipeline.surface.grid import SurfaceGrid
-from cama_pipeline.surface.labels import curb_height_logits, fused_logits
+from cama_pipeline.surface.labels import PAINT, curb_logits, fused_logits
 from cama_pipeline.surface.observe import (
     GROUND,
     Camera,
@@ -172,13 +172,14 @@ def observe(
     mesh.colour = road_level.mean()
     mesh.step = torch.zeros(vertices, device=device)
     if config.curb_height_m > 0 and config.kerb_step.enabled:
-        road_ids = torch.tensor(ROAD_SURFACE_IDS, device=device)
-        off_road = (seen & ~torch.isin(mesh.logits.argmax(dim=1), road_ids)).cpu().numpy()
-        raised, foot = raised_vertices(mesh.grid, road_level, curb_level, off_road, config.kerb_step)
+        classes = mesh.logits.argmax(dim=1)
+        off_road = (seen & ~torch.isin(classes, torch.tensor(ROAD_SURFACE_IDS, device=device))).cpu().numpy()
+        painted = torch.isin(classes, torch.tensor([int(c) for c in PAINT], device=device)).cpu().numpy()
+        raised, foot = raised_vertices(mesh.grid, road_level, curb_level, off_road, painted, config.kerb_step)
         on_step, kerb = torch.as_tensor(raised, device=device), torch.as_tensor(foot, device=device)
         mesh.step[on_step] = config.curb_height_m
         mesh.colour[on_step] = curb_level.mean()[on_step]
-        mesh.logits[kerb] = curb_height_logits(raised_sums[kerb])
+        mesh.logits[kerb] = curb_logits(int(kerb.sum()), device)
     return visible
 
 

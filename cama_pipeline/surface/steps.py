@@ -8,7 +8,9 @@ another patch of ground (the parallax grows with the camera's distance), so the 
 raised when its views agree better at curb height: the log ratio of the two weighted colour variances, averaged
 over the neighbouring off-road cells (a sidewalk or a kerb is a region, not a cell) and above `threshold`.
 Optionally (`kerb_band_m`) road-labelled cells next to a raised region that agree better at curb height too are
-the kerb's foot: raised and labelled curb. A kerb's edge is a line, so the foot is not decided cell by cell (that
+the kerb's foot: raised and labelled curb. Painted cells (lane marking, crosswalk) are never the foot: paint lies on
+the road, and a crossing runs up to the kerb, so a foot across it would cut the crossing's end (default site, SfM
+poses: crosswalk IoU 0.893 with painted cells in the foot, 0.898 without, as without a foot). A kerb's edge is a line, so the foot is not decided cell by cell (that
 leaves patches and a ragged road edge): along the kerb, the foot's width is the one of 0.1, 0.2, ... `kerb_band_m`
 whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb height; the cells within that
 width of the raised region are the foot, so the road's edge moves as a whole.
@@ -115,10 +117,12 @@ def raised_vertices(
     road_level: ColourMoments,
     curb_level: ColourMoments,
     off_road: np.ndarray,
+    painted: np.ndarray,
     config: KerbStepConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(V,) bool twice: the vertices standing at curb height, and those of them labelled with a road class
-    (`off_road` (V,) False), which are kerb cells the road-level vote smeared (see the module docstring)."""
+    (`off_road` (V,) False), which are kerb cells the road-level vote smeared (see the module docstring); the
+    `painted` (V,) vertices (lane marking, crosswalk) are never among the latter."""
     both = ((road_level.weight > 0) & (curb_level.weight > 0)).cpu().numpy()
     ratio = (road_level.variance() + VARIANCE_FLOOR) / (curb_level.variance() + VARIANCE_FLOOR)
     score = torch.log(ratio).cpu().numpy()
@@ -130,7 +134,7 @@ def raised_vertices(
     raised = _drop_small(raised, config.min_area_m2, grid.resolution_m)[rows, cols]
     if config.kerb_band_m <= 0:
         return raised, np.zeros_like(raised)
-    foot = _kerb_foot(grid, score, both & ~off_road, raised, config)
+    foot = _kerb_foot(grid, score, both & ~off_road & ~painted, raised, config)
     return raised | foot, foot
 
 

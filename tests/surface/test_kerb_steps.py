@@ -4,12 +4,14 @@ import numpy as np
 import pytest
 import torch
 
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import BEV_CLASSES, Semantic
 from cama_pipeline.surface.grid import SurfaceGrid
+from cama_pipeline.surface.labels import curb_logits
 from cama_pipeline.surface.steps import ColourMoments, KerbStepConfig, raised_vertices, step_summary
 
 ROWS, COLS = 20, 30
 GRID = SurfaceGrid((0.0, 0.0), 0.1, ROWS, COLS, np.arange(ROWS * COLS).reshape(ROWS, COLS))
+NO_PAINT = np.zeros(ROWS * COLS, bool)
 
 
 def moments(spread: np.ndarray) -> ColourMoments:
@@ -50,15 +52,35 @@ def layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_off_road_cells_agreeing_at_curb_height_are_raised_and_the_kerb_foot_with_them() -> None:
     road_spread, curb_spread, sidewalk = layout()
     with_foot = KerbStepConfig(kerb_band_m=0.3)
-    raised, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, with_foot)
+    raised, foot = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, NO_PAINT, with_foot
+    )
     cols = np.tile(np.arange(COLS), ROWS)
     assert raised[sidewalk].all()
     assert foot[(cols == 13) | (cols == 14)].all() and raised[foot].all()
     assert not raised[cols < 13].any() and not foot[sidewalk].any()
     raised, foot = raised_vertices(
-        GRID, moments(road_spread), moments(curb_spread), sidewalk, KerbStepConfig()
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, NO_PAINT, KerbStepConfig()
     )
     assert np.array_equal(raised, sidewalk) and not foot.any()  # no foot by default
+
+
+def test_paint_is_never_the_kerb_foot() -> None:
+    """A crossing runs up to the kerb in rows 5-9: its painted cells in the foot's columns stay road (paint lies on
+    the road), the foot elsewhere along the kerb is unchanged."""
+    road_spread, curb_spread, sidewalk = layout()
+    rows, cols = np.repeat(np.arange(ROWS), COLS), np.tile(np.arange(COLS), ROWS)
+    crossing = (rows >= 5) & (rows <= 9) & (cols < 15)
+    config = KerbStepConfig(kerb_band_m=0.3)
+    _, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, crossing, config)
+    assert not foot[crossing].any()
+    assert np.array_equal(foot[~crossing], ((cols == 13) | (cols == 14))[~crossing])
+
+
+def test_the_foot_is_labelled_curb() -> None:
+    logits = curb_logits(4, torch.device("cpu"))
+    assert logits.shape == (4, len(BEV_CLASSES))
+    assert (logits.argmax(dim=1) == BEV_CLASSES.index(Semantic.CURB)).all()
 
 
 def test_the_foot_is_a_band_of_one_width_along_the_kerb_despite_noisy_cells() -> None:
@@ -69,7 +91,9 @@ def test_the_foot_is_a_band_of_one_width_along_the_kerb_despite_noisy_cells() ->
     flipped = (np.random.default_rng(3).random(ROWS * COLS) < 0.2) & (cols >= 9) & (cols <= 14)
     road_spread[flipped], curb_spread[flipped] = curb_spread[flipped], road_spread[flipped]
     config = KerbStepConfig(kerb_band_m=0.5)
-    raised, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, config)
+    raised, foot = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, NO_PAINT, config
+    )
     assert np.array_equal(foot, (cols == 13) | (cols == 14))
     assert np.array_equal(raised, sidewalk | foot)
 
@@ -83,7 +107,7 @@ def test_the_foot_width_follows_the_kerb_where_it_changes() -> None:
     at_curb_height = sidewalk | kerb_foot
     road_spread, curb_spread = np.where(at_curb_height, 0.4, 0.02), np.where(at_curb_height, 0.02, 0.4)
     config = KerbStepConfig(kerb_band_m=0.5, foot_smoothing_m=0.1)
-    _, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, config)
+    _, foot = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, NO_PAINT, config)
     away = (rows < 7) | (rows > 12)
     assert np.array_equal(foot[away], kerb_foot[away])
 
@@ -94,7 +118,9 @@ def test_road_far_from_a_raised_region_is_never_raised() -> None:
     curb_spread = np.where(cols < 5, 0.0, curb_spread)  # road that happens to agree better at curb height
     road_spread = np.where(cols < 5, 0.4, road_spread)
     with_foot = KerbStepConfig(kerb_band_m=0.3)
-    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), sidewalk, with_foot)
+    raised, _ = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), sidewalk, NO_PAINT, with_foot
+    )
     assert not raised[cols < 5].any()
 
 
@@ -103,10 +129,12 @@ def test_small_raised_patches_and_unseen_cells_stay_down() -> None:
     off_road = np.ones(ROWS * COLS, bool)
     patch = (rows < 3) & (cols < 3)  # 0.09 m2, under the 0.5 m2 minimum
     road_spread, curb_spread = np.where(patch, 0.4, 0.02), np.where(patch, 0.02, 0.4)
-    raised, _ = raised_vertices(GRID, moments(road_spread), moments(curb_spread), off_road, KerbStepConfig())
+    raised, _ = raised_vertices(
+        GRID, moments(road_spread), moments(curb_spread), off_road, NO_PAINT, KerbStepConfig()
+    )
     assert not raised.any()
     unseen = ColourMoments(ROWS * COLS, torch.device("cpu"))
-    raised, _ = raised_vertices(GRID, unseen, moments(curb_spread), off_road, KerbStepConfig())
+    raised, _ = raised_vertices(GRID, unseen, moments(curb_spread), off_road, NO_PAINT, KerbStepConfig())
     assert not raised.any()
 
 
