@@ -1394,6 +1394,17 @@ def test_more_reconstructions_not_shipped() -> None:
     ) in text
 
 
+def _recon_masks(record: dict[str, Any]) -> dict[str, Any]:
+    """The element-mask network's figures on the reconstructions of a bench/vma_masks.py record."""
+    return record["results"]["reconstructed"]["element_masks"]
+
+
+def _site_class_ap(figures: dict[str, Any], site: str, cls: str) -> float:
+    """One class's AP on the reconstruction whose path ends with `site`, in `_recon_masks` figures."""
+    per_site = figures["observed_truth"]["per_site"]
+    return float(next(v for k, v in per_site.items() if k.endswith(site))["class_ap"][cls])
+
+
 def test_kerb_foot_with_the_shipped_network_table() -> None:
     """Each cell of the foot's table against its end-to-end and confirmation results, and the figures the
     paragraph below it quotes."""
@@ -1430,24 +1441,20 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
         assert trained_on_foot == ("trained" in label), label
         # the rasters with the foot are the sites' copies; without it, the sites themselves
         assert ("--recon-site data/synthetic/default" in confirm["command"]) == label.startswith("off"), label
-        scored = confirm["results"]["reconstructed"]["element_masks"]
+        scored = _recon_masks(confirm)
         assert_shows(cells[3], [scored["observed_truth"]["mean_ap"], scored["annotator"]["speed_up"]], label)
     off, on = (results(f"vma_masks_kerb_foot_confirm_{s}.json") for s in ("off_v0004", "v0004"))
     assert off["checkpoint"]["version"] == on["checkpoint"]["version"] == "v0004"
-    shipped = results("vma_masks_recon_trained_confirm.json")["results"]["reconstructed"]["element_masks"]
-    baseline = off["results"]["reconstructed"]["element_masks"]
+    shipped = _recon_masks(results("vma_masks_recon_trained_confirm.json"))
+    baseline, with_foot = _recon_masks(off), _recon_masks(on)
     # the baseline repeats the v0004 column of the training table
     assert baseline["observed_truth"]["mean_ap"] == pytest.approx(shipped["observed_truth"]["mean_ap"])
     assert baseline["annotator"]["speed_up"] == pytest.approx(shipped["annotator"]["speed_up"])
-    correction = [
-        r["results"]["reconstructed"]["element_masks"]["annotator"]["correction_s"] for r in (on, off)
-    ]
+    correction = [figures["annotator"]["correction_s"] for figures in (with_foot, baseline)]
     text = " ".join(readme_text().split())
     assert f"spends {correction[0]:.0f} s instead of {correction[1]:.0f} s" in text
     assert correction[0] > correction[1]  # what keeps the foot off
-    trained = results("vma_masks_kerb_foot_confirm_foot_trained.json")["results"]["reconstructed"][
-        "element_masks"
-    ]
+    trained = _recon_masks(results("vma_masks_kerb_foot_confirm_foot_trained.json"))
     assert (
         f"at {trained['observed_truth']['mean_ap']:.3f} mAP and {trained['annotator']['correction_s']:.0f} s of "
         "correction"
@@ -1458,30 +1465,21 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
         for s in ("off_v0004", "v0004")
     ]
     assert f"boundary AP goes from {boundary[0]:.3f} to {boundary[1]:.3f}" in text
-    per_site = [
-        r["results"]["reconstructed"]["element_masks"]["observed_truth"]["per_site"] for r in (off, on)
-    ]
     for site, cls, where in (
         ("random-9001", "boundary", "boundary AP"),
         ("random-9021", "divider", "dividers"),
     ):
-        ap = [next(v for k, v in s.items() if k.endswith(site))["class_ap"][cls] for s in per_site]
+        ap = [_site_class_ap(figures, site, cls) for figures in (baseline, with_foot)]
         assert (
             f"{where} {ap[0]:.3f} -> {ap[1]:.3f}" in text or f"{where} ({ap[0]:.3f} -> {ap[1]:.3f})" in text
         )
-    fixed = results("vma_masks_kerb_foot_curb_confirm_v0004.json")["results"]["reconstructed"][
-        "element_masks"
-    ]
+    fixed = _recon_masks(results("vma_masks_kerb_foot_curb_confirm_v0004.json"))
     assert (
         f"correction time is {fixed['annotator']['correction_s']:.0f} s, against {correction[0]:.0f} s with the foot "
         f"as it was and {correction[1]:.0f} s without"
     ) in text
     assert fixed["annotator"]["correction_s"] > correction[1]  # what still keeps the changed foot off
-    sites = fixed["observed_truth"]["per_site"]
-    ap = [
-        next(v for k, v in sites.items() if k.endswith(s))["class_ap"][c]
-        for s, c in (("9001", "boundary"), ("9021", "divider"))
-    ]
+    ap = [_site_class_ap(fixed, site, cls) for site, cls in (("9001", "boundary"), ("9021", "divider"))]
     assert f"9001's boundary AP {ap[0]:.3f}, 9021's divider AP {ap[1]:.3f}" in text
     before, after = (
         results(name)["variant_kerb_foot"] for name in ("surface.json", "surface_kerb_foot_paint_curb.json")

@@ -1,24 +1,24 @@
 """Kerb steps: which off-road cells stand at curb height, decided by photo-consistency at two heights.
 
-The elevation MLP is smooth by design (a few encoding octaves), so it cannot hold the 10-15 cm step where the
-road meets a raised kerb and sidewalk. The observation pass samples every visible cell in every image twice: at
-the MLP's height and `curb_height_m` above it. A cell really at one of the two heights is seen in the same place
-by every camera at that height, so its colour agrees across the views; at the other height each camera sees
-another patch of ground (the parallax grows with the camera's distance), so the colours disagree. The cell is
-raised when its views agree better at curb height: the log ratio of the two weighted colour variances, averaged
-over the neighbouring off-road cells (a sidewalk or a kerb is a region, not a cell) and above `threshold`.
-Optionally (`kerb_band_m`) road-labelled cells next to a raised region that agree better at curb height too are
-the kerb's foot: raised and labelled curb. Painted cells (lane marking, crosswalk) are never the foot: paint lies on
-the road, and a crossing runs up to the kerb, so a foot across it would cut the crossing's end (default site, SfM
-poses: crosswalk IoU 0.893 with painted cells in the foot, 0.898 without, as without a foot). A kerb's edge is a line, so the foot is not decided cell by cell (that
-leaves patches and a ragged road edge): along the kerb, the foot's width is the one of 0.1, 0.2, ... `kerb_band_m`
-whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb height; the cells within that
-width of the raised region are the foot, so the road's edge moves as a whole.
+The elevation MLP is smooth by design (a few encoding octaves), so it cannot hold the 10-15 cm step where the road
+meets a raised kerb and sidewalk. The observation pass samples every visible cell in every image twice: at the MLP's
+height and `curb_height_m` above it. A cell really at one of the two heights is seen in the same place by every
+camera at that height, so its colour agrees across the views; at the other height each camera sees another patch of
+ground (the parallax grows with the camera's distance), so the colours disagree. The cell is raised when its views
+agree better at curb height: the log ratio of the two weighted colour variances, averaged over the neighbouring
+off-road cells (a sidewalk or a kerb is a region, not a cell) and above `threshold`. Optionally (`kerb_band_m`)
+road-labelled cells next to a raised region that agree better at curb height too are the kerb's foot: raised and
+labelled curb. Painted cells (lane marking, crosswalk) are never the foot: paint lies on the road, and a crossing
+runs up to the kerb, so a foot across it would cut the crossing's end (default site, SfM poses: crosswalk IoU 0.893
+with painted cells in the foot, 0.898 without, as without a foot). A kerb's edge is a line, so the foot is not
+decided cell by cell (that leaves patches and a ragged road edge): along the kerb, the foot's width is the one of
+0.1, 0.2, ... `kerb_band_m` whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb
+height; the cells within that width of the raised region are the foot, so the road's edge moves as a whole.
 
-Road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits. The BEV
-`elevation` layer stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the
-step goes to its own raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour
-and classes are taken from.
+Road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits. The BEV `elevation`
+layer stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the step goes to its
+own raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour and classes are taken
+from.
 """
 
 from dataclasses import dataclass
