@@ -14,6 +14,7 @@ DEFAULT_MAX_PAYLOAD_BYTES = 8 * 1024 * 1024
 DEFAULT_EXTENT_MARGIN_M = 50.0
 DEFAULT_SCRYPT_N = 2**14
 DEFAULT_QA_SHARE = 0.1
+DEFAULT_RETRAIN_STALL_S = 900.0
 DEFAULT_LOGIN_MAX_FAILURES = 5
 DEFAULT_LOGIN_MAX_FAILURES_PER_ADDRESS = 20
 DEFAULT_LOGIN_WINDOW_S = 300.0
@@ -70,6 +71,9 @@ class Settings:
     reconstructed rasters, as the product proposes, against their observed truth (`models.vma.validation`)."""
     retrain_after: int = 0
     """Start a retrain job by itself after this many new accepted/fixed corrections of a site (0: never)."""
+    retrain_stall_s: float = DEFAULT_RETRAIN_STALL_S
+    """A retrain job whose process (with the processes below it) uses under a second of CPU for this long has hung:
+    it is stopped and the job fails, saying so (`app.backend.jobs.vma.StallWatch`; 0: never stopped)."""
     qa_share: float = DEFAULT_QA_SHARE
     """Share of pre-accepted proposals sampled for the lead's QA queue."""
     preaccept_threshold: float | None = None
@@ -112,6 +116,8 @@ class Settings:
             raise ValueError("CAMA_ADMIN_USERNAME and CAMA_ADMIN_PASSWORD: set both or neither")
         if self.retrain_after < 0:
             raise ValueError(f"CAMA_RETRAIN_AFTER: must be >= 0, got {self.retrain_after}")
+        if not self.retrain_stall_s >= 0:
+            raise ValueError(f"CAMA_RETRAIN_STALL_S: must be >= 0 seconds, got {self.retrain_stall_s}")
         if self.vma_model not in VMA_MODELS:
             raise ValueError(
                 f"CAMA_VMA_MODEL: must be one of {', '.join(VMA_MODELS)}, got {self.vma_model!r}"
@@ -178,6 +184,7 @@ _ENV_FIELDS: dict[str, Callable[[str], object]] = {
     "vma_validation_sites": _paths,
     "vma_validation_reconstructed": _paths,
     "retrain_after": int,
+    "retrain_stall_s": float,
     "qa_share": float,
     "preaccept_threshold": float,
     "review_url": str,

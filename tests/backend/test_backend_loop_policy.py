@@ -43,16 +43,19 @@ def test_loop_settings_from_the_environment(tmp_path: Path) -> None:
         "CAMA_RETRAIN_AFTER": "25",
         "CAMA_QA_SHARE": "0.2",
         "CAMA_PREACCEPT_THRESHOLD": "0.9",
+        "CAMA_RETRAIN_STALL_S": "120",
     }
     settings = Settings.from_env(env)
     assert settings.vma_registry == tmp_path / "reg" and settings.retrain_after == 25
     assert settings.vma_validation_sites == (tmp_path / "a", tmp_path / "b")
     assert settings.qa_share == 0.2 and settings.preaccept_threshold == 0.9
+    assert settings.retrain_stall_s == 120.0 and Settings().retrain_stall_s == 900.0
     for key, value, message in (
         ("CAMA_QA_SHARE", "1.5", "CAMA_QA_SHARE: must be in [0, 1]"),
         ("CAMA_RETRAIN_AFTER", "-1", "CAMA_RETRAIN_AFTER: must be >= 0"),
         ("CAMA_PREACCEPT_THRESHOLD", "2", "CAMA_PREACCEPT_THRESHOLD: must be in [0, 1]"),
         ("CAMA_RETRAIN_AFTER", "many", "CAMA_RETRAIN_AFTER: invalid value"),
+        ("CAMA_RETRAIN_STALL_S", "-5", "CAMA_RETRAIN_STALL_S: must be >= 0 seconds"),
     ):
         with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("]", r"\]")):
             Settings.from_env({key: value})

@@ -1,13 +1,18 @@
 """Retrain progress: the child's step log records become a progress file, and the job's progress and message; a
-cancelled child ends even when SIGTERM does not end it."""
+cancelled child ends even when SIGTERM does not end it; a hung child is stopped and the job fails saying so, and a
+busy one is left to work."""
 
+import json
 import logging
 import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
 
+from app.backend.jobs.process_cpu import tree_cpu_seconds
 from app.backend.jobs.runner import JobCancelled
 from app.backend.jobs.vma import FIT_SPAN, StepReporter, _run_child, read_step, step_progress
 
@@ -79,3 +84,59 @@ def test_a_cancelled_child_that_sigterm_does_not_end_is_killed(tmp_path: Path) -
         _run_child(context, (), out, target=sigterm_ignoring_child)  # type: ignore[arg-type]
     assert time.monotonic() - began < 100  # killed after the grace, not left to sleep its 120 s
     assert not out.exists()
+
+
+class Quiet:
+    """The job context of a job nobody cancels."""
+
+    def report(self, progress: float, message: str | None = None, *, force: bool = False) -> None:
+        pass
+
+
+def hung_child(out: Path) -> None:
+    """A retraining child that hangs: it waits and uses no CPU, as the deadlocked one did."""
+    out.with_name("child_started").touch()
+    time.sleep(120)
+
+
+def busy_child(out: Path) -> None:
+    """A child that computes for 3 s of CPU (however long the machine takes to give them) and then reports its
+    result: slow, not hung."""
+    total = 0
+    while time.process_time() < 3.0:
+        total += sum(range(1000))
+    out.write_text(json.dumps({"candidate": "v0002", "promoted": False, "work": total}))
+
+
+def test_a_hung_child_is_stopped_and_the_job_fails_saying_so(tmp_path: Path) -> None:
+    out = tmp_path / "retrain.json"
+    began = time.monotonic()
+    with pytest.raises(RuntimeError, match=r"hung before its first step: .* in 2 s .*CAMA_RETRAIN_STALL_S"):
+        _run_child(Quiet(), (), out, target=hung_child, stall_s=2.0)  # type: ignore[arg-type]
+    assert (tmp_path / "child_started").is_file()
+    assert time.monotonic() - began < 100  # stopped, not left to sleep its 120 s
+    assert not out.exists()
+
+
+def test_a_busy_child_is_not_taken_for_hung(tmp_path: Path) -> None:
+    out = tmp_path / "retrain.json"
+    payload = _run_child(Quiet(), (), out, target=busy_child, stall_s=8.0)  # type: ignore[arg-type]
+    assert payload["candidate"] == "v0002" and payload["work"] > 0
+
+
+def test_a_process_tree_counts_the_cpu_of_the_processes_below_it() -> None:
+    worker = "import time\nwhile time.process_time() < 1.5: pass"
+    shell = subprocess.Popen(["sh", "-c", f"{sys.executable} -c '{worker}'; sleep 60"])
+    try:
+        deadline = time.monotonic() + 60
+        while (tree_cpu_seconds(shell.pid) or 0.0) < 1.5 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(1.0)  # the worker has ended and the shell has reaped it
+        cpu_s = tree_cpu_seconds(shell.pid)
+        assert (
+            cpu_s is not None and 1.5 <= cpu_s < 1.9
+        )  # the worker's time, still counted; the shell only waits
+    finally:
+        shell.kill()
+        shell.wait()
+    assert tree_cpu_seconds(2**22 + 1) is None  # above Linux's largest process id: no such process

@@ -5,7 +5,8 @@ validation sites, `app.review_effort.review_time`) and
 
 Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
 `models.vma.retrain.retrain_from_corrections` is one long call: the job polls the child, reports its progress,
-and terminates it when the job is cancelled or the server stops. The child turns the trainer's step log records
+and terminates it when the job is cancelled or the server stops, or when it hangs (its processes use no CPU for
+`Settings.retrain_stall_s`; the job then fails saying so, instead of staying "running" until a lead cancels it). The child turns the trainer's step log records
 (`step i/n loss x`, written by `models.vma.train.fit` at its first step, every 50 steps and its last) into
 `retrain_progress.json` ({"step", "total", "loss"}) in the job folder; the job's progress field follows them
 (0.1 to 0.9 over the steps; the evaluations of the current model before and of the candidate after take the
@@ -31,6 +32,7 @@ from annotations.schema import AnnotationSet
 from app.backend.config import Settings
 from app.backend.crud.refresh import refresh_proposals
 from app.backend.jobs.kinds import every_site_annotations, site_annotations
+from app.backend.jobs.process_cpu import tree_cpu_seconds
 from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.schemas import STRICT
 from app.backend.vma_loop import preaccept_threshold
@@ -54,6 +56,9 @@ TERMINATE_GRACE_S = 5.0
 """How long a cancelled retraining child has to end on SIGTERM before it is killed: a child can hold SIGTERM
 blocked (CPython's multiprocessing resource tracker blocks it while it starts its server, and a child was seen
 deadlocked there, every thread waiting on a lock), and a join without a limit then never returns."""
+STALL_CPU_S = 1.0
+"""CPU seconds a retraining child (with the processes below it) must use within `Settings.retrain_stall_s` to
+count as working; one that uses less is hung (`app.backend.jobs.process_cpu`) and is stopped."""
 LOOP_USER = "vma-loop"
 """Edit-log username of loop changes when the proposer names no author."""
 
@@ -209,29 +214,76 @@ def _retrain_child(
     atomic_write_json(out, payload, indent=2)
 
 
+class StallWatch:
+    """Tells when a child process (with the processes below it) has used under `STALL_CPU_S` of CPU for `limit_s`
+    seconds: hung, not slow (see `app.backend.jobs.process_cpu`). `limit_s` 0, or a system without `/proc`: never."""
+
+    def __init__(self, pid: int, limit_s: float) -> None:
+        self.pid, self.limit_s = pid, limit_s
+        self.mark_cpu_s, self.mark_at = tree_cpu_seconds(pid), time.monotonic()
+        self.checked_at = self.mark_at
+
+    def stalled(self) -> bool:
+        """Whether the CPU time has stood still (within `STALL_CPU_S`) for `limit_s`; /proc is read at most four
+        times per `limit_s` (and every 5 s at most), not on every poll."""
+        now = time.monotonic()
+        if self.limit_s <= 0 or self.mark_cpu_s is None or now - self.checked_at < min(5.0, self.limit_s / 4):
+            return False
+        self.checked_at = now
+        cpu_s = tree_cpu_seconds(self.pid)
+        if cpu_s is None:
+            return False
+        if cpu_s - self.mark_cpu_s >= STALL_CPU_S:
+            self.mark_cpu_s, self.mark_at = cpu_s, now
+            return False
+        return now - self.mark_at >= self.limit_s
+
+
+def _end_child(process: "multiprocessing.process.BaseProcess") -> None:
+    """SIGTERM, then SIGKILL after `TERMINATE_GRACE_S` if the child is still there."""
+    process.terminate()
+    process.join(TERMINATE_GRACE_S)
+    if process.is_alive():
+        logger.warning(
+            "retraining process %s ignored SIGTERM for %.0f s; killing it", process.pid, TERMINATE_GRACE_S
+        )
+        process.kill()
+        process.join()
+
+
 def _run_child(
-    context: JobContext, args: tuple[Any, ...], out: Path, target: Callable[..., None] = _retrain_child
+    context: JobContext,
+    args: tuple[Any, ...],
+    out: Path,
+    target: Callable[..., None] = _retrain_child,
+    *,
+    stall_s: float = 0.0,
 ) -> dict[str, Any]:
     """Run `target` (`_retrain_child`) in a spawned process, reporting its steps while it runs; on cancel, end it
-    (SIGTERM, then SIGKILL after `TERMINATE_GRACE_S`)."""
+    (`_end_child`); when it has hung for `stall_s` (`StallWatch`; 0: never), end it and fail, saying so."""
     progress_file = out.parent / PROGRESS_FILE
     progress_file.unlink(missing_ok=True)
     process = multiprocessing.get_context("spawn").Process(target=target, args=(*args, out), daemon=True)
     process.start()
     started = time.monotonic()
+    watch = StallWatch(process.pid or 0, stall_s)
     try:
         while process.is_alive():
             process.join(POLL_S)
-            context.report(*step_progress(read_step(progress_file), time.monotonic() - started))
+            step = read_step(progress_file)
+            context.report(*step_progress(step, time.monotonic() - started))
+            if process.is_alive() and watch.stalled():
+                _end_child(process)
+                where = (
+                    "before its first step" if step is None else f"after step {step['step']}/{step['total']}"
+                )
+                raise RuntimeError(
+                    f"the retraining process {process.pid} hung {where}: it used under {STALL_CPU_S:.0f} s of CPU "
+                    f"in {stall_s:.0f} s and was stopped (CAMA_RETRAIN_STALL_S); nothing was promoted, start the "
+                    "retrain again"
+                )
     except JobCancelled:
-        process.terminate()
-        process.join(TERMINATE_GRACE_S)
-        if process.is_alive():
-            logger.warning(
-                "retraining process %s ignored SIGTERM for %.0f s; killing it", process.pid, TERMINATE_GRACE_S
-            )
-            process.kill()
-            process.join()
+        _end_child(process)
         raise
     if not out.is_file():
         raise RuntimeError(f"the retraining process ended without a result (exit code {process.exitcode})")
@@ -323,7 +375,7 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
         params.replay_share,
     )
     out = context.workdir / RETRAIN_FILE
-    outcome = _run_child(context, args, out)
+    outcome = _run_child(context, args, out, stall_s=settings.retrain_stall_s)
     message = _gate_message(outcome, validation)
     if outcome["promoted"] and params.refresh_after_promotion:
         message += f"; proposal refresh queued as job {context.follow_up('refresh_proposals', {})}"
