@@ -17,7 +17,11 @@
    Each row records `sre_ref_px`, the SRE at 960x540 (the paper's and CAMA's scale; the figure README quotes and
    the plot shows), beside `sre_px` in the images' own pixels (512 wide on the synthetic sites).
 6. The simulated annotator's person-hours per km: drawing from scratch vs correcting the proposals, on the true
-   vectors cut to the observed cells (nobody can draw road that no camera saw).
+   vectors cut to the observed cells (nobody can draw road that no camera saw): `annotator` towards the truth where
+   the world has it, `annotator_in_reconstruction_frame` towards the truth carried into the frame the rasters sit in
+   (`reconstruction_frame`: the 2D similarity from the true to the reconstruction's keyframe positions, how far it
+   moves them and what it leaves; see `cama_pipeline.evaluate.frame`), which is what an annotator looking at the
+   rasters and images can reach.
 
 Plots (per-stage time, SRE / F1 comparison, elevation error map, observation-count map) go to
 bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out X.json`: X.json and X/*.png).
@@ -51,6 +55,7 @@ from cama_pipeline.bev import read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import Pose, load_dataset
 from cama_pipeline.evaluate import SreConfig, evaluate_sre, load_true_poses, load_vector_map
+from cama_pipeline.evaluate.frame import ReconstructionFrame, reconstruction_frame
 from cama_pipeline.evaluate.inputs import VectorElement
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from cama_pipeline.features.config import FeaturesConfig
@@ -207,11 +212,11 @@ def sfm_pose_map(workspace: Workspace, site_id: str) -> dict[str, Pose]:
 
 
 def simulated_pass(
-    site: Path, proposals: Path, rasters_folder: Path
+    site: Path, proposals: Path, rasters_folder: Path, frame: ReconstructionFrame | None = None
 ) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     """The scripted annotator on the proposals and on an empty site, both working towards the observed parts of
-    the true vectors; the corrected map (global 2D)."""
-    truths = observed_true_polylines(site, load_site_rasters(rasters_folder))
+    the true vectors (carried into `frame`, None: the world's); the corrected map (global 2D)."""
+    truths = observed_true_polylines(site, load_site_rasters(rasters_folder), frame)
     with local_backend(site) as (admin, annotator):
         corrected_site = register_synthetic_site(admin, site, "corrected")
         load_proposals(admin, corrected_site, proposals)
@@ -402,6 +407,9 @@ def main() -> None:
     figures["proposed_by"] = sorted({e.author for e in AnnotationSet.read_json(proposals).elements})
     figures["proposals_ap"] = proposals_ap(site, rasters, proposals)
     figures["annotator"], corrected = simulated_pass(site, proposals, rasters)
+    frame = reconstruction_frame(site / "nuscenes", workspace, site_id)
+    figures["reconstruction_frame"] = frame.as_dict()
+    figures["annotator_in_reconstruction_frame"], _ = simulated_pass(site, proposals, rasters, frame)
     truth = site / "ground_truth"
     sfm_poses = sfm_pose_map(workspace, site_id)
     proposal_xy = [(v.cls, v.points) for v in proposal_vectors(proposals)]

@@ -98,7 +98,11 @@ def corrections_of(entry: ValidationEntry, propose: Proposer) -> tuple[Correctio
     site = as_validation_site(entry)
     rasters = load_site_rasters(site.rasters)
     vectors, queue = review_queue(propose(rasters), MIN_CONFIDENCE)
-    truth = observed_true_polylines(site.site, rasters) if site.reconstructed else true_polylines(site.site)
+    truth = (
+        observed_true_polylines(site.site, rasters, site.frame)
+        if site.reconstructed
+        else true_polylines(site.site)
+    )
     log = work_queue(queue, truth, SimulationConfig(), ActionCosts())
     reviewed: list[tuple[Vector, str]] = []
     for index, decision in queue.verdicts.items():

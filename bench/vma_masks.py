@@ -37,6 +37,7 @@ from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_m
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import SiteRasters
 from models.vma.rule_based import RuleConfig, propose_rule_based
+from models.vma.validation import reconstruction_of
 from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
@@ -44,6 +45,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
+
+
+def _frame_figures(site: Path) -> dict[str, Any] | None:
+    """Where a reconstruction's rasters sit against the world (`cama_pipeline.evaluate.frame`): the truth its
+    figures are scored against is carried by this."""
+    frame = reconstruction_of(site).frame
+    return None if frame is None else frame.as_dict()
 
 
 def main() -> None:
@@ -109,6 +117,7 @@ def main() -> None:
             "train_metrics": checkpoint.meta.get("metrics"),
         },
         "results": results,
+        "reconstruction_frames": {str(site): _frame_figures(site) for site in recon},
         "map_margin_over_rule_based": margins,
         "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
         "seconds": round(time.perf_counter() - started, 1),

@@ -1497,3 +1497,49 @@ def test_kerb_foot_with_the_shipped_network_table() -> None:
     ) in text
     assert f"{after['iou']['crosswalk']:.3f}" == f"{no_foot['iou']['crosswalk']:.3f}"
     assert SurfaceConfig().kerb_step.kerb_band_m == 0.0  # the foot is off by default, as README says
+
+
+def _annotator_cell(annotator: dict[str, Any]) -> list[Expected]:
+    """Speed-up, then accepted / fixed / rejected / drawn, as the frame table shows an end-to-end run."""
+    counts = annotator["corrected"]["counts"]
+    return [annotator["speed_up"], *(counts.get(k, 0) for k in ("accept", "fix", "reject", "drawn"))]
+
+
+def test_truth_in_the_reconstruction_frame_table() -> None:
+    t = table("site and proposer", "bench/vma_masks.py")
+    for results_file in (
+        "end_to_end_frame_default.json",
+        "end_to_end_frame_random-9011.json",
+        "vma_masks_confirm_frame_v0004.json",
+    ):
+        assert_names_source(t, results_file, "bench/end_to_end.py")
+    for label, name in (
+        ("default, v0004, end to end", "default"),
+        ("9011, v0004, end to end", "random-9011"),
+    ):
+        run = results(f"end_to_end_frame_{name}.json")
+        frame = run["reconstruction_frame"]
+        cells = row(t, label)
+        assert_shows(cells[1], [frame["shift_cm"], -frame["scale_error_permille"]], label)
+        assert frame["scale_error_permille"] < 0 and "short" in cells[1]
+        assert_shows(cells[2], _annotator_cell(run["annotator"]), label)
+        assert_shows(cells[3], _annotator_cell(run["annotator_in_reconstruction_frame"]), label)
+    world = results("vma_masks_kerb_foot_confirm_off_v0004.json")
+    framed = results("vma_masks_confirm_frame_v0004.json")
+    assert world["command"] == framed["command"]  # the same sites, network and settings
+    shifts = [f["shift_cm"] for f in framed["reconstruction_frames"].values()]
+    scales = [f["scale_error_permille"] for f in framed["reconstruction_frames"].values()]
+    cells = row(t, "six confirmation reconstructions, v0004")
+    assert_shows(cells[1], [min(shifts), max(shifts), -min(scales), max(scales)], "six: frames")
+    for label, proposer in (
+        ("six confirmation reconstructions, v0004", "element_masks"),
+        ("six confirmation reconstructions, rule-based", "rule_based"),
+    ):
+        cells = row(t, label)
+        for cell, run in ((cells[2], world), (cells[3], framed)):
+            figures = run["results"]["reconstructed"][proposer]
+            assert_shows(
+                cell, [figures["observed_truth"]["mean_ap"], figures["annotator"]["speed_up"]], label
+            )
+    margins = [run["map_margin_over_rule_based"]["reconstructed"] for run in (framed, world)]
+    assert f"({margins[0]:.3f} mAP, {margins[1]:.3f} before)" in readme_text()

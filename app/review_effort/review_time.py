@@ -2,7 +2,7 @@
 
 Chamfer mAP says how close proposals are; what the loop is for is the annotators' time. For each validation site
 (a synthetic site folder, or a BEV-only VMA site, with its true vectors; or a synthetic site's reconstruction,
-`models.vma.validation`), the proposer's vectors at or above
+`models.vma.validation`, whose truth is carried into the reconstruction's frame), the proposer's vectors at or above
 `min_confidence` (as `cama propose` keeps them, made simple as in a proposals file) go into an in-memory queue
 (`session.MemoryQueue`, the backend's queue order) and the scripted annotator corrects them towards the true
 vectors cut to the observed cells, then draws the same truth from scratch. The figures are the seconds of both
@@ -49,7 +49,7 @@ def review_time(
     for entry in sites:
         site = as_validation_site(entry)
         rasters = load_site_rasters(site.rasters)
-        truths = observed_true_polylines(site.site, rasters)
+        truths = observed_true_polylines(site.site, rasters, site.frame)
         _, queue = review_queue(propose(rasters), min_confidence)
         correction_s += work_queue(queue, truths, config, costs).total_s
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 
 from app.review_effort.plan import Polyline
+from cama_pipeline.evaluate.frame import ReconstructionFrame
 from cama_pipeline.evaluate.inputs import load_vector_map
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from models.vma.rasters import SiteRasters, vector_map_of
@@ -16,12 +17,15 @@ def true_polylines(site: Path) -> list[Polyline]:
     return [Polyline(e.cls, np.asarray(e.points)[:, :2]) for e in elements]
 
 
-def observed_true_polylines(site: Path, rasters: SiteRasters) -> list[Polyline]:
-    """The site's true vectors cut to the cells `rasters` (a reconstruction's, loaded by the caller, who proposes on
-    them too) observed (nobody draws road that no camera saw)."""
+def observed_true_polylines(
+    site: Path, rasters: SiteRasters, frame: ReconstructionFrame | None = None
+) -> list[Polyline]:
+    """The site's true vectors carried into the reconstruction's `frame` (None: left in the world's; see
+    `cama_pipeline.evaluate.frame`: an annotator sees the rasters, not the world) and cut to the cells `rasters` (a
+    reconstruction's, loaded by the caller, who proposes on them too) observed (nobody draws road that no camera
+    saw)."""
     mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
-    return [
-        Polyline(t.cls, part)
-        for t in true_polylines(site)
-        for part in observed_parts(t.points, t.closed, mask)
-    ]
+    truths = true_polylines(site)
+    if frame is not None:
+        truths = [Polyline(t.cls, frame.apply(t.points)) for t in truths]
+    return [Polyline(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]

@@ -5,13 +5,16 @@ The product proposes on the surface stage's reconstructed rasters, with smeared 
 generator site's own rasters are clean. A gate that scores retrained models on clean rasters only promotes models
 that are worse on reconstructions (README, "Rehearsal while retraining"), so a validation site may name the
 reconstruction of a synthetic site (`cama synth` then `cama run`): the rasters are the surface stage's, the truth
-is the generator's, cut to the cells the cameras observed (nobody can propose or draw what no image shows).
+is the generator's, carried into the reconstruction's frame (`cama_pipeline.evaluate.frame`: the rasters sit where
+their poses' gauge put them, decimetres from the world on a small site, which no proposer or annotator can see or
+mend) and cut to the cells the cameras observed (nobody can propose or draw what no image shows).
 """
 
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from cama_pipeline.evaluate.frame import FrameError, ReconstructionFrame, reconstruction_frame
 from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.surface.outputs import is_surface_bev
@@ -29,6 +32,8 @@ class ValidationSite:
     site: Path
     rasters: Path
     reconstructed: bool = False
+    frame: ReconstructionFrame | None = None
+    """Where a reconstruction's rasters sit against the world (`reconstruction_of`); None: the world's own."""
 
     def __str__(self) -> str:
         return f"{self.site} (reconstructed: {self.rasters})" if self.reconstructed else str(self.site)
@@ -53,13 +58,17 @@ def reconstruction_of(site: Path, workspace: Path | None = None) -> ValidationSi
     where = Workspace.resolve(workspace, site / "nuscenes")
     index = where.sites_index()
     site_ids = read_site_ids(index) if index.is_file() else []
-    found = [bev for bev in (where.surface_bev(s) for s in site_ids) if is_surface_bev(bev)]
+    found = [s for s in site_ids if is_surface_bev(where.surface_bev(s))]
     if len(found) != 1:
         raise SiteInputError(
             f"{site}: expected the finished surface rasters of exactly one reconstructed site under {where.root} "
             f"(run `cama run {site / 'nuscenes'}` first), found {len(found)}"
         )
-    return ValidationSite(site, found[0], reconstructed=True)
+    try:
+        frame = reconstruction_frame(site / "nuscenes", where, found[0])
+    except (FrameError, FileNotFoundError) as error:
+        raise SiteInputError(f"{site}: the reconstruction's frame: {error}") from None
+    return ValidationSite(site, where.surface_bev(found[0]), reconstructed=True, frame=frame)
 
 
 ValidationEntry = Path | ValidationSite
@@ -82,10 +91,13 @@ def truth_folder(entry: ValidationEntry) -> Path:
 
 
 def true_vectors(validation: ValidationSite, rasters: SiteRasters) -> list[Vector]:
-    """The truth a proposer on `rasters` (`validation.rasters`, loaded) is scored against: the site's vectors,
-    cut to their observed parts on a reconstruction."""
+    """The truth a proposer on `rasters` (`validation.rasters`, loaded) is scored against: the site's vectors, on a
+    reconstruction carried into its frame and cut to their observed parts."""
     truth = read_vectors(vector_map_of(validation.site))
     if not validation.reconstructed:
         return truth
+    if validation.frame is not None:
+        frame = validation.frame
+        truth = [Vector(t.cls, frame.apply(t.points), t.score) for t in truth]
     mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
     return [Vector(t.cls, part) for t in truth for part in observed_parts(t.points, t.closed, mask)]

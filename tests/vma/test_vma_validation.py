@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shapely.geometry import LineString, Point
 from typer.testing import CliRunner
 
 from app.review_effort.review_time import review_time
+from cama_pipeline.evaluate.frame import ReconstructionFrame, reconstruction_frame
 from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.site_identity import SeenSiteError
@@ -35,6 +37,7 @@ from models.vma.validation import (
 )
 from models.vma.vectors import Vector, read_vectors
 from tests.conftest import GeneratedSite
+from tests.vma.vma_test_sites import hand_drawn_site
 
 
 @pytest.fixture(scope="module")
@@ -159,3 +162,31 @@ def _boundaries(vectors: list[Vector]) -> list[list[float]]:
 
 def _length(vector: Vector) -> float:
     return float(np.linalg.norm(np.diff(vector.points, axis=0), axis=1).sum())
+
+
+def test_a_reconstruction_is_scored_against_the_truth_in_its_frame(tmp_path: Path) -> None:
+    site = hand_drawn_site(tmp_path / "drawn")
+    frame = ReconstructionFrame(1.0, 0.0, (0.0, 0.4), "sfm", 10, 0.4, 0.01)  # across the lines
+    reconstruction = ValidationSite(site, site, reconstructed=True, frame=frame)
+    truth = read_vectors(vector_map_of(site))
+    moved = true_vectors(reconstruction, load_site_rasters(site))
+    assert [v.cls for v in moved] == [v.cls for v in truth]
+    for ours, true in zip(moved, truth, strict=True):  # the cut resamples the lines: compare as lines
+        carried, left = LineString(frame.apply(true.points)), LineString(true.points)
+        assert max(carried.distance(Point(p)) for p in ours.points) < 1e-6
+        if not true.closed:  # a crossing's ring moved along its long side overlaps itself
+            assert min(left.distance(Point(p)) for p in ours.points) > 0.3
+
+    def as_shown(_: SiteRasters) -> list[Vector]:
+        return [Vector(v.cls, frame.apply(v.points), 1.0) for v in truth]
+
+    assert evaluate_proposer(as_shown, [reconstruction])["mean_ap"] == pytest.approx(1.0)
+
+
+def test_a_reconstruction_of_records_its_frame(
+    reconstructed: ValidationSite, whole_path: PipelineResult
+) -> None:
+    workspace = Workspace(whole_path.workspace)
+    (site_id,) = read_site_ids(workspace.sites_index())
+    assert reconstructed.frame is not None
+    assert reconstructed.frame == reconstruction_frame(reconstructed.site / "nuscenes", workspace, site_id)
