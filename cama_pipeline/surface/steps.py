@@ -15,9 +15,10 @@ decided cell by cell (that leaves patches and a ragged road edge): along the ker
 0.1, 0.2, ... `kerb_band_m` whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb
 height; the cells within that width of the raised region are the foot, so the road's edge moves as a whole.
 
-Road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits. The BEV `elevation`
-layer stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the step goes to its
-own raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour and classes are taken
+Otherwise road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits, and only
+the foot option (off by default) raises road-labelled cells, which it relabels curb. The BEV `elevation` layer
+stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the step goes to its own
+raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour and classes are taken
 from.
 """
 
