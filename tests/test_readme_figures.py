@@ -1543,3 +1543,19 @@ def test_truth_in_the_reconstruction_frame_table() -> None:
             )
     margins = [run["map_margin_over_rule_based"]["reconstructed"] for run in (framed, world)]
     assert f"({margins[0]:.3f} mAP, {margins[1]:.3f} before)" in readme_text()
+
+
+def test_surface_grid_ceiling_table() -> None:
+    t = table("site", "bench/surface_grid.py")
+    assert_names_source(t, "surface_grid.json", "bench/surface_grid.py")
+    recorded = {Path(r["site"]).name: r["classes"] for r in results("surface_grid.json")["sites"]}
+    for label, name in (
+        ("default", "default"),
+        ("9003 (default size, randomised)", "random-default-9003"),
+        ("9001 (tiny)", "random-9001"),
+        ("9011 (tiny)", "random-9011"),
+    ):
+        classes = [recorded[name][c] for c in ("curb", "lane_marking", "crosswalk")]
+        cells = row(t, label)
+        assert_shows(cells[1], [c["area_rule_iou"] for c in classes], label)
+        assert_shows(cells[2], [c["undecided_per_true_cell"] for c in classes], label)
