@@ -1559,3 +1559,23 @@ def test_surface_grid_ceiling_table() -> None:
         cells = row(t, label)
         assert_shows(cells[1], [c["area_rule_iou"] for c in classes], label)
         assert_shows(cells[2], [c["undecided_per_true_cell"] for c in classes], label)
+
+
+def test_segment_annotator_in_own_frame_table() -> None:
+    t = table("site, frame shift", "bench/segment.py")
+    for seed in ("9002", "9004", "9005", "9006"):
+        assert_names_source(t, f"segment_frame_{seed}.json", "bench/segment.py")
+        runs = results(f"segment_frame_{seed}.json")["runs"]
+        reference, predicted = runs["generator_masks"], runs["predicted_masks"]
+        (label,) = [label for label in t.rows if label.startswith(f"{seed},")]
+        cells = row(t, label)
+        assert_shows(label, [int(seed), reference["reconstruction_frame"]["shift_cm"]], label)
+        for cell, run in ((cells[1], reference), (cells[2], predicted)):
+            assert_shows(
+                cell, [run["annotator_speed_up"], run["annotator_speed_up_in_reconstruction_frame"]], label
+            )
+        maps = [run["proposals_ap"]["observed_truth"]["mean_ap"] for run in (reference, predicted)]
+        assert_shows(cells[3], maps, label)
+        assert all(
+            d["met"] for d in results(f"segment_frame_{seed}.json")["differences"].values() if "met" in d
+        )
