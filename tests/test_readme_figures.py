@@ -1579,3 +1579,52 @@ def test_segment_annotator_in_own_frame_table() -> None:
         assert all(
             d["met"] for d in results(f"segment_frame_{seed}.json")["differences"].values() if "met" in d
         )
+
+
+def test_gate_comparisons_in_the_frame_table() -> None:
+    t = table("reconstructions, proposer", "bench/vma_masks.py")
+    for label, world_file, frame_file, proposer in (
+        (
+            "six confirmation sites, v0003",
+            "vma_masks_recon_trained_confirm_v0003.json",
+            "vma_masks_confirm_frame_v0003.json",
+            "element_masks",
+        ),
+        (
+            "six confirmation sites, v0004",
+            "vma_masks_kerb_foot_confirm_off_v0004.json",
+            "vma_masks_confirm_frame_v0004.json",
+            "element_masks",
+        ),
+        (
+            "validation 9007 and 9011, rule-based",
+            "vma_masks_recon_trained_validation.json",
+            "vma_masks_validation_frame_v0004.json",
+            "rule_based",
+        ),
+        (
+            "validation 9007 and 9011, v0003",
+            "vma_masks_recon_trained_validation_v0003.json",
+            "vma_masks_validation_frame_v0003.json",
+            "element_masks",
+        ),
+        (
+            "validation 9007 and 9011, v0004",
+            "vma_masks_recon_trained_validation.json",
+            "vma_masks_validation_frame_v0004.json",
+            "element_masks",
+        ),
+    ):
+        cells = row(t, label)
+        world, framed = results(world_file), results(frame_file)
+        assert (
+            world["command"].split("--checkpoint")[1].split()[1:]
+            == framed["command"].split("--checkpoint")[1].split()[1:]
+        )
+        for cell, run in ((cells[1], world), (cells[2], framed)):
+            figures = run["results"]["reconstructed"][proposer]
+            assert_shows(
+                cell, [figures["observed_truth"]["mean_ap"], figures["annotator"]["speed_up"]], label
+            )
+        if proposer == "element_masks":
+            assert label.endswith(framed["checkpoint"]["version"])
