@@ -146,7 +146,8 @@ def measure_model(registry: Path, sites: list[Path], recon_sites: list[Path]) ->
         figures = {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
         if recon_sites:
             on_reconstruction = mask_proposer(masks.model, MaskInferenceConfig(boundary_evidence="road_edge"))
-            figures["reconstructed"] = reconstructed_figures(on_reconstruction, recon_sites)
+            reconstructions = [reconstruction_of(site) for site in recon_sites]
+            figures["reconstructed"] = reconstructed_figures(on_reconstruction, reconstructions)
         return figures
     loaded = load_checkpoint(registry)
     for site in sites:
@@ -170,7 +171,8 @@ def measure_rule_based(sites: list[Path], recon_sites: list[Path]) -> dict[str, 
     if recon_sites:
         on_reconstruction = RuleConfig(boundary_source="road_edge")
         figures["reconstructed"] = reconstructed_figures(
-            lambda rasters: propose_rule_based(rasters, on_reconstruction), recon_sites
+            lambda rasters: propose_rule_based(rasters, on_reconstruction),
+            [reconstruction_of(site) for site in recon_sites],
         )
     return figures
 

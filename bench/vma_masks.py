@@ -47,13 +47,6 @@ from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
 RESULTS = Path(__file__).parent / "results"
 
 
-def _frame_figures(site: Path) -> dict[str, Any] | None:
-    """Where a reconstruction's rasters sit against the world (`cama_pipeline.evaluate.frame`): the truth its
-    figures are scored against is carried by this."""
-    frame = reconstruction_of(site).frame
-    return None if frame is None else frame.as_dict()
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/element_masks/checkpoints"))
@@ -76,6 +69,7 @@ def main() -> None:
     for site in [*held_out, *recon]:  # SeenSiteError when the network trained on a site scored here
         ensure_unseen(checkpoint, site)
     started = time.perf_counter()
+    reconstructions = [reconstruction_of(site) for site in recon]
 
     def network(rasters: SiteRasters) -> list[Vector]:
         return predict_site_masks(checkpoint.model, rasters)
@@ -99,7 +93,7 @@ def main() -> None:
                 **evaluate_proposer(run, held_out),
                 "annotator": review_time(run, held_out),
             }
-        results["reconstructed"][name] = reconstructed_figures(recon_propose, recon)
+        results["reconstructed"][name] = reconstructed_figures(recon_propose, reconstructions)
     margins = {
         condition: _margin(per, "observed_truth" if condition == "reconstructed" else None)
         for condition, per in results.items()
@@ -117,7 +111,10 @@ def main() -> None:
             "train_metrics": checkpoint.meta.get("metrics"),
         },
         "results": results,
-        "reconstruction_frames": {str(site): _frame_figures(site) for site in recon},
+        # where each reconstruction's rasters sit against the world: its truth is carried by this
+        "reconstruction_frames": {
+            str(site.site): site.frame.as_dict() if site.frame else None for site in reconstructions
+        },
         "map_margin_over_rule_based": margins,
         "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
         "seconds": round(time.perf_counter() - started, 1),

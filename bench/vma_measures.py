@@ -6,14 +6,13 @@ rasters of full synthetic sites; this module is that one definition of both cond
 """
 
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from app.review_effort.review_time import review_time
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
-from models.vma.validation import reconstruction_of, true_vectors
+from models.vma.validation import ValidationSite, true_vectors
 from models.vma.vectors import Vector, read_vectors
 
 Proposer = Callable[[SiteRasters], list[Vector]]
@@ -28,12 +27,11 @@ def on_damaged(propose: Proposer) -> Proposer:
     return run
 
 
-def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
+def reconstructed_figures(propose: Proposer, reconstructions: list[ValidationSite]) -> dict[str, Any]:
     """Chamfer-AP against all true vectors in the reconstructed extent and against their observed parts (over
-    all `sites` and per site: one bad site hides in a mean), and the annotator's speed-up, over the
-    reconstructed rasters of `sites`."""
+    all sites and per site: one bad site hides in a mean), and the annotator's speed-up, over the reconstructed
+    rasters of `reconstructions` (`reconstruction_of`, made once by the caller for all its proposers)."""
     all_truth, observed_truth = [], []
-    reconstructions = [reconstruction_of(site) for site in sites]
     for site in reconstructions:
         rasters = load_site_rasters(site.rasters)
         truths = read_vectors(vector_map_of(site.site))
@@ -43,8 +41,8 @@ def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any
         observed_truth.append((predictions, seen, rasters.extent()))
     keys = ("mean_ap", "class_ap", "confidence_bins")
     per_site = {
-        str(site): {k: v for k, v in evaluate_sites([scored]).items() if k in ("mean_ap", "class_ap")}
-        for site, scored in zip(sites, observed_truth, strict=True)
+        str(site.site): {k: v for k, v in evaluate_sites([scored]).items() if k in ("mean_ap", "class_ap")}
+        for site, scored in zip(reconstructions, observed_truth, strict=True)
     }
     return {
         "all_truth": {k: v for k, v in evaluate_sites(all_truth).items() if k in keys},
@@ -53,5 +51,5 @@ def reconstructed_figures(propose: Proposer, sites: list[Path]) -> dict[str, Any
             "per_site": per_site,
         },
         "annotator": review_time(propose, reconstructions),
-        "sites": [str(s) for s in sites],
+        "sites": [str(s.site) for s in reconstructions],
     }

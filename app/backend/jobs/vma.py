@@ -6,8 +6,9 @@ validation sites, `app.review_effort.review_time`) and
 Retraining runs in a child process (spawned, so no lock or thread state of the server is inherited) because
 `models.vma.retrain.retrain_from_corrections` is one long call: the job polls the child, reports its progress,
 and terminates it when the job is cancelled or the server stops, or when it hangs (its processes use no CPU for
-`Settings.retrain_stall_s`; the job then fails saying so, instead of staying "running" until a lead cancels it). The child turns the trainer's step log records
-(`step i/n loss x`, written by `models.vma.train.fit` at its first step, every 50 steps and its last) into
+`Settings.retrain_stall_s`; the job then fails saying so, instead of staying "running" until a lead cancels it).
+The child turns the trainer's step log records (`step i/n loss x`, written by `models.vma.train.fit` at its first
+step, every 50 steps and its last) into
 `retrain_progress.json` ({"step", "total", "loss"}) in the job folder; the job's progress field follows them
 (0.1 to 0.9 over the steps; the evaluations of the current model before and of the candidate after take the
 rest), and its message names the step and the loss. The child writes `retrain.json` in the
