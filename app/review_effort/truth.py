@@ -7,8 +7,8 @@ import numpy as np
 from app.review_effort.plan import Polyline
 from cama_pipeline.evaluate.frame import ReconstructionFrame
 from cama_pipeline.evaluate.inputs import load_vector_map
-from cama_pipeline.evaluate.observed import ObservedMask, observed_parts
 from models.vma.rasters import SiteRasters, vector_map_of
+from models.vma.validation import observed_truth
 
 
 def true_polylines(site: Path) -> list[Polyline]:
@@ -23,9 +23,5 @@ def observed_true_polylines(
     """The site's true vectors carried into the reconstruction's `frame` (None: left in the world's; see
     `cama_pipeline.evaluate.frame`: an annotator sees the rasters, not the world) and cut to the cells `rasters` (a
     reconstruction's, loaded by the caller, who proposes on them too) observed (nobody draws road that no camera
-    saw)."""
-    mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
-    truths = true_polylines(site)
-    if frame is not None:
-        truths = [Polyline(t.cls, frame.apply(t.points)) for t in truths]
-    return [Polyline(t.cls, part) for t in truths for part in observed_parts(t.points, t.closed, mask)]
+    saw): the truth the VMA gate scores proposals against (`models.vma.validation.observed_truth`), as polylines."""
+    return [Polyline(v.cls, v.points) for v in observed_truth(site, rasters, frame)]

@@ -92,12 +92,18 @@ def truth_folder(entry: ValidationEntry) -> Path:
 
 def true_vectors(validation: ValidationSite, rasters: SiteRasters) -> list[Vector]:
     """The truth a proposer on `rasters` (`validation.rasters`, loaded) is scored against: the site's vectors, on a
-    reconstruction carried into its frame and cut to their observed parts."""
-    truth = read_vectors(vector_map_of(validation.site))
+    reconstruction carried into its frame and cut to their observed parts (`observed_truth`)."""
     if not validation.reconstructed:
-        return truth
-    if validation.frame is not None:
-        frame = validation.frame
+        return read_vectors(vector_map_of(validation.site))
+    return observed_truth(validation.site, rasters, validation.frame)
+
+
+def observed_truth(site: Path, rasters: SiteRasters, frame: ReconstructionFrame | None) -> list[Vector]:
+    """A synthetic site's true vectors carried into a reconstruction's `frame` (None: left in the world's) and cut
+    to the cells `rasters` (the reconstruction's, loaded) observed: what a proposer on those rasters can find and
+    an annotator on them can draw."""
+    truth = read_vectors(vector_map_of(site))
+    if frame is not None:
         truth = [Vector(t.cls, frame.apply(t.points), t.score) for t in truth]
     mask = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
     return [Vector(t.cls, part) for t in truth for part in observed_parts(t.points, t.closed, mask)]
