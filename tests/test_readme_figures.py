@@ -1628,3 +1628,67 @@ def test_gate_comparisons_in_the_frame_table() -> None:
             )
         if proposer == "element_masks":
             assert label.endswith(framed["checkpoint"]["version"])
+
+
+def test_training_towards_the_frame_table() -> None:
+    """v0004's recipe with its reconstructions' targets in their frames, against v0004, on the gate's sites and
+    the confirmation sites; the gate's correction seconds over both kinds."""
+    t = table("network, where its training targets were", "bench/vma_masks.py")
+    runs = {}
+    for suffix in ("v0004", "trained"):
+        for kind in ("validation", "confirm"):
+            assert_names_source(t, f"vma_masks_{kind}_frame_{suffix}.json", "bench/vma_masks.py")
+            runs[kind, suffix] = results(f"vma_masks_{kind}_frame_{suffix}.json")
+    for label, suffix in (
+        ("v0004, the world", "v0004"),
+        ("v0004's recipe, the reconstruction's frame", "trained"),
+    ):
+        cells = row(t, label)
+        for cell, kind, condition in (
+            (cells[1], "validation", "clean"),
+            (cells[2], "validation", "reconstructed"),
+            (cells[3], "confirm", "reconstructed"),
+            (cells[4], "confirm", "clean"),
+        ):
+            shown = runs[kind, suffix]["results"][condition]["element_masks"]
+            mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
+            assert_shows(cell, [mean_ap, shown["annotator"]["speed_up"]], f"{label} {kind} {condition}")
+    trained, shipped = (runs["confirm", s]["checkpoint"] for s in ("trained", "v0004"))
+    assert (
+        trained["data"]["seen_sites"] == shipped["data"]["seen_sites"]
+    )  # the same sites, only the targets moved
+    assert trained["train_metrics"]["steps_done"] == shipped["train_metrics"]["steps_done"] == 1200
+
+    def correction_s(suffix: str) -> float:
+        figures = runs["validation", suffix]["results"]
+        return sum(
+            figures[c]["element_masks"]["annotator"]["correction_s"] for c in ("clean", "reconstructed")
+        )
+
+    text = " ".join(readme_text().split())
+    assert f"over both is {correction_s('trained'):.0f} s against {correction_s('v0004'):.0f} s" in text
+
+
+def test_loop_on_reconstructions_in_the_frame_table() -> None:
+    """The rounds again with the truth in each reconstruction's frame: the same command but the registry."""
+    t = table("round on reconstructions, in the frame", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds_frame.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds_frame.json")
+
+    def arguments(command: str) -> str:
+        return re.sub(r"--(checkpoint|out) \S+ ?", "", command)
+
+    assert arguments(recorded["command"]) == arguments(results("vma_loop_masks_recon_rounds.json")["command"])
+    for entry in recorded["rounds"]:
+        label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
+        cells = row(t, label)
+        heldout = entry["heldout"]
+        assert cells[1].split(" ")[0] == heldout["version"], label
+        if entry["round"]:
+            assert_shows(cells[2], [round(entry["retrain_seconds"])], f"{label} seconds")
+            assert_shows(cells[3], _gate_figures(entry["gate"]), f"{label} gate")
+            assert (entry["candidate"] + " kept out" in cells[1]) != entry["promoted"], label
+        recon = heldout["reconstructed"]
+        assert_shows(
+            cells[4], [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]], f"{label} recon"
+        )
