@@ -1350,20 +1350,30 @@ def test_loop_on_reconstructions_table() -> None:
     assert_names_source(t, "vma_loop_masks_recon_rounds.json", "bench/vma_loop.py")
     recorded = results("vma_loop_masks_recon_rounds.json")
     assert "--new-recon-site data/synthetic/random-9113" in recorded["command"]
+    for cells, entry in _checked_rounds(t, recorded):
+        assert_shows(cells[4], _loop_figures(entry["heldout"]), f"{cells[0]} held-out")
+        recon = entry["heldout"]["reconstructed"]
+        assert_shows(
+            cells[5],
+            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
+            f"{cells[0]} recon",
+        )
+
+
+def _checked_rounds(t: MarkdownTable, recorded: dict[str, Any]) -> list[tuple[list[str], dict[str, Any]]]:
+    """Each round's row (label first) and record, once its promoted version, retrain seconds and gate figures
+    (the first four columns of a loop table) are checked."""
+    checked = []
     for entry in recorded["rounds"]:
         label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
         cells = row(t, label)
-        heldout = entry["heldout"]
-        assert cells[1].split(" ")[0] == heldout["version"], label
+        assert cells[1].split(" ")[0] == entry["heldout"]["version"], label
         if entry["round"]:
             assert_shows(cells[2], [round(entry["retrain_seconds"])], f"{label} seconds")
             assert_shows(cells[3], _gate_figures(entry["gate"]), f"{label} gate")
             assert (entry["candidate"] + " kept out" in cells[1]) != entry["promoted"], label
-        assert_shows(cells[4], _loop_figures(heldout), f"{label} held-out")
-        recon = heldout["reconstructed"]
-        assert_shows(
-            cells[5], [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]], f"{label} recon"
-        )
+        checked.append((cells, entry))
+    return checked
 
 
 def test_more_reconstructions_not_shipped() -> None:
@@ -1679,16 +1689,10 @@ def test_loop_on_reconstructions_in_the_frame_table() -> None:
         return re.sub(r"--(checkpoint|out) \S+ ?", "", command)
 
     assert arguments(recorded["command"]) == arguments(results("vma_loop_masks_recon_rounds.json")["command"])
-    for entry in recorded["rounds"]:
-        label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
-        cells = row(t, label)
-        heldout = entry["heldout"]
-        assert cells[1].split(" ")[0] == heldout["version"], label
-        if entry["round"]:
-            assert_shows(cells[2], [round(entry["retrain_seconds"])], f"{label} seconds")
-            assert_shows(cells[3], _gate_figures(entry["gate"]), f"{label} gate")
-            assert (entry["candidate"] + " kept out" in cells[1]) != entry["promoted"], label
-        recon = heldout["reconstructed"]
+    for cells, entry in _checked_rounds(t, recorded):
+        recon = entry["heldout"]["reconstructed"]
         assert_shows(
-            cells[4], [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]], f"{label} recon"
+            cells[4],
+            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
+            f"{cells[0]} recon",
         )
