@@ -1653,16 +1653,9 @@ def test_training_towards_the_frame_table() -> None:
         ("v0004, the world", "v0004"),
         ("v0004's recipe, the reconstruction's frame", "trained"),
     ):
-        cells = row(t, label)
-        for cell, kind, condition in (
-            (cells[1], "validation", "clean"),
-            (cells[2], "validation", "reconstructed"),
-            (cells[3], "confirm", "reconstructed"),
-            (cells[4], "confirm", "clean"),
-        ):
-            shown = runs[kind, suffix]["results"][condition]["element_masks"]
-            mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
-            assert_shows(cell, [mean_ap, shown["annotator"]["speed_up"]], f"{label} {kind} {condition}")
+        _assert_gate_and_confirmation_cells(
+            row(t, label), runs["validation", suffix], runs["confirm", suffix]
+        )
     trained, shipped = (runs["confirm", s]["checkpoint"] for s in ("trained", "v0004"))
     assert (
         trained["data"]["seen_sites"] == shipped["data"]["seen_sites"]
@@ -1696,3 +1689,47 @@ def test_loop_on_reconstructions_in_the_frame_table() -> None:
             [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
             f"{cells[0]} recon",
         )
+
+
+def _assert_gate_and_confirmation_cells(
+    cells: list[str], validation: dict[str, Any], confirmation: dict[str, Any]
+) -> None:
+    """A row of mAP and speed-up of the element-mask network on the gate's BEV sites, the gate's reconstructions,
+    the six confirmation reconstructions and the confirmation BEV sites (`bench/vma_masks.py` runs)."""
+    for cell, run, condition in (
+        (cells[1], validation, "clean"),
+        (cells[2], validation, "reconstructed"),
+        (cells[3], confirmation, "reconstructed"),
+        (cells[4], confirmation, "clean"),
+    ):
+        shown = run["results"][condition]["element_masks"]
+        mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
+        assert_shows(cell, [mean_ap, shown["annotator"]["speed_up"]], f"{cells[0]} {condition}")
+
+
+def test_boundary_ends_on_the_course_table() -> None:
+    t = table("boundary ends, v0004 proposing", "bench/vma_masks.py")
+    for label, suffix in (
+        ("as the refinement leaves them", ""),
+        ("put back on the line's course", "_ends"),
+    ):
+        runs = [results(f"vma_masks_{kind}_frame_v0004{suffix}.json") for kind in ("validation", "confirm")]
+        for kind in ("validation", "confirm"):
+            assert_names_source(t, f"vma_masks_{kind}_frame_v0004{suffix}.json", "bench/vma_masks.py")
+        _assert_gate_and_confirmation_cells(row(t, label), *runs)
+    for kind in ("validation", "confirm"):  # the same command, only the code between
+        before, after = (results(f"vma_masks_{kind}_frame_v0004{s}.json") for s in ("", "_ends"))
+        assert (
+            re.sub(r"--out \S+", "", before["command"]).strip()
+            == re.sub(r"--out \S+", "", after["command"]).strip()
+        )
+    corrections = [
+        results(f"vma_masks_confirm_frame_v0004{s}.json")["results"]["reconstructed"]["element_masks"][
+            "annotator"
+        ]
+        for s in ("", "_ends")
+    ]
+    text = " ".join(readme_text().split())
+    assert (
+        f"falls from {corrections[0]['correction_s']:.0f} s to {corrections[1]['correction_s']:.0f} s" in text
+    )

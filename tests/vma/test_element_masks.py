@@ -22,6 +22,7 @@ from models.vma.element_masks.propose import (
     refined_line,
     ring_cells,
     road_edge_band,
+    straightened_ends,
     traced_semantic,
     vectors_from_probabilities,
 )
@@ -225,6 +226,25 @@ def test_the_road_edge_band_straddles_the_edge_and_configs_name_bad_evidence(dra
     assert set(np.nonzero(band.any(axis=0))[0].tolist()) == {299, 300}  # the cells on both sides of the edge
     with pytest.raises(ValueError, match="boundary_evidence"):
         MaskInferenceConfig(boundary_evidence="curb")  # type: ignore[arg-type]
+
+
+def test_a_boundary_end_pulled_aside_goes_back_on_the_lines_course() -> None:
+    line = np.column_stack([np.arange(0.0, 12.5, 1.0), np.zeros(13)])
+    bent = line.copy()
+    bent[0] = [0.0, 0.6]  # the first vertex pulled 0.6 m aside
+    bent[-1] = [12.0, -0.1]  # the last one only 0.1 m: within the tolerance
+    out = straightened_ends(bent, 2.0, 0.15)
+    np.testing.assert_allclose(out[0], [0.0, 0.0], atol=1e-9)  # back on the course, at its distance along it
+    np.testing.assert_array_equal(out[1:], bent[1:])
+    np.testing.assert_array_equal(bent[0], [0.0, 0.6])  # the input is left as it was
+    bent[-1] = [12.0, -0.7]
+    np.testing.assert_allclose(straightened_ends(bent, 2.0, 0.15)[-1], [12.0, 0.0], atol=1e-9)
+    np.testing.assert_array_equal(straightened_ends(bent, 0.0, 0.15), bent)  # 0: never
+    np.testing.assert_array_equal(straightened_ends(bent[:5], 2.0, 0.15), bent[:5])  # too short to have a course
+    curve = np.column_stack([np.cos(np.linspace(0, np.pi / 2, 40)), np.sin(np.linspace(0, np.pi / 2, 40))]) * 10
+    np.testing.assert_allclose(straightened_ends(curve, 2.0, 0.15), curve)  # a bend follows its course
+    with pytest.raises(ValueError, match="end_course_m"):
+        MaskInferenceConfig(end_tolerance_m=-0.1)
 
 
 def test_correction_crops_centre_on_the_elements_and_the_road_between_them(drawn_site: Path) -> None:

@@ -64,6 +64,11 @@ class MaskInferenceConfig:
     """How far across the line a station looks for the centre of its class's probability."""
     refine_simplify_m: float = 0.04
     """Tolerance of the simplification after refinement."""
+    end_course_m: float = 2.0
+    """A boundary's end vertex is checked against the course of the line's vertices within this of its end
+    (`straightened_ends`; 0: never)."""
+    end_tolerance_m: float = 0.15
+    """... and put back on that course when it lies farther off it than this."""
     boundary_evidence: Literal["none", "road_edge"] = "none"
     """What boundaries snap to where the rasters show it: nothing (a generator's rasters: the network's band is
     nearer the true kerb line than the curb label's centre), or the road's sharp edge next to observed off-road
@@ -81,6 +86,8 @@ class MaskInferenceConfig:
             raise ValueError(
                 "MaskInferenceConfig: refine_step_m > 0, refine_reach_m and refine_simplify_m >= 0"
             )
+        if self.end_course_m < 0 or self.end_tolerance_m < 0:
+            raise ValueError("MaskInferenceConfig: end_course_m and end_tolerance_m must be >= 0")
         if self.boundary_evidence not in ("none", "road_edge"):
             raise ValueError(
                 f"MaskInferenceConfig.boundary_evidence must be 'none' or 'road_edge', got {self.boundary_evidence!r}"
@@ -262,6 +269,36 @@ def road_edge_band(rasters: SiteRasters, rule: RuleConfig) -> np.ndarray:
     return ((rim > 0) | inner).astype(np.float32)
 
 
+END_SKIP_M = 0.3
+"""The vertices this close to a line's end are not part of the course its end is checked against."""
+
+
+def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -> np.ndarray:
+    """`points` with each end vertex put back on the line's course where it strays from it sideways.
+
+    Where a boundary's band ends (the road's edge turning a corner, or stopping at the end of what the cameras
+    saw) the refinement's last station is pulled across the line, often by half a metre or more: a kink an
+    annotator has to drag back. The course is the straight line through the vertices between `END_SKIP_M` and
+    `END_SKIP_M + course_m` from the end (at least two of them); an end vertex farther than `tolerance_m` off it
+    moves onto it, keeping its distance along it. Lines shorter than three times `course_m` are left as they
+    are (their ends are most of them)."""
+    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    if course_m == 0 or along[-1] < 3 * course_m:
+        return points
+    out = np.array(points, dtype=np.float64)
+    for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
+        course = end[(distance > END_SKIP_M) & (distance <= END_SKIP_M + course_m)]
+        if len(course) < 2:
+            continue
+        direction = course[0] - course[-1]
+        direction /= max(float(np.linalg.norm(direction)), 1e-9)
+        normal = np.array([-direction[1], direction[0]])
+        off = float((end[0] - course[0]) @ normal)
+        if abs(off) > tolerance_m:
+            end[0] = end[0] - off * normal
+    return out
+
+
 def _bridged(stations: np.ndarray, seen: np.ndarray, gap_m: float) -> np.ndarray:
     """Stations without evidence that lie in a gap no longer than `gap_m` between stations with evidence."""
     out = np.zeros(len(stations), bool)
@@ -296,6 +333,7 @@ def vectors_from_probabilities(
             )
             if vector.cls == "boundary":  # a band's end bends round into a corner's band: cut the hook off
                 points = trim_hooks(points, config.rule.hook_m, config.rule.hook_angle_deg)
+                points = straightened_ends(points, config.end_course_m, config.end_tolerance_m)
             score = mean_probability(rasters, probability, points, config.sample_step_m)
         out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
     return out
