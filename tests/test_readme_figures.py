@@ -1733,3 +1733,29 @@ def test_boundary_ends_on_the_course_table() -> None:
     assert (
         f"falls from {corrections[0]['correction_s']:.0f} s to {corrections[1]['correction_s']:.0f} s" in text
     )
+
+
+def test_boundary_ends_end_to_end_table() -> None:
+    t = table("end to end, boundary ends", "bench/end_to_end.py")
+    for label, prefix in (
+        ("as the refinement leaves them", "end_to_end_frame"),
+        ("put back on the line's course", "end_to_end_ends"),
+    ):
+        cells = row(t, label)
+        for cell, site in ((cells[1], "default"), (cells[2], "random-9011")):
+            assert_names_source(t, f"{prefix}_{site}.json", "bench/end_to_end.py")
+            run = results(f"{prefix}_{site}.json")
+            assert_shows(
+                cell,
+                [
+                    run["annotator"]["speed_up"],
+                    run["annotator_in_reconstruction_frame"]["speed_up"],
+                    run["proposals_ap"]["observed_truth"]["mean_ap"],
+                ],
+                f"{label} {site}",
+            )
+    for site in ("default", "random-9011"):  # the same surface: only the proposals changed
+        before, after = (
+            results(f"{prefix}_{site}.json") for prefix in ("end_to_end_frame", "end_to_end_ends")
+        )
+        assert before["elevation"] == after["elevation"]
