@@ -1759,3 +1759,26 @@ def test_boundary_ends_end_to_end_table() -> None:
             results(f"{prefix}_{site}.json") for prefix in ("end_to_end_frame", "end_to_end_ends")
         )
         assert before["elevation"] == after["elevation"]
+
+
+def test_paint_placement_table() -> None:
+    t = table("site, divider length", "bench/paint_placement.py")
+    assert_names_source(t, "paint_placement.json", "bench/paint_placement.py")
+    recorded = results("paint_placement.json")
+    displaced = [
+        (Path(site["site"]).name.removeprefix("random-"), divider)
+        for site in recorded["sites"]
+        for divider in site["dividers"]
+        if divider["paint_offset_m"] is not None and abs(divider["paint_offset_m"]) > recorded["displaced_m"]
+    ]
+    assert len(displaced) == len(t.rows)
+    for (name, divider), (label, cells) in zip(displaced, t.rows.items(), strict=True):
+        assert label.split(",")[0] == name
+        assert_shows(label, [*([] if name == "default" else [int(name)]), divider["length_m"]], label)
+        assert_shows(cells[1], [divider["paint_offset_m"]], label)
+        assert_shows(cells[2], [divider["height_error_m"] * 100], label)
+        assert_shows(cells[3], [divider["distance_from_trajectory_m"]], label)
+    painted = sum(site["with_paint"] for site in recorded["sites"])
+    assert f"Of {painted} dividers with paint in the rasters, {len(displaced)} lie" in " ".join(
+        readme_text().split()
+    )

@@ -51,6 +51,13 @@ class ReconstructionFrame:
         )
         return np.asarray(transform(np.asarray(xy, dtype=np.float64)[:, :2]))
 
+    def world_of(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) the world's x, y of points in the reconstruction (the inverse of `apply`)."""
+        transform = SimilarityTransform(
+            scale=self.scale, rotation=self.rotation_rad, translation=self.translation
+        )
+        return np.asarray(transform.inverse(np.asarray(xy, dtype=np.float64)[:, :2]))
+
     def as_dict(self) -> dict[str, object]:
         """The frame's figures, as benches record them (scale as parts per thousand off 1, rotation in degrees)."""
         return {

@@ -28,6 +28,7 @@ def test_a_known_similarity_is_found_with_its_shift_and_residual() -> None:
     assert frame.shift_m == pytest.approx(moved, abs=0.01) and frame.shift_m > 1.0  # 0.4 % of ~2.2 km
     with_z = np.column_stack([world, np.full(len(world), 31.5)])
     assert np.allclose(frame.apply(with_z), frame.apply(world))  # z plays no part
+    np.testing.assert_allclose(frame.world_of(frame.apply(world)), world, atol=1e-9)  # and back
     figures = frame.as_dict()
     assert figures["scale_error_permille"] == pytest.approx(4.0, abs=0.2)
     assert figures["shift_cm"] == pytest.approx(frame.shift_m * 100)
