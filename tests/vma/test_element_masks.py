@@ -240,8 +240,12 @@ def test_a_boundary_end_pulled_aside_goes_back_on_the_lines_course() -> None:
     bent[-1] = [12.0, -0.7]
     np.testing.assert_allclose(straightened_ends(bent, 2.0, 0.15)[-1], [12.0, 0.0], atol=1e-9)
     np.testing.assert_array_equal(straightened_ends(bent, 0.0, 0.15), bent)  # 0: never
-    np.testing.assert_array_equal(straightened_ends(bent[:5], 2.0, 0.15), bent[:5])  # too short to have a course
-    curve = np.column_stack([np.cos(np.linspace(0, np.pi / 2, 40)), np.sin(np.linspace(0, np.pi / 2, 40))]) * 10
+    np.testing.assert_array_equal(
+        straightened_ends(bent[:5], 2.0, 0.15), bent[:5]
+    )  # too short to have a course
+    curve = (
+        np.column_stack([np.cos(np.linspace(0, np.pi / 2, 40)), np.sin(np.linspace(0, np.pi / 2, 40))]) * 10
+    )
     np.testing.assert_allclose(straightened_ends(curve, 2.0, 0.15), curve)  # a bend follows its course
     with pytest.raises(ValueError, match="end_course_m"):
         MaskInferenceConfig(end_tolerance_m=-0.1)
