@@ -7,7 +7,10 @@ proposal covered. A second, empty copy of the site is drawn from scratch. Every 
 keystroke-level model (`app/review_effort/costs.py`); both workflows pay the same road-scanning time.
 
 With `--rasters FOLDER` (a reconstruction's BEV rasters) the truth is cut to the cells they observed, as
-`bench/end_to_end.py` does; without it the whole generated truth is the target.
+`bench/end_to_end.py` does; without it the whole generated truth is the target. When the rasters are the surface
+stage's of one of the site's reconstructions (`<workspace>/surface/<site id>/bev`), the truth is first carried
+into that reconstruction's frame (`cama_pipeline.evaluate.frame`: an annotator sees the rasters, not the world;
+recorded as `reconstruction_frame`); rasters from elsewhere leave it in the world's (`reconstruction_frame` null).
 
 Usage: .venv/bin/python bench/annotator.py [--site data/synthetic/default] [--proposals FILE ...]
        [--rasters FOLDER] [--out bench/results/annotator.json]
@@ -26,6 +29,7 @@ from typing import Any
 from app.review_effort.truth import observed_true_polylines, true_polylines
 from app.simulation.annotator import correct_proposals, draw_from_scratch
 from app.simulation.workbench import load_proposals, local_backend, register_synthetic_site
+from cama_pipeline.evaluate.frame import ReconstructionFrame, reconstruction_frame
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
 from models.vma.rasters import load_site_rasters
@@ -33,8 +37,25 @@ from models.vma.rasters import load_site_rasters
 RESULTS = Path(__file__).parent / "results" / "annotator.json"
 
 
+def frame_of(site: Path, rasters: Path) -> ReconstructionFrame | None:
+    """The frame of the reconstruction of `site` whose surface rasters `rasters` are (`<workspace>/surface/<site
+    id>/bev`, any workspace); None when they are not a surface stage's."""
+    if len(rasters.resolve().parents) < 3:
+        return None
+    workspace, site_id = Workspace(rasters.resolve().parents[2]), rasters.resolve().parent.name
+    if (
+        workspace.surface_bev(site_id).resolve() != rasters.resolve()
+        or not workspace.surface_report(site_id).is_file()
+    ):
+        return None
+    return reconstruction_frame(site / "nuscenes", workspace, site_id)
+
+
 def run(site: Path, proposal_files: list[Path], rasters: Path | None = None) -> dict[str, Any]:
-    truths = observed_true_polylines(site, load_site_rasters(rasters)) if rasters else true_polylines(site)
+    frame = frame_of(site, rasters) if rasters else None
+    truths = (
+        observed_true_polylines(site, load_site_rasters(rasters), frame) if rasters else true_polylines(site)
+    )
     with local_backend(site) as (admin, annotator):
         started = time.perf_counter()
         scratch = draw_from_scratch(annotator, register_synthetic_site(admin, site, "scratch"), truths)
@@ -51,7 +72,13 @@ def run(site: Path, proposal_files: list[Path], rasters: Path | None = None) -> 
                 "speed_up_vs_scratch": scratch.total_s / log.total_s if log.total_s else None,
             }
     truth = f"cut to the cells observed in {rasters}" if rasters else "all"
-    return {"site": str(site), "truth": truth, "true_elements": len(truths), "results": out}
+    return {
+        "site": str(site),
+        "truth": truth,
+        "reconstruction_frame": frame.as_dict() if frame else None,
+        "true_elements": len(truths),
+        "results": out,
+    }
 
 
 def main() -> None:

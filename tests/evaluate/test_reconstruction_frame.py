@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import bench.annotator as annotator_bench
 from cama_pipeline.evaluate.frame import FrameError, ReconstructionFrame, fitted_frame, reconstruction_frame
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.surface.outputs import read_report
@@ -48,6 +49,9 @@ def test_the_tiny_site_reconstruction_frame(tiny_site: GeneratedSite, whole_path
     assert frame.residual_m < 0.1  # consistent inside, whatever the gauge
     assert frame.residual_m <= frame.shift_m + 1e-9 or frame.shift_m < 0.01
     assert abs(frame.scale - 1.0) < 0.02
+    site = tiny_site.result.out_dir  # the annotator bench finds the frame from the rasters it is given
+    assert annotator_bench.frame_of(site, workspace.surface_bev(site_id)) == frame
+    assert annotator_bench.frame_of(site, site / "ground_truth" / "bev") is None  # not a surface's rasters
 
 
 def test_a_workspace_without_a_surface_is_a_clear_error(tiny_site: GeneratedSite, tmp_path: Path) -> None:
