@@ -50,6 +50,23 @@ def test_drag_a_vertex_is_saved(page: Page, seeded: SeededServer) -> None:
     expect(page.locator("#save-state")).to_have_text("All changes saved")
 
 
+def test_ctrl_drag_moves_the_selected_element_whole_and_undo_puts_it_back(
+    page: Page, seeded: SeededServer
+) -> None:
+    element = divider_at(seeded, 4.0, 30.0)  # a place of its own
+    open_on(page, seeded, element)
+    page.keyboard.down("Control")
+    drag(page, page_xy(page, 11.5, 30.0), page_xy(page, 11.5, 29.0))  # from a segment: no vertex inserted
+    page.keyboard.up("Control")
+    moved = seeded.wait_element(element["id"], lambda e: e["version"] > element["version"])
+    assert len(moved["points"]) == 3, moved["points"]
+    for point, x in zip(moved["points"], (4.0, 9.0, 14.0), strict=True):
+        assert near(point, (x, 29.0)), moved["points"]  # every vertex by the same metre
+    expect(page.locator("#save-state")).to_have_text("All changes saved")
+    page.keyboard.press("Control+z")
+    seeded.wait_element(element["id"], lambda e: e["points"] == element["points"])
+
+
 def test_insert_then_delete_a_vertex(page: Page, seeded: SeededServer) -> None:
     element = divider_at(seeded, 20.0, 66.0)
     open_on(page, seeded, element)

@@ -92,6 +92,8 @@ export class Shortcuts {
         h("dd", {}, "Insert a vertex"),
         h("dt", {}, h("kbd", {}, "Alt+click vertex")),
         h("dd", {}, "Delete it"),
+        h("dt", {}, h("kbd", {}, "Ctrl+drag element")),
+        h("dd", {}, "Move the selected elements whole"),
         h("dt", {}, h("kbd", {}, "click camera image")),
         h("dd", {}, "Enlarge it (Esc closes)"),
       ),

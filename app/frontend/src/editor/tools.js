@@ -1,10 +1,20 @@
 // Editing interactions: Select (shift toggles), Modify on the selection (drag a vertex, drag a segment to insert
-// one, alt-click deletes one), Draw for new polylines and crosswalk polygons, Snap to existing vertices (last).
+// one, alt-click deletes one), Translate on the selection (Ctrl/Cmd-drag moves the selected elements whole), Draw
+// for new polylines and crosswalk polygons, Snap to existing vertices (last).
 import Draw from "ol/interaction/Draw.js";
 import Modify from "ol/interaction/Modify.js";
 import Select from "ol/interaction/Select.js";
 import Snap from "ol/interaction/Snap.js";
-import { altKeyOnly, click, doubleClick, shiftKeyOnly, singleClick } from "ol/events/condition.js";
+import Translate from "ol/interaction/Translate.js";
+import {
+  altKeyOnly,
+  click,
+  doubleClick,
+  platformModifierKeyOnly,
+  primaryAction,
+  shiftKeyOnly,
+  singleClick,
+} from "ol/events/condition.js";
 import { geometryFor, pointsOf, samePoints } from "./elements.js";
 import { CLASS_COLORS, CLASS_LABELS, selectedStyle } from "./styles.js";
 import { Stroke, Style, Circle, Fill } from "ol/style.js";
@@ -81,16 +91,36 @@ export class Tools extends EventTarget {
       pixelTolerance: 10,
       deleteCondition: altClickDeletes,
       insertVertexCondition: (event) => !altKeyOnly(event),
+      // Ctrl/Cmd-drag belongs to the Translate below, even on a vertex
+      condition: (event) => primaryAction(event) && !platformModifierKeyOnly(event),
+    });
+    // An element the rasters show beside where it is proposed (a shifted lane line) is moved in one drag, not
+    // vertex by vertex: Ctrl/Cmd-drag on a selected element moves every selected element by the same offset.
+    this.translate = new Translate({
+      features: this.select.getFeatures(),
+      condition: (event) => platformModifierKeyOnly(event),
+      hitTolerance: 6,
     });
     this.snap = new Snap({ source: elementLayer.getSource(), pixelTolerance: 10 });
-    /** @type {Map<number, number[][]>} each feature's points when the current Modify gesture began */
+    /** @type {Map<number, number[][]>} each feature's points when the current Modify or Translate gesture began */
     this.beforeModify = new Map();
-    this.modify.on("modifystart", (event) => {
+    const remember = (event) => {
       this.beforeModify = new Map(event.features.getArray().map((f) => [/** @type {number} */ (f.getId()), pointsOf(f)]));
-    });
+    };
+    this.modify.on("modifystart", remember);
     this.modify.on("modifyend", (event) => this.saveModified(event.features.getArray()));
+    // Snap would pull the pointer onto the moving element's own vertices: off while an element moves
+    this.translate.on("translatestart", (event) => {
+      remember(event);
+      this.snap.setActive(false);
+    });
+    this.translate.on("translateend", (event) => {
+      this.snap.setActive(true);
+      this.saveModified(event.features.getArray(), "Move element");
+    });
     this.select.on("select", () => this.emit("selection"));
     map.addInteraction(this.select);
+    map.addInteraction(this.translate);
     map.addInteraction(this.modify);
     map.addInteraction(this.snap);
   }
@@ -113,12 +143,13 @@ export class Tools extends EventTarget {
   }
 
   /**
-   * Save the geometry of features the Modify interaction changed, named by what happened to the vertices. The
+   * Save the geometry of features the Modify (or Translate: `movedLabel`) interaction changed, named by what
+   * happened to the vertices (or by `movedLabel`). The
    * change is judged against the feature as the gesture found it, not against the server's last answer: while an
    * earlier edit of the element is still being saved, that answer is one edit behind (an Alt-click deleting the
    * vertex just dragged in would otherwise look like no change and be lost).
    */
-  saveModified(features) {
+  saveModified(features, movedLabel = "") {
     const steps = [];
     let delta = 0;
     for (const feature of features) {
@@ -136,7 +167,7 @@ export class Tools extends EventTarget {
       steps.push({ op: "update", id: element.id, body: { points } });
     }
     if (!steps.length) return;
-    const label = delta > 0 ? "Insert vertex" : delta < 0 ? "Delete vertex" : "Move vertex";
+    const label = movedLabel || (delta > 0 ? "Insert vertex" : delta < 0 ? "Delete vertex" : "Move vertex");
     this.sync.commit(label, steps);
   }
 
@@ -153,6 +184,7 @@ export class Tools extends EventTarget {
     const drawing = mode !== "select";
     this.select.setActive(!drawing);
     this.modify.setActive(!drawing);
+    this.translate.setActive(!drawing);
     if (drawing) {
       this.setSelection([]);
       this.draw = new Draw({
