@@ -1782,3 +1782,23 @@ def test_paint_placement_table() -> None:
     assert f"Of {painted} dividers with paint in the rasters, {len(displaced)} lie" in " ".join(
         readme_text().split()
     )
+
+
+def test_moving_an_element_whole_table() -> None:
+    t = table("scripted annotator, reconstructions", "bench/vma_masks.py")
+    for label, suffix in (("vertex edits only", "_ends"), ("may move an element whole first", "_move")):
+        cells = row(t, label)
+        for cell, kind in ((cells[1], "validation"), (cells[2], "confirm")):
+            name = f"vma_masks_{kind}_frame_v0004{suffix}.json"
+            assert_names_source(t, name, "bench/vma_masks.py")
+            shown = results(name)["results"]["reconstructed"]
+            speed_ups = [shown[p]["annotator"]["speed_up"] for p in ("rule_based", "element_masks")]
+            assert_shows(cell, speed_ups, f"{label} {kind}")
+    corrections = [
+        results(f"vma_masks_confirm_frame_v0004{s}.json")["results"]["reconstructed"]["element_masks"][
+            "annotator"
+        ]["correction_s"]
+        for s in ("_ends", "_move")
+    ]
+    text = " ".join(readme_text().split())
+    assert f"v0004 falls from {corrections[0]:.0f} s to {corrections[1]:.0f} s" in text

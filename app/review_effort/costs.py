@@ -34,6 +34,8 @@ class ActionCosts:
     """Finish the polyline (Enter / double click)."""
     simplify_s: float = K_S
     """Simplify the selected polyline: one key."""
+    move_element_s: float = K_S + P_S + B_S + P_S + B_S
+    """Move the selected element whole (Ctrl/Cmd-drag): hold the key, point at it, press, drag, release."""
     merge_s: float = P_S + B_S + K_S + K_S
     """Shift-click a second polyline to add it to the selection, press the merge key."""
     scan_per_100m_s: float = 10.0

@@ -81,6 +81,8 @@ class Decision:
     """True vertices missing, per stretch of the element no proposal covers."""
     simplified: bool = False
     """The editor's simplify was run on it first (fewer vertices to drag or delete)."""
+    moved_whole: bool = False
+    """It was moved whole onto its true line first (Ctrl/Cmd-drag), then its vertices edited."""
 
     @property
     def added(self) -> int:
@@ -107,6 +109,7 @@ class Decision:
             + len(self.merged) * costs.merge_s
             + fill
             + (costs.simplify_s if self.simplified else 0.0)
+            + (costs.move_element_s if self.moved_whole else 0.0)
         )
         return costs.inspect_s + edits + costs.verdict_s
 
@@ -199,6 +202,23 @@ def _nearest_truth(
     return min(reach)[1] if reach else None
 
 
+def offset_onto(points: np.ndarray, truth: Polyline) -> np.ndarray:
+    """(2,) the shift that lays a polyline onto a true line beside it: the median of the vectors from its
+    resampled points to their nearest points on the truth (a parallel offset, read off where it runs beside it)."""
+    line = LineString(truth.points)
+    samples = resample_fixed(points, _SAMPLES)
+    nearest = np.array([line.interpolate(line.project(Point(p))).coords[0] for p in samples])
+    return np.asarray(np.median(nearest - samples, axis=0))
+
+
+def move_offsets(points: np.ndarray, truth: Polyline) -> list[np.ndarray]:
+    """The drags a person might move a polyline whole by: onto the truth as a whole (`offset_onto`), or taking it
+    by one vertex and putting that vertex on the true line (the rest follows)."""
+    line = LineString(truth.points)
+    by_vertex = [np.array(line.interpolate(line.project(Point(p))).coords[0]) - p for p in points]
+    return [offset_onto(points, truth), *by_vertex]
+
+
 def _fix(
     index: int,
     truth: Polyline,
@@ -208,14 +228,20 @@ def _fix(
     config: SimulationConfig,
     *,
     simplify_first: bool,
+    move_by: np.ndarray | None = None,
 ) -> Decision:
-    """The fix that turns the pieces into the truth's clicked vertices, optionally after the editor's simplify
-    on them (one key)."""
+    """The fix that turns the pieces into the truth's clicked vertices, optionally after moving the proposal whole
+    by `move_by` (one drag, `move_offsets`) and after the editor's simplify on them (one key)."""
     target = clicked_vertices(truth, config)
+    move_whole = move_by is not None
+    if move_by is not None:
+        pieces = [pieces[0] + move_by, *pieces[1:]]
     if simplify_first:
         pieces = [simplify(p, config.editor_simplify_m) for p in pieces]
     moved, removed, gap_runs = _vertex_edits(pieces, target, truth.closed, config.vertex_tolerance_m)
-    return Decision("fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first)
+    return Decision(
+        "fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first, move_whole
+    )
 
 
 def decide(
@@ -249,8 +275,14 @@ def decide(
     )
     pieces = [proposal.points, *(pending[k].points for k in merged)]
     simplify_options = (False,) if truth.closed else (False, True)  # the editor does not simplify rings
+    # a proposal alone may be moved whole first; pieces to merge are edited where they lie
+    move_options = [None, *([] if merged else move_offsets(proposal.points, truth))]
     fix = min(
-        (_fix(index, truth, relabel, merged, pieces, config, simplify_first=o) for o in simplify_options),
+        (
+            _fix(index, truth, relabel, merged, pieces, config, simplify_first=s, move_by=m)
+            for m in move_options
+            for s in simplify_options
+        ),
         key=lambda d: d.seconds(costs),
     )
     redraw_s = Decision("reject").seconds(costs) + drawing_seconds(truth, config, costs)

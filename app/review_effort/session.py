@@ -97,6 +97,7 @@ def work_queue(
         log.seconds[decision.kind] += decision.seconds(costs)
         log.counts[decision.kind] += 1
         log.counts["vertices_moved"] += decision.moved
+        log.counts["elements_moved_whole"] += int(decision.moved_whole)
         log.counts["pieces_merged"] += len(decision.merged)
         log.counts["gaps_drawn"] += decision.gaps
     else:

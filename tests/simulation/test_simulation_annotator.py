@@ -80,6 +80,7 @@ def test_correcting_proposals_accepts_fixes_rejects_and_draws_what_is_missing(
         "reject": 1,
         "drawn": 1,
         "vertices_moved": 2,
+        "elements_moved_whole": 0,
         "pieces_merged": 0,
         "gaps_drawn": 0,
     }

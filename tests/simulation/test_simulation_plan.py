@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from app.review_effort.costs import ActionCosts
-from app.review_effort.plan import Polyline, SimulationConfig, decide, drawing_seconds, road_length_km
+from app.review_effort.plan import (
+    Polyline,
+    SimulationConfig,
+    decide,
+    drawing_seconds,
+    offset_onto,
+    road_length_km,
+)
 
 CONFIG = SimulationConfig()
 LINE = Polyline("divider", np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 0.0]]))
@@ -29,9 +36,26 @@ def test_an_offset_proposal_is_fixed_by_moving_its_vertices_onto_the_truth() -> 
 
 
 def test_a_fix_dearer_than_drawing_anew_is_a_reject() -> None:
-    # three vertices off a straight truth that needs two: dragging two and deleting one takes longer than
-    # rejecting it and clicking the two true vertices
-    assert decide(Polyline("divider", LINE.points + [0.0, 0.6]), [LINE], set(), CONFIG).kind == "reject"
+    # three vertices off a straight truth that needs two, each by another offset (no drag of the whole lays more
+    # than one on the line): the edits take longer than rejecting it and clicking the two true vertices
+    bent = LINE.points + [[0.0, 0.6], [0.0, -0.6], [0.0, 0.3]]
+    assert decide(Polyline("divider", bent), [LINE], set(), CONFIG).kind == "reject"
+
+
+def test_a_line_beside_its_truth_is_moved_whole_then_edited() -> None:
+    costs = ActionCosts()
+    accept = decide(LINE, [LINE], set(), CONFIG)
+    beside = decide(Polyline("divider", LINE.points + [0.0, 0.6]), [LINE], set(), CONFIG)
+    assert beside.kind == "fix" and beside.moved_whole and beside.moved == 0  # one drag lays it on the line
+    assert beside.seconds(costs) == pytest.approx(accept.seconds(costs) + costs.move_element_s)
+    kinked = LINE.points + [0.0, 0.6]
+    kinked[1] += [0.0, 0.8]  # and a vertex off the line after the move is dragged as well
+    fixed = decide(Polyline("divider", kinked), [LINE], set(), CONFIG)
+    assert fixed.moved_whole and fixed.moved + fixed.removed == 1
+    assert not decide(
+        Polyline("divider", LINE.points + [0.0, 0.1]), [LINE], set(), CONFIG
+    ).moved_whole  # accepted
+    np.testing.assert_allclose(offset_onto(LINE.points + [0.3, -0.4], LINE), [0.0, 0.4], atol=1e-9)
 
 
 def test_a_short_proposal_is_extended_and_a_wrong_class_relabelled() -> None:
@@ -77,11 +101,12 @@ def test_costs_grow_with_the_edits_and_drawing_counts_clicks() -> None:
     fix = decide(Polyline("boundary", short_kinked), [ZIGZAG], set(), CONFIG)
     # one vertex dragged, the missing last one inserted and dragged too
     assert fix.seconds(costs) == pytest.approx(accept.seconds(costs) + 2 * costs.move_vertex_s)
-    # dragging all ten off the line would take longer than drawing it anew
-    assert (
-        decide(Polyline("boundary", ZIGZAG.points[:-1] + [0.0, 0.6]), [ZIGZAG], set(), CONFIG).kind
-        == "reject"
-    )
+    # dragging all ten off the line, each by another offset, would take longer than drawing it anew
+    both_sides = ZIGZAG.points[:-1] + np.array([[0.0, (0.45 + 0.3 * i) * (-1) ** i] for i in range(10)])
+    assert decide(Polyline("boundary", both_sides), [ZIGZAG], set(), CONFIG).kind == "reject"
+    # all ten beside it by the same offset: one drag moves it whole, then the missing last vertex is drawn on
+    beside = decide(Polyline("boundary", ZIGZAG.points[:-1] + [0.0, 0.6]), [ZIGZAG], set(), CONFIG)
+    assert beside.kind == "fix" and beside.moved_whole
     assert drawing_seconds(LINE, CONFIG, costs) == pytest.approx(
         costs.draw_start_s + 2 * costs.draw_vertex_s + costs.draw_finish_s
     )
