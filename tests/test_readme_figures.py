@@ -1740,6 +1740,7 @@ def test_boundary_ends_end_to_end_table() -> None:
     for label, prefix in (
         ("as the refinement leaves them", "end_to_end_frame"),
         ("put back on the line's course", "end_to_end_ends"),
+        ("the same, and the annotator may move an element whole (below)", "end_to_end_move"),
     ):
         cells = row(t, label)
         for cell, site in ((cells[1], "default"), (cells[2], "random-9011")):
@@ -1754,11 +1755,16 @@ def test_boundary_ends_end_to_end_table() -> None:
                 ],
                 f"{label} {site}",
             )
-    for site in ("default", "random-9011"):  # the same surface: only the proposals changed
-        before, after = (
-            results(f"{prefix}_{site}.json") for prefix in ("end_to_end_frame", "end_to_end_ends")
+    for site in (
+        "default",
+        "random-9011",
+    ):  # the same surface: only the proposals, then the annotator, changed
+        before, after, moved = (
+            results(f"{prefix}_{site}.json")
+            for prefix in ("end_to_end_frame", "end_to_end_ends", "end_to_end_move")
         )
-        assert before["elevation"] == after["elevation"]
+        assert before["elevation"] == after["elevation"] == moved["elevation"]
+        assert after["proposals_ap"] == moved["proposals_ap"]
 
 
 def test_paint_placement_table() -> None:
