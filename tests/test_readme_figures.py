@@ -1350,20 +1350,14 @@ def test_loop_on_reconstructions_table() -> None:
     assert_names_source(t, "vma_loop_masks_recon_rounds.json", "bench/vma_loop.py")
     recorded = results("vma_loop_masks_recon_rounds.json")
     assert "--new-recon-site data/synthetic/random-9113" in recorded["command"]
-    for cells, entry in _checked_rounds(t, recorded):
-        assert_shows(cells[4], _loop_figures(entry["heldout"]), f"{cells[0]} held-out")
-        recon = entry["heldout"]["reconstructed"]
-        assert_shows(
-            cells[5],
-            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
-            f"{cells[0]} recon",
-        )
+    _check_rounds(t, recorded, recon_column=5, bev_column=4)
 
 
-def _checked_rounds(t: MarkdownTable, recorded: dict[str, Any]) -> list[tuple[list[str], dict[str, Any]]]:
-    """Each round's row (label first) and record, once its promoted version, retrain seconds and gate figures
-    (the first four columns of a loop table) are checked."""
-    checked = []
+def _check_rounds(
+    t: MarkdownTable, recorded: dict[str, Any], recon_column: int, bev_column: int | None
+) -> None:
+    """Each round's row of a loop table on reconstructions: promoted version, retrain seconds and gate figures (the
+    first four columns), the held-out BEV figures (`bev_column`, if shown) and the held-out reconstructions'."""
     for entry in recorded["rounds"]:
         label = next(name for name in t.rows if name.split(" ")[0] == str(entry["round"]))
         cells = row(t, label)
@@ -1372,8 +1366,14 @@ def _checked_rounds(t: MarkdownTable, recorded: dict[str, Any]) -> list[tuple[li
             assert_shows(cells[2], [round(entry["retrain_seconds"])], f"{label} seconds")
             assert_shows(cells[3], _gate_figures(entry["gate"]), f"{label} gate")
             assert (entry["candidate"] + " kept out" in cells[1]) != entry["promoted"], label
-        checked.append((cells, entry))
-    return checked
+        if bev_column is not None:
+            assert_shows(cells[bev_column], _loop_figures(entry["heldout"]), f"{label} held-out")
+        recon = entry["heldout"]["reconstructed"]
+        assert_shows(
+            cells[recon_column],
+            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
+            f"{label} recon",
+        )
 
 
 def test_more_reconstructions_not_shipped() -> None:
@@ -1672,23 +1672,23 @@ def test_training_towards_the_frame_table() -> None:
     assert f"over both is {correction_s('trained'):.0f} s against {correction_s('v0004'):.0f} s" in text
 
 
-def test_loop_on_reconstructions_in_the_frame_table() -> None:
-    """The rounds again with the truth in each reconstruction's frame: the same command but the registry."""
-    t = table("round on reconstructions, in the frame", "bench/vma_loop.py")
-    assert_names_source(t, "vma_loop_masks_recon_rounds_frame.json", "bench/vma_loop.py")
-    recorded = results("vma_loop_masks_recon_rounds_frame.json")
+def test_loop_on_reconstructions_in_the_frame_tables() -> None:
+    """The rounds again with the truth in each reconstruction's frame, then with the annotator that may move an
+    element whole: the same command as the rounds in the world but the registry."""
 
     def arguments(command: str) -> str:
         return re.sub(r"--(checkpoint|out) \S+ ?", "", command)
 
-    assert arguments(recorded["command"]) == arguments(results("vma_loop_masks_recon_rounds.json")["command"])
-    for cells, entry in _checked_rounds(t, recorded):
-        recon = entry["heldout"]["reconstructed"]
-        assert_shows(
-            cells[4],
-            [recon["observed_truth"]["mean_ap"], recon["annotator"]["speed_up"]],
-            f"{cells[0]} recon",
-        )
+    world = results("vma_loop_masks_recon_rounds.json")
+    for header, results_file, recon_column, bev_column in (
+        ("round on reconstructions, in the frame", "vma_loop_masks_recon_rounds_frame.json", 4, None),
+        ("round, elements moved whole", "vma_loop_masks_recon_rounds_move.json", 5, 4),
+    ):
+        t = table(header, "bench/vma_loop.py")
+        assert_names_source(t, results_file, "bench/vma_loop.py")
+        recorded = results(results_file)
+        assert arguments(recorded["command"]) == arguments(world["command"])
+        _check_rounds(t, recorded, recon_column, bev_column)
 
 
 def _assert_gate_and_confirmation_cells(
