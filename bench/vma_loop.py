@@ -82,6 +82,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.vma_measures import on_damaged, reconstructed_figures  # noqa: E402
 from models.vma.validation import (  # noqa: E402
     ValidationEntry,
+    ValidationSite,
     as_validation_site,
     reconstruction_of,
     truth_folder,
@@ -135,18 +136,17 @@ def measure(propose: Proposer, sites: list[Path]) -> dict[str, Any]:
     }
 
 
-def measure_model(registry: Path, sites: list[Path], recon_sites: list[Path]) -> dict[str, Any]:
+def measure_model(registry: Path, sites: list[Path], reconstructions: list[ValidationSite]) -> dict[str, Any]:
     """The promoted model as the product proposes with it (rescored candidates, or the element-mask network's own
-    traced masks, also on the reconstructed rasters of `recon_sites`), and an anchored model's own refined
+    traced masks, also on the reconstructed rasters of `reconstructions`), and an anchored model's own refined
     points."""
     if checkpoint_kind(registry) == MASK_KIND:
         masks = load_mask_checkpoint(registry)
-        for site in [*sites, *recon_sites]:
+        for site in [*sites, *map(truth_folder, reconstructions)]:
             ensure_unseen(masks, site)
         figures = {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
-        if recon_sites:
+        if reconstructions:
             on_reconstruction = mask_proposer(masks.model, MaskInferenceConfig(boundary_evidence="road_edge"))
-            reconstructions = [reconstruction_of(site) for site in recon_sites]
             figures["reconstructed"] = reconstructed_figures(on_reconstruction, reconstructions)
         return figures
     loaded = load_checkpoint(registry)
@@ -164,15 +164,14 @@ def mask_proposer(model: ElementMaskNet, config: MaskInferenceConfig | None = No
     return lambda rasters: predict_site_masks(model, rasters, config)
 
 
-def measure_rule_based(sites: list[Path], recon_sites: list[Path]) -> dict[str, Any]:
+def measure_rule_based(sites: list[Path], reconstructions: list[ValidationSite]) -> dict[str, Any]:
     """The rule-based proposer's held-out figures; on reconstructions its boundaries follow the road's edge, as
     `cama run` runs it there."""
     figures = measure(propose_rule_based, sites)
-    if recon_sites:
+    if reconstructions:
         on_reconstruction = RuleConfig(boundary_source="road_edge")
         figures["reconstructed"] = reconstructed_figures(
-            lambda rasters: propose_rule_based(rasters, on_reconstruction),
-            [reconstruction_of(site) for site in recon_sites],
+            lambda rasters: propose_rule_based(rasters, on_reconstruction), reconstructions
         )
     return figures
 
@@ -386,9 +385,12 @@ def main() -> None:
     # only new BEV sites are damaged: a reconstruction is proposed on as it is
     damage = args.propose_on == "damaged" and not args.new_recon_site
     propose_on = on_damaged if damage else (lambda propose: propose)
-    rule = measure_rule_based(heldout, recon)
+    held_out_reconstructions = [reconstruction_of(site) for site in recon]  # made once, measured every round
+    rule = measure_rule_based(heldout, held_out_reconstructions)
     print(f"rule-based: {summary(rule)}")
-    rounds: list[dict[str, Any]] = [{"round": 0, "heldout": measure_model(registry, heldout, recon)}]
+    rounds: list[dict[str, Any]] = [
+        {"round": 0, "heldout": measure_model(registry, heldout, held_out_reconstructions)}
+    ]
     print(f"round 0: {summary(rounds[0]['heldout'])}")
     corrected: list[Corrections] = []
     try:
@@ -414,7 +416,7 @@ def main() -> None:
                     "promoted": result.promoted,
                     "gate": {"current": result.current_metrics, "candidate": result.candidate_metrics},
                     "retrain_seconds": round(retrain_s, 1),
-                    "heldout": measure_model(registry, heldout, recon),
+                    "heldout": measure_model(registry, heldout, held_out_reconstructions),
                 }
             )
             print(
