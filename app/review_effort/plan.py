@@ -202,21 +202,22 @@ def _nearest_truth(
     return min(reach)[1] if reach else None
 
 
+def _to_line(points: np.ndarray, truth: Polyline) -> np.ndarray:
+    """(N, 2) the vectors from each point to its nearest point on the true line."""
+    line = LineString(truth.points)
+    return np.array([line.interpolate(line.project(Point(p))).coords[0] for p in points]) - points
+
+
 def offset_onto(points: np.ndarray, truth: Polyline) -> np.ndarray:
     """(2,) the shift that lays a polyline onto a true line beside it: the median of the vectors from its
     resampled points to their nearest points on the truth (a parallel offset, read off where it runs beside it)."""
-    line = LineString(truth.points)
-    samples = resample_fixed(points, _SAMPLES)
-    nearest = np.array([line.interpolate(line.project(Point(p))).coords[0] for p in samples])
-    return np.asarray(np.median(nearest - samples, axis=0))
+    return np.asarray(np.median(_to_line(resample_fixed(points, _SAMPLES), truth), axis=0))
 
 
 def move_offsets(points: np.ndarray, truth: Polyline) -> list[np.ndarray]:
     """The drags a person might move a polyline whole by: onto the truth as a whole (`offset_onto`), or taking it
     by one vertex and putting that vertex on the true line (the rest follows)."""
-    line = LineString(truth.points)
-    by_vertex = [np.array(line.interpolate(line.project(Point(p))).coords[0]) - p for p in points]
-    return [offset_onto(points, truth), *by_vertex]
+    return [offset_onto(points, truth), *_to_line(points, truth)]
 
 
 def _fix(
@@ -233,14 +234,13 @@ def _fix(
     """The fix that turns the pieces into the truth's clicked vertices, optionally after moving the proposal whole
     by `move_by` (one drag, `move_offsets`) and after the editor's simplify on them (one key)."""
     target = clicked_vertices(truth, config)
-    move_whole = move_by is not None
     if move_by is not None:
         pieces = [pieces[0] + move_by, *pieces[1:]]
     if simplify_first:
         pieces = [simplify(p, config.editor_simplify_m) for p in pieces]
     moved, removed, gap_runs = _vertex_edits(pieces, target, truth.closed, config.vertex_tolerance_m)
     return Decision(
-        "fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first, move_whole
+        "fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first, move_by is not None
     )
 
 

@@ -46,17 +46,14 @@ class ReconstructionFrame:
 
     def apply(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) global x, y of the world carried into the reconstruction (extra columns, such as z, dropped)."""
-        transform = SimilarityTransform(
-            scale=self.scale, rotation=self.rotation_rad, translation=self.translation
-        )
-        return np.asarray(transform(np.asarray(xy, dtype=np.float64)[:, :2]))
+        return np.asarray(self._transform()(np.asarray(xy, dtype=np.float64)[:, :2]))
 
     def world_of(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) the world's x, y of points in the reconstruction (the inverse of `apply`)."""
-        transform = SimilarityTransform(
-            scale=self.scale, rotation=self.rotation_rad, translation=self.translation
-        )
-        return np.asarray(transform.inverse(np.asarray(xy, dtype=np.float64)[:, :2]))
+        return np.asarray(self._transform().inverse(np.asarray(xy, dtype=np.float64)[:, :2]))
+
+    def _transform(self) -> SimilarityTransform:
+        return SimilarityTransform(scale=self.scale, rotation=self.rotation_rad, translation=self.translation)
 
     def as_dict(self) -> dict[str, object]:
         """The frame's figures, as benches record them (scale as parts per thousand off 1, rotation in degrees)."""
