@@ -40,13 +40,11 @@ RESULTS = Path(__file__).parent / "results" / "annotator.json"
 def frame_of(site: Path, rasters: Path) -> ReconstructionFrame | None:
     """The frame of the reconstruction of `site` whose surface rasters `rasters` are (`<workspace>/surface/<site
     id>/bev`, any workspace); None when they are not a surface stage's."""
-    if len(rasters.resolve().parents) < 3:
+    folder = rasters.resolve()
+    if len(folder.parents) < 3:
         return None
-    workspace, site_id = Workspace(rasters.resolve().parents[2]), rasters.resolve().parent.name
-    if (
-        workspace.surface_bev(site_id).resolve() != rasters.resolve()
-        or not workspace.surface_report(site_id).is_file()
-    ):
+    workspace, site_id = Workspace(folder.parents[2]), folder.parent.name
+    if workspace.surface_bev(site_id).resolve() != folder or not workspace.surface_report(site_id).is_file():
         return None
     return reconstruction_frame(site / "nuscenes", workspace, site_id)
 

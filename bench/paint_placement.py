@@ -49,31 +49,45 @@ DISPLACED_M = 0.25
 """Paint this far off its true line is beyond the simulated annotator's acceptance (Chamfer 0.25 m)."""
 
 
-def true_trajectory(site: Path) -> np.ndarray:
-    """(K, 2) the true ego positions of the keyframes of the site's one reconstruction (world metres)."""
+def true_trajectory(site: Path, site_id: str) -> np.ndarray:
+    """(K, 2) the true ego positions of the keyframes of reconstructed site `site_id` (world metres)."""
     dataset_root = site / "nuscenes"
     workspace = Workspace.for_dataset(dataset_root)
-    (site_id,) = [p.parent.name for p in workspace.root.glob("surface/*/report.json")]
     manifest = read_site_manifest(workspace.site_manifest(site_id))
     views = posed_views(load_dataset(dataset_root), manifest, workspace, site_id, "ground_truth")
     return np.array([v.world_from_ego[:2, 3] for v in views]).reshape(-1, 2)
 
 
-def paint_offsets(rasters: SiteRasters, line: LineString) -> np.ndarray:
-    """(S,) the offset across `line` (frame metres, NaN where none) of the rasters' paint at each station."""
-    paint = (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)
-    across = np.arange(-REACH_M, REACH_M + 1e-9, 0.25 * rasters.resolution_m)
-    offsets = []
+def stations_along(line: LineString) -> tuple[np.ndarray, np.ndarray]:
+    """(S, 2) points every `STATION_M` along `line` (the first half a step in) and (S, 2) the unit normals to its
+    left there."""
+    points, normals = [], []
     for distance in np.arange(STATION_M / 2, line.length, STATION_M):
-        here = np.array(line.interpolate(distance).coords[0])
         ahead = np.array(line.interpolate(min(distance + 0.2, line.length)).coords[0])
         behind = np.array(line.interpolate(max(distance - 0.2, 0.0)).coords[0])
         tangent = (ahead - behind) / max(float(np.linalg.norm(ahead - behind)), 1e-9)
-        normal = np.array([-tangent[1], tangent[0]])
+        points.append(line.interpolate(distance).coords[0])
+        normals.append([-tangent[1], tangent[0]])
+    return np.array(points).reshape(-1, 2), np.array(normals).reshape(-1, 2)
+
+
+def paint_offsets(
+    rasters: SiteRasters, paint: np.ndarray, stations: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """(S,) the offset along each station's normal (frame metres, NaN where none) of the centre of the `paint`
+    cells (float 0/1 on the rasters' grid) within `REACH_M` of it."""
+    across = np.arange(-REACH_M, REACH_M + 1e-9, 0.25 * rasters.resolution_m)
+    offsets = []
+    for here, normal in zip(stations, normals, strict=True):
         colrow = rasters.pixel_from_global(here[None] + across[:, None] * normal[None])
         seen = map_coordinates(paint, [colrow[:, 1], colrow[:, 0]], order=0, mode="constant")
         offsets.append(float((seen * across).sum() / seen.sum()) if seen.sum() else np.nan)
     return np.asarray(offsets)
+
+
+def lane_marking(rasters: SiteRasters) -> np.ndarray:
+    """(H, W) float32 1 on the rasters' lane-marking cells."""
+    return (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)
 
 
 def site_figures(site: Path) -> dict[str, Any]:
@@ -86,16 +100,15 @@ def site_figures(site: Path) -> dict[str, Any]:
     elevation = read_bev(validation.rasters).require("elevation")
     truth_bev = read_bev(site / "ground_truth" / "bev")
     true_elevation = truth_bev.require("elevation")
-    trajectory = cKDTree(frame.apply(true_trajectory(site)))
+    trajectory = cKDTree(frame.apply(true_trajectory(site, validation.rasters.parent.name)))
+    paint = lane_marking(rasters)
     dividers = []
     for polyline in observed_true_polylines(site, rasters, frame):
         line = LineString(polyline.points)
         if polyline.cls != "divider" or line.length < STATION_M:
             continue
-        offsets = paint_offsets(rasters, line)
-        stations = np.array(
-            [line.interpolate(d).coords[0] for d in np.arange(STATION_M / 2, line.length, STATION_M)]
-        ).reshape(-1, 2)
+        stations, normals = stations_along(line)
+        offsets = paint_offsets(rasters, paint, stations, normals)
         colrow = rasters.pixel_from_global(stations)
         ours = map_coordinates(elevation, [colrow[:, 1], colrow[:, 0]], order=1, cval=np.nan)
         inside, rows, cols = nearest_true_cells(frame.world_of(stations), truth_bev)
