@@ -1691,6 +1691,24 @@ def test_loop_on_reconstructions_in_the_frame_tables() -> None:
         _check_rounds(t, recorded, recon_column, bev_column)
 
 
+def test_loop_with_a_gate_on_ten_reconstructions_table() -> None:
+    """The rounds with the annotator that moves elements whole again, eight more reconstructions validating: the
+    same command but the gate's sites, and each round's figures as recorded."""
+    t = table("round, gate on ten reconstructions", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds_gate10.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds_gate10.json")
+    move = results("vma_loop_masks_recon_rounds_move.json")
+
+    def arguments(command: str) -> str:
+        return re.sub(r"--(checkpoint|out|gate-recon-site) \S+ ?", "", command)
+
+    assert arguments(recorded["command"]) == arguments(move["command"])
+    assert recorded["command"].count("--gate-recon-site") == 10
+    _check_rounds(t, recorded, 5, 4)
+    text = " ".join(readme_text().split())
+    assert f"{recorded['seconds']:.0f} s in all against {move['seconds']:.0f} s" in text
+
+
 def _assert_gate_and_confirmation_cells(
     cells: list[str], validation: dict[str, Any], confirmation: dict[str, Any]
 ) -> None:
