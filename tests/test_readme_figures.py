@@ -1753,6 +1753,30 @@ def test_boundary_ends_on_the_course_table() -> None:
     )
 
 
+def test_lines_carried_to_the_observed_edge_table() -> None:
+    t = table("lines at the observed edge, v0004 proposing", "bench/vma_masks.py")
+    for label, suffix in (("stopping where the masks stop", "_move"), ("carried on to the edge", "_border")):
+        for kind in ("validation", "confirm"):
+            assert_names_source(t, f"vma_masks_{kind}_frame_v0004{suffix}.json", "bench/vma_masks.py")
+        runs = [results(f"vma_masks_{kind}_frame_v0004{suffix}.json") for kind in ("validation", "confirm")]
+        _assert_gate_and_confirmation_cells(row(t, label), *runs)
+    for kind in ("validation", "confirm"):  # the same command, only the code between
+        before, after = (results(f"vma_masks_{kind}_frame_v0004{s}.json") for s in ("_move", "_border"))
+        assert (
+            re.sub(r"--out \S+", "", before["command"]).strip()
+            == re.sub(r"--out \S+", "", after["command"]).strip()
+        )
+    shown = [
+        results(f"vma_masks_confirm_frame_v0004{s}.json")["results"]["reconstructed"]["element_masks"]
+        for s in ("_move", "_border")
+    ]
+    text = " ".join(readme_text().split())
+    corrections = [f"{figures['annotator']['correction_s']:.0f} s" for figures in shown]
+    assert f"falls from {corrections[0]} to {corrections[1]}" in text
+    boundary = [f"{figures['observed_truth']['class_ap']['boundary']:.3f}" for figures in shown]
+    assert f"boundary AP rises from {boundary[0]} to {boundary[1]}" in text
+
+
 def test_boundary_ends_end_to_end_table() -> None:
     t = table("end to end, boundary ends", "bench/end_to_end.py")
     for label, prefix in (

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site_identity import SeenSiteError
 from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint
@@ -17,6 +18,7 @@ from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
+    carried_to_border,
     predict_probabilities,
     read_crossing,
     refined_line,
@@ -249,6 +251,28 @@ def test_a_boundary_end_pulled_aside_goes_back_on_the_lines_course() -> None:
     np.testing.assert_allclose(straightened_ends(curve, 2.0, 0.15), curve)  # a bend follows its course
     with pytest.raises(ValueError, match="end_course_m"):
         MaskInferenceConfig(end_tolerance_m=-0.1)
+
+
+def test_a_line_stopping_short_of_the_observed_edge_is_carried_on_to_it() -> None:
+    observed = np.zeros((100, 200), bool)  # 0.1 m cells, origin (0, 10): x 0..20 m, y 0..10 m
+    observed[:, 20:150] = True  # seen from x = 2.0 to x = 14.9
+    mask = ObservedMask(observed, (0.0, 10.0), 0.1)
+    line = np.column_stack([np.arange(4.0, 14.0, 1.0), np.full(10, 5.0)])  # x 4..13, 1.9 m short of the edge
+    out = carried_to_border(line, mask, 2.0, 2.0, 0.4)
+    np.testing.assert_array_equal(out[:-1], line)  # the start: the edge is 2.05 m behind it, beyond reach
+    assert out[-1, 0] == pytest.approx(14.9, abs=0.051) and out[-1, 1] == pytest.approx(5.0)
+    assert mask.contains(out[-1:]).all()  # on the last observed cell, not beyond
+    assert len(carried_to_border(line, mask, 2.0, 1.5, 0.4)) == len(line)  # the edge beyond the reach: left
+    near = line[line[:, 0] <= 12.0] + [2.5, 0.0]  # ends at x = 14.5, 0.4 m short, and starts at 6.5
+    assert len(carried_to_border(near, mask, 2.0, 2.0, 0.5)) == len(near)  # nearer than the minimum: left
+    both = carried_to_border(near - [2.5 + 0.6, 0.0], mask, 2.0, 2.0, 0.4)  # x 3.4..8.4, 1.4 m past the start
+    assert both[0, 0] == pytest.approx(2.0, abs=0.051) and len(both) == len(near) + 1
+    slanted = np.array([[9.0, 1.0], [12.0, 4.0], [13.0, 5.0]])  # heading +x +y at 45 degrees
+    end = carried_to_border(slanted, mask, 2.0, 3.0, 0.4)[-1]
+    assert end[0] - 13.0 == pytest.approx(end[1] - 5.0) and end[0] == pytest.approx(14.9, abs=0.051)
+    np.testing.assert_array_equal(carried_to_border(line, mask, 2.0, 0.0, 0.0), line)  # 0: never
+    with pytest.raises(ValueError, match="border_min_m"):
+        MaskInferenceConfig(border_reach_m=0.3, border_min_m=0.4)
 
 
 def test_correction_crops_centre_on_the_elements_and_the_road_between_them(drawn_site: Path) -> None:

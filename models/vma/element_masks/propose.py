@@ -19,6 +19,7 @@ import torch
 from scipy.ndimage import map_coordinates
 from shapely.geometry import LineString
 
+from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.element_masks.net import STRIDE, ElementMaskNet
@@ -69,6 +70,11 @@ class MaskInferenceConfig:
     (`straightened_ends`; 0: never)."""
     end_tolerance_m: float = 0.15
     """... and put back on that course when it lies farther off it than this."""
+    border_reach_m: float = 2.0
+    """A divider or boundary whose end stops short of the edge of the observed cells, with that edge no farther
+    than this straight ahead, is carried on to it (`carried_to_border`; 0: never) ..."""
+    border_min_m: float = 0.4
+    """... when the edge is at least this far ahead."""
     boundary_evidence: Literal["none", "road_edge"] = "none"
     """What boundaries snap to where the rasters show it: nothing (a generator's rasters: the network's band is
     nearer the true kerb line than the curb label's centre), or the road's sharp edge next to observed off-road
@@ -88,6 +94,11 @@ class MaskInferenceConfig:
             )
         if self.end_course_m < 0 or self.end_tolerance_m < 0:
             raise ValueError("MaskInferenceConfig: end_course_m and end_tolerance_m must be >= 0")
+        if not 0 <= self.border_min_m <= self.border_reach_m:
+            raise ValueError(
+                "MaskInferenceConfig: need 0 <= border_min_m <= border_reach_m, got "
+                f"{self.border_min_m}, {self.border_reach_m}"
+            )
         if self.boundary_evidence not in ("none", "road_edge"):
             raise ValueError(
                 f"MaskInferenceConfig.boundary_evidence must be 'none' or 'road_edge', got {self.boundary_evidence!r}"
@@ -273,6 +284,17 @@ END_SKIP_M = 0.3
 """The vertices this close to a line's end are not part of the course its end is checked against."""
 
 
+def _along(points: np.ndarray) -> np.ndarray:
+    """Distance of each vertex from the first, along the line."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+
+
+def _course(end: np.ndarray, distance: np.ndarray, course_m: float) -> np.ndarray:
+    """The vertices an end is judged against (`end` starts at the end vertex, `distance` from it): those between
+    `END_SKIP_M` and `END_SKIP_M + course_m` along the line."""
+    return end[(distance > END_SKIP_M) & (distance <= END_SKIP_M + course_m)]
+
+
 def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -> np.ndarray:
     """`points` with each end vertex put back on the line's course where it strays from it sideways.
 
@@ -282,12 +304,12 @@ def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -
     `END_SKIP_M + course_m` from the end (at least two of them); an end vertex farther than `tolerance_m` off it
     moves onto it, keeping its distance along it. Lines shorter than three times `course_m` are left as they
     are (their ends are most of them)."""
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    along = _along(points)
     if course_m == 0 or along[-1] < 3 * course_m:
         return points
     out = np.array(points, dtype=np.float64)
     for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
-        course = end[(distance > END_SKIP_M) & (distance <= END_SKIP_M + course_m)]
+        course = _course(end, distance, course_m)
         if len(course) < 2:
             continue
         direction = course[0] - course[-1]
@@ -297,6 +319,51 @@ def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -
         if abs(off) > tolerance_m:
             end[0] = end[0] - off * normal
     return out
+
+
+BORDER_STEP_M = 0.05
+"""Spacing of the probes that look for the edge of the observed cells ahead of a line's end."""
+
+
+def carried_to_border(
+    points: np.ndarray, observed: ObservedMask, course_m: float, reach_m: float, min_m: float
+) -> np.ndarray:
+    """`points` with a vertex added beyond each end that stops short of the edge of the observed cells, on the
+    edge, where the edge lies between `min_m` and `reach_m` straight ahead.
+
+    Lines that run off the observed map are cut at its edge in the truth an annotator draws (what the cameras saw,
+    `cama_pipeline.evaluate.observed`), but the network's masks fade out before that edge, so the traced line
+    stops short and the annotator drags each such end out to it: on the tuning reconstructions 9116-9127 these
+    were a third of the boundary fixes. Ahead is the direction from the end's course (its farthest vertex within
+    `END_SKIP_M + course_m`, else its neighbour) to the end. An edge farther ahead than `reach_m` means the line
+    ends inside the observed map, a real end, left alone; carries shorter than `min_m` gained nothing there and
+    tipped accepted lines into fixes."""
+    if reach_m == 0 or len(points) < 2:
+        return points
+    out = np.array(points, dtype=np.float64)
+    along = _along(out)
+    probes = np.arange(BORDER_STEP_M, reach_m + BORDER_STEP_M / 2, BORDER_STEP_M)
+    ends = []
+    for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
+        course = _course(end, distance, course_m)
+        behind = course[-1] if len(course) else end[1]
+        direction = end[0] - behind
+        length = float(np.linalg.norm(direction))
+        carried = None
+        if length > 1e-6:
+            ahead = end[0] + probes[:, None] * (direction / length)
+            seen = observed.contains(ahead)
+            first_unseen = int(np.argmax(~seen))
+            if not seen.all() and first_unseen > 0 and probes[first_unseen - 1] >= min_m:
+                carried = ahead[first_unseen - 1]
+        ends.append(carried)
+    start, finish = ends
+    parts = [out]
+    if start is not None:
+        parts.insert(0, start[None])
+    if finish is not None:
+        parts.append(finish[None])
+    return np.vstack(parts)
 
 
 def _bridged(stations: np.ndarray, seen: np.ndarray, gap_m: float) -> np.ndarray:
@@ -318,6 +385,7 @@ def vectors_from_probabilities(
     evidence = {"divider": (rasters.semantic == int(Semantic.LANE_MARKING)).astype(np.float32)}
     if config.boundary_evidence == "road_edge":
         evidence["boundary"] = road_edge_band(rasters, config.rule)
+    observed = ObservedMask.from_semantic(rasters.semantic, rasters.origin_xy, rasters.resolution_m)
     out = []
     for vector in propose_rule_based(traced, config.rule):
         probability = probabilities[CLASSES.index(vector.cls)]
@@ -335,6 +403,10 @@ def vectors_from_probabilities(
                 points = trim_hooks(points, config.rule.hook_m, config.rule.hook_angle_deg)
                 points = straightened_ends(points, config.end_course_m, config.end_tolerance_m)
             score = mean_probability(rasters, probability, points, config.sample_step_m)
+            # scored on the network's own stretch; the carry to the map's edge is no evidence of the class
+            points = carried_to_border(
+                points, observed, config.end_course_m, config.border_reach_m, config.border_min_m
+            )
         out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
     return out
 
