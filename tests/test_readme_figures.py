@@ -1777,6 +1777,28 @@ def test_lines_carried_to_the_observed_edge_table() -> None:
     assert f"boundary AP rises from {boundary[0]} to {boundary[1]}" in text
 
 
+def test_lines_carried_to_the_observed_edge_end_to_end_table() -> None:
+    t = table("end to end, lines at the observed edge", "bench/end_to_end.py")
+    for label, prefix in (
+        ("stopping where the masks stop", "end_to_end_move"),
+        ("carried on to the edge", "end_to_end_border"),
+    ):
+        cells = row(t, label)
+        for cell, site in ((cells[1], "default"), (cells[2], "random-9011")):
+            assert_names_source(t, f"{prefix}_{site}.json", "bench/end_to_end.py")
+            run = results(f"{prefix}_{site}.json")
+            figures = [
+                run["annotator"]["speed_up"],
+                run["annotator_in_reconstruction_frame"]["speed_up"],
+                run["proposals_ap"]["observed_truth"]["mean_ap"],
+            ]
+            assert_shows(cell, figures, f"{label} {site}")
+    boundary = results("end_to_end_border_default.json")["proposals_ap"]["observed_truth"]["class_ap"][
+        "boundary"
+    ]
+    assert f"(boundary AP {boundary:.3f})" in " ".join(readme_text().split())
+
+
 def test_boundary_ends_end_to_end_table() -> None:
     t = table("end to end, boundary ends", "bench/end_to_end.py")
     for label, prefix in (
