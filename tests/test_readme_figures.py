@@ -1725,51 +1725,41 @@ def _assert_gate_and_confirmation_cells(
         assert_shows(cell, [mean_ap, shown["annotator"]["speed_up"]], f"{cells[0]} {condition}")
 
 
-def test_boundary_ends_on_the_course_table() -> None:
-    t = table("boundary ends, v0004 proposing", "bench/vma_masks.py")
-    for label, suffix in (
-        ("as the refinement leaves them", ""),
-        ("put back on the line's course", "_ends"),
-    ):
-        runs = [results(f"vma_masks_{kind}_frame_v0004{suffix}.json") for kind in ("validation", "confirm")]
+def _check_v0004_variants(t: MarkdownTable, variants: tuple[tuple[str, str], ...]) -> list[dict[str, Any]]:
+    """Rows of a table of v0004 proposing with the proposer's code in several states (`bench/vma_masks.py` runs on
+    the gate's sites and the confirmation sites, files `vma_masks_{validation,confirm}_frame_v0004{suffix}.json`,
+    one command but the output); the element-mask figures on the confirmation reconstructions of each state."""
+    for label, suffix in variants:
         for kind in ("validation", "confirm"):
             assert_names_source(t, f"vma_masks_{kind}_frame_v0004{suffix}.json", "bench/vma_masks.py")
+        runs = [results(f"vma_masks_{kind}_frame_v0004{suffix}.json") for kind in ("validation", "confirm")]
         _assert_gate_and_confirmation_cells(row(t, label), *runs)
     for kind in ("validation", "confirm"):  # the same command, only the code between
-        before, after = (results(f"vma_masks_{kind}_frame_v0004{s}.json") for s in ("", "_ends"))
-        assert (
-            re.sub(r"--out \S+", "", before["command"]).strip()
-            == re.sub(r"--out \S+", "", after["command"]).strip()
-        )
-    corrections = [
-        results(f"vma_masks_confirm_frame_v0004{s}.json")["results"]["reconstructed"]["element_masks"][
-            "annotator"
-        ]
-        for s in ("", "_ends")
+        commands = {
+            re.sub(r"--out \S+", "", results(f"vma_masks_{kind}_frame_v0004{suffix}.json")["command"]).strip()
+            for _, suffix in variants
+        }
+        assert len(commands) == 1, commands
+    return [
+        results(f"vma_masks_confirm_frame_v0004{suffix}.json")["results"]["reconstructed"]["element_masks"]
+        for _, suffix in variants
     ]
-    text = " ".join(readme_text().split())
-    assert (
-        f"falls from {corrections[0]['correction_s']:.0f} s to {corrections[1]['correction_s']:.0f} s" in text
+
+
+def test_boundary_ends_on_the_course_table() -> None:
+    t = table("boundary ends, v0004 proposing", "bench/vma_masks.py")
+    shown = _check_v0004_variants(
+        t, (("as the refinement leaves them", ""), ("put back on the line's course", "_ends"))
     )
+    corrections = [f"{figures['annotator']['correction_s']:.0f} s" for figures in shown]
+    assert f"falls from {corrections[0]} to {corrections[1]}" in " ".join(readme_text().split())
 
 
 def test_lines_carried_to_the_observed_edge_table() -> None:
     t = table("lines at the observed edge, v0004 proposing", "bench/vma_masks.py")
-    for label, suffix in (("stopping where the masks stop", "_move"), ("carried on to the edge", "_border")):
-        for kind in ("validation", "confirm"):
-            assert_names_source(t, f"vma_masks_{kind}_frame_v0004{suffix}.json", "bench/vma_masks.py")
-        runs = [results(f"vma_masks_{kind}_frame_v0004{suffix}.json") for kind in ("validation", "confirm")]
-        _assert_gate_and_confirmation_cells(row(t, label), *runs)
-    for kind in ("validation", "confirm"):  # the same command, only the code between
-        before, after = (results(f"vma_masks_{kind}_frame_v0004{s}.json") for s in ("_move", "_border"))
-        assert (
-            re.sub(r"--out \S+", "", before["command"]).strip()
-            == re.sub(r"--out \S+", "", after["command"]).strip()
-        )
-    shown = [
-        results(f"vma_masks_confirm_frame_v0004{s}.json")["results"]["reconstructed"]["element_masks"]
-        for s in ("_move", "_border")
-    ]
+    shown = _check_v0004_variants(
+        t, (("stopping where the masks stop", "_move"), ("carried on to the edge", "_border"))
+    )
     text = " ".join(readme_text().split())
     corrections = [f"{figures['annotator']['correction_s']:.0f} s" for figures in shown]
     assert f"falls from {corrections[0]} to {corrections[1]}" in text
@@ -1777,12 +1767,10 @@ def test_lines_carried_to_the_observed_edge_table() -> None:
     assert f"boundary AP rises from {boundary[0]} to {boundary[1]}" in text
 
 
-def test_lines_carried_to_the_observed_edge_end_to_end_table() -> None:
-    t = table("end to end, lines at the observed edge", "bench/end_to_end.py")
-    for label, prefix in (
-        ("stopping where the masks stop", "end_to_end_move"),
-        ("carried on to the edge", "end_to_end_border"),
-    ):
+def _check_end_to_end_rows(t: MarkdownTable, rows: tuple[tuple[str, str], ...]) -> None:
+    """Rows of an end-to-end table on the default site and 9011 (files `{prefix}_{site}.json`): the annotator's
+    speed-up in the world and in the reconstruction's frame, and the proposals' mAP against the observed truth."""
+    for label, prefix in rows:
         cells = row(t, label)
         for cell, site in ((cells[1], "default"), (cells[2], "random-9011")):
             assert_names_source(t, f"{prefix}_{site}.json", "bench/end_to_end.py")
@@ -1793,6 +1781,22 @@ def test_lines_carried_to_the_observed_edge_end_to_end_table() -> None:
                 run["proposals_ap"]["observed_truth"]["mean_ap"],
             ]
             assert_shows(cell, figures, f"{label} {site}")
+
+
+def test_lines_carried_to_the_observed_edge_end_to_end_table() -> None:
+    t = table("end to end, lines at the observed edge", "bench/end_to_end.py")
+    _check_end_to_end_rows(
+        t,
+        (
+            ("stopping where the masks stop", "end_to_end_move"),
+            ("carried on to the edge", "end_to_end_border"),
+        ),
+    )
+    for site in ("default", "random-9011"):  # the same surface and annotator: only the proposals changed
+        before, after = (
+            results(f"{prefix}_{site}.json") for prefix in ("end_to_end_move", "end_to_end_border")
+        )
+        assert before["elevation"] == after["elevation"]
     boundary = results("end_to_end_border_default.json")["proposals_ap"]["observed_truth"]["class_ap"][
         "boundary"
     ]
@@ -1801,24 +1805,14 @@ def test_lines_carried_to_the_observed_edge_end_to_end_table() -> None:
 
 def test_boundary_ends_end_to_end_table() -> None:
     t = table("end to end, boundary ends", "bench/end_to_end.py")
-    for label, prefix in (
-        ("as the refinement leaves them", "end_to_end_frame"),
-        ("put back on the line's course", "end_to_end_ends"),
-        ("the same, and the annotator may move an element whole (below)", "end_to_end_move"),
-    ):
-        cells = row(t, label)
-        for cell, site in ((cells[1], "default"), (cells[2], "random-9011")):
-            assert_names_source(t, f"{prefix}_{site}.json", "bench/end_to_end.py")
-            run = results(f"{prefix}_{site}.json")
-            assert_shows(
-                cell,
-                [
-                    run["annotator"]["speed_up"],
-                    run["annotator_in_reconstruction_frame"]["speed_up"],
-                    run["proposals_ap"]["observed_truth"]["mean_ap"],
-                ],
-                f"{label} {site}",
-            )
+    _check_end_to_end_rows(
+        t,
+        (
+            ("as the refinement leaves them", "end_to_end_frame"),
+            ("put back on the line's course", "end_to_end_ends"),
+            ("the same, and the annotator may move an element whole (below)", "end_to_end_move"),
+        ),
+    )
     for site in (
         "default",
         "random-9011",
