@@ -1709,6 +1709,42 @@ def test_loop_with_a_gate_on_ten_reconstructions_table() -> None:
     assert f"{recorded['seconds']:.0f} s in all against {move['seconds']:.0f} s" in text
 
 
+def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
+    """Each refused candidate of the loop scored on the confirmation sites beside v0004, with the same command but
+    the checkpoint; what the README concludes from them."""
+    t = table("candidate the ten-reconstruction gate refused", "bench/vma_masks.py")
+    loop = results("vma_loop_masks_recon_rounds_gate10.json")
+    files = {"v0004 (kept)": "vma_masks_confirm_frame_v0004_border.json"}
+    for entry in loop["rounds"][1:]:
+        assert not entry["promoted"]
+        files[f"{entry['candidate']} (round {entry['round']})"] = (
+            f"vma_masks_confirm_gate10_{entry['candidate']}.json"
+        )
+    assert set(files) == set(t.rows)
+    kept = results(files["v0004 (kept)"])
+
+    def arguments(command: str) -> str:
+        return re.sub(r"--(checkpoint|out) \S+ ?", "", command)
+
+    def figures(run: dict[str, Any], condition: str) -> tuple[float, float]:
+        shown = run["results"][condition]["element_masks"]
+        mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
+        return mean_ap, shown["annotator"]["speed_up"]
+
+    for label, name in files.items():
+        assert_names_source(t, name, "bench/vma_masks.py")
+        run = results(name)
+        assert arguments(run["command"]) == arguments(kept["command"])
+        assert run["checkpoint"]["version"] == label.split()[0]
+        cells = row(t, label)
+        for cell, condition in ((cells[1], "reconstructed"), (cells[2], "clean")):
+            assert_shows(cell, list(figures(run, condition)), f"{label} {condition}")
+        if label != "v0004 (kept)":  # slower on both, lower mAP on the reconstructions, as the README says
+            assert figures(run, "reconstructed") < figures(kept, "reconstructed")
+            assert figures(run, "reconstructed")[1] < figures(kept, "reconstructed")[1]
+            assert figures(run, "clean")[1] < figures(kept, "clean")[1]
+
+
 def _assert_gate_and_confirmation_cells(
     cells: list[str], validation: dict[str, Any], confirmation: dict[str, Any]
 ) -> None:
