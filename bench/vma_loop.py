@@ -14,7 +14,8 @@ labels, rejected as negatives). The retrain then fine-tunes on the corrections o
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
 both gates (validation mAP and the annotator's correction time on the validation sites: BEV sites `--val-seeds`
 and the reconstructions of `--gate-recon-site`, as a server's CAMA_VMA_VALIDATION_RECONSTRUCTED gates); the
-element-mask network rehearses `--replay-sites` of its own training sites in `--replay-share` of its crops. After
+element-mask network rehearses `--replay-sites` of its own generator training sites and `--replay-reconstructions`
+of the reconstructions it trained on in `--replay-share` of its crops. After
 every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
 sites `--heldout-seeds` (Chamfer mAP clean and damaged, `models.vma.degrade`; the annotator's speed-up over
 drawing on clean rasters) and, for the element-mask network, the surface stage's reconstructed rasters of full
@@ -23,7 +24,8 @@ it once. A checkpoint is refused on a held-out or validation site it saw (`ensur
 
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
        [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE]
-       [--recon-site SITE] [--replay-sites 4] [--replay-share 0] [--threads 2] [--out bench/results/vma_loop.json]
+       [--recon-site SITE] [--replay-sites 4] [--replay-reconstructions 0] [--replay-share 0] [--threads 2]
+       [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -203,15 +205,16 @@ def retrain_round(
     corrections: list[Corrections],
     validation: list[ValidationEntry],
     steps: int,
-    replay: tuple[int, float],
+    replay: tuple[int, int, float],
 ) -> RetrainResult:
     """One retraining of the registry's network on corrections, behind both gates; the element-mask network
-    rehearses `replay` = (sites, share) of its own training sites."""
+    rehearses `replay` = (generator sites, reconstructions, share) of its own training sites."""
     if checkpoint_kind(registry) == MASK_KIND:
         config = MaskRetrainConfig(
             train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2),
             replay_sites=replay[0],
-            replay_share=replay[1],
+            replay_reconstructions=replay[1],
+            replay_share=replay[2],
         )
         return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
     retrain = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4))
@@ -314,6 +317,12 @@ def main() -> None:
         help="element-mask retraining: how many of the model's own training sites it rehearses (0: none)",
     )
     parser.add_argument(
+        "--replay-reconstructions",
+        type=int,
+        default=MaskRetrainConfig.replay_reconstructions,
+        help="element-mask retraining: how many of the reconstructions the model trained on it rehearses (0: none)",
+    )
+    parser.add_argument(
         "--replay-share",
         type=float,
         default=MaskRetrainConfig.replay_share,
@@ -403,7 +412,7 @@ def main() -> None:
                 corrected,
                 [*validation, *gate_recon],
                 args.steps,
-                (args.replay_sites, args.replay_share),
+                (args.replay_sites, args.replay_reconstructions, args.replay_share),
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -445,7 +454,9 @@ def main() -> None:
         + f"--val-seeds '{args.val_seeds}' --heldout-seeds {args.heldout_seeds} "
         + "".join(f"--recon-site {s} " for s in recon)
         + "".join(f"--gate-recon-site {s} " for s in args.gate_recon_site)
-        + f"--replay-sites {args.replay_sites} --replay-share {args.replay_share} "
+        + f"--replay-sites {args.replay_sites} "
+        + (f"--replay-reconstructions {args.replay_reconstructions} " if args.replay_reconstructions else "")
+        + f"--replay-share {args.replay_share} "
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,
         "rule_based": rule,

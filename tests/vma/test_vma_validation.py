@@ -3,7 +3,9 @@ the product's inference settings, the seen-site refusal through them, and missin
 
 import json
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,6 +24,7 @@ from models.vma.checkpoint import ensure_unseen, refuse_seen_validation, seen_re
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.propose import MaskInferenceConfig, inference_for, predict_site_masks
+from models.vma.element_masks.replay import reconstruction_candidates, rehearsed_reconstructions
 from models.vma.element_masks.retrain import evaluate_mask_model
 from models.vma.element_masks.targets import element_masks
 from models.vma.element_masks.train import load_mask_training_site, train_masks
@@ -135,6 +138,41 @@ def test_training_on_a_reconstruction_draws_the_observed_truth_and_records_the_s
     with pytest.raises(SeenSiteError):  # nor may it gate on the site it trains on
         train_masks(config, train, [reconstructed], tmp_path / "other", validation_sites=[reconstructed])
     assert not (tmp_path / "other").exists()
+
+
+@dataclass(frozen=True)
+class _Version:
+    """A version record (`models.vma.checkpoint.VersionRecord`) with metadata edited by a test."""
+
+    meta: dict[str, Any]
+    path: Path
+
+
+def test_retraining_rehearses_the_reconstructions_a_version_trained_on_and_skips_changed_ones(
+    reconstructed: ValidationSite, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    config = MaskModelConfig(base_channels=4)
+    train = MaskTrainConfig(steps=1, batch_size=2, crop_px=64, damaged_copies=1, threads=1)
+    version = load_mask_checkpoint(
+        train_masks(config, train, [reconstructed], tmp_path / "r", show_progress=False)
+    )
+    (identity, rasters), *others = reconstruction_candidates(version)
+    assert not others and rasters == reconstructed.rasters and Path(identity.path) == reconstructed.site
+    (rehearsed,) = rehearsed_reconstructions(version, 3, config, seed=0)  # as many as it trained on
+    expected = load_mask_training_site(reconstructed, config, damaged_copies=0)
+    assert rehearsed.name == expected.name and np.array_equal(rehearsed.targets, expected.targets)
+    assert len(rehearsed.images) == 1  # the reconstruction as it is, no damaged copies
+    assert rehearsed_reconstructions(version, 0, config, seed=0) == []
+
+    data = version.meta["data"]
+    changed = {**data, "seen_sites": [{**site, "layout_digest": "0" * 16} for site in data["seen_sites"]]}
+    moved = {**data, "reconstructions": [str(tmp_path / "gone" / "surface" / "site-001" / "bev")]}
+    moved["seen_sites"] = [{**site, "path": str(tmp_path)} for site in data["seen_sites"]]
+    for meta, said in ((changed, "is not the reconstruction"), (moved, "not replayed")):
+        caplog.clear()
+        record = _Version({**version.meta, "data": meta}, version.path)
+        assert rehearsed_reconstructions(record, 3, config, seed=0) == []
+        assert said in caplog.text
 
 
 def test_train_masks_names_a_site_without_a_reconstruction(tiny_site: GeneratedSite, tmp_path: Path) -> None:

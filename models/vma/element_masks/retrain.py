@@ -23,7 +23,7 @@ from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import inference_for, predict_site_masks
-from models.vma.element_masks.replay import replay_sites
+from models.vma.element_masks.replay import rehearsed_reconstructions, replay_sites
 from models.vma.element_masks.train import fit_masks, training_site
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import SiteRasters, load_site_rasters
@@ -62,6 +62,9 @@ class MaskRetrainConfig:
     elements): without them the network forgets that most road between elements holds nothing to draw."""
     replay_sites: int = 4
     """How many of the promoted version's own generator training sites are rehearsed (`replay`); 0: none."""
+    replay_reconstructions: int = 0
+    """How many of the reconstructions the promoted version trained on are rehearsed beside them (`replay`,
+    read where they lie); 0: none."""
     replay_share: float = 0.0
     """The share of training crops cut from the rehearsed sites (the rest from the corrected sites); off by
     default: in the loop bench it helped the held-out BEV sites and hurt the annotator on the reconstructed one
@@ -72,8 +75,9 @@ class MaskRetrainConfig:
             raise ValueError(
                 "MaskRetrainConfig: tolerance, time_tolerance and context_m >= 0 and min_labels >= 1 required"
             )
-        if self.replay_sites < 0:
-            raise ValueError(f"MaskRetrainConfig.replay_sites must be >= 0, got {self.replay_sites}")
+        for name in ("replay_sites", "replay_reconstructions"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"MaskRetrainConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.replay_share < 1.0:
             raise ValueError(f"MaskRetrainConfig.replay_share must be in [0, 1), got {self.replay_share}")
 
@@ -135,14 +139,19 @@ def retrain_masks_from_corrections(
         )
     current_metrics = evaluate_mask_model(current.model, validation_sites, review)
     rehearsed = (
-        replay_sites(
-            current,
-            Path(registry) / REPLAY_FOLDER,
-            config.replay_sites,
-            current.model.config,
-            config.train.damaged_copies,
-            config.train.seed,
-        )
+        [
+            *replay_sites(
+                current,
+                Path(registry) / REPLAY_FOLDER,
+                config.replay_sites,
+                current.model.config,
+                config.train.damaged_copies,
+                config.train.seed,
+            ),
+            *rehearsed_reconstructions(
+                current, config.replay_reconstructions, current.model.config, config.train.seed
+            ),
+        ]
         if config.replay_share > 0
         else []
     )
