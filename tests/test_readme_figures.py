@@ -1709,6 +1709,23 @@ def test_loop_with_a_gate_on_ten_reconstructions_table() -> None:
     assert f"{recorded['seconds']:.0f} s in all against {move['seconds']:.0f} s" in text
 
 
+def test_loop_rehearsing_reconstructions_table() -> None:
+    """The ten-reconstruction gate's rounds again, rehearsing v0004's reconstructions: the same command but the
+    rehearsal, each round as recorded."""
+    t = table("round, rehearsing reconstructions", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds_rehearse.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds_rehearse.json")
+
+    def arguments(command: str) -> str:
+        return re.sub(r"--(checkpoint|out|replay-reconstructions|replay-share) \S+ ?", "", command)
+
+    assert arguments(recorded["command"]) == arguments(
+        results("vma_loop_masks_recon_rounds_gate10.json")["command"]
+    )
+    assert "--replay-reconstructions 6 --replay-share 0.5 " in recorded["command"]
+    _check_rounds(t, recorded, 5, 4)
+
+
 def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
     """Each refused candidate of the loop scored on the confirmation sites beside v0004, with the same command but
     the checkpoint; what the README concludes from them."""
