@@ -13,7 +13,8 @@ missing; its verdicts become corrections (accepted / fixed / drawn as
 labels, rejected as negatives). The retrain then fine-tunes on the corrections of every round so far (as the
 lead's retrain job learns from every site in the database; `--corrections latest`: this round's only), behind
 both gates (validation mAP and the annotator's correction time on the validation sites: BEV sites `--val-seeds`
-and the reconstructions of `--gate-recon-site`, as a server's CAMA_VMA_VALIDATION_RECONSTRUCTED gates); the
+and the reconstructions of `--gate-recon-site`, as a server's CAMA_VMA_VALIDATION_RECONSTRUCTED gates; a saving
+counts when it holds in `--time-confidence` of bootstrap resamples of those sites, `models.vma.gate`); the
 element-mask network rehearses `--replay-sites` of its own generator training sites and `--replay-reconstructions`
 of the reconstructions it trained on in `--replay-share` of its crops. After
 every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
@@ -25,7 +26,7 @@ it once. A checkpoint is refused on a held-out or validation site it saw (`ensur
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
        [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE]
        [--recon-site SITE] [--replay-sites 4] [--replay-reconstructions 0] [--replay-share 0] [--threads 2]
-       [--out bench/results/vma_loop.json]
+       [--time-confidence 0.9] [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -64,6 +65,7 @@ from models.vma.element_masks.propose import MaskInferenceConfig, inference_for,
 from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
 from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
+from models.vma.gate import TIME_CONFIDENCE, saving_confidence
 from models.vma.infer import InferenceConfig
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.retrain import (
@@ -206,19 +208,33 @@ def retrain_round(
     validation: list[ValidationEntry],
     steps: int,
     replay: tuple[int, int, float],
+    time_confidence: float,
 ) -> RetrainResult:
-    """One retraining of the registry's network on corrections, behind both gates; the element-mask network
-    rehearses `replay` = (generator sites, reconstructions, share) of its own training sites."""
+    """One retraining of the registry's network on corrections, behind both gates (the time saving at
+    `time_confidence`); the element-mask network rehearses `replay` = (generator sites, reconstructions, share) of
+    its own training sites."""
     if checkpoint_kind(registry) == MASK_KIND:
         config = MaskRetrainConfig(
             train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2),
             replay_sites=replay[0],
             replay_reconstructions=replay[1],
             replay_share=replay[2],
+            time_confidence=time_confidence,
         )
         return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
-    retrain = RetrainConfig(train=TrainConfig(steps=steps, learning_rate=2e-4))
+    retrain = RetrainConfig(
+        train=TrainConfig(steps=steps, learning_rate=2e-4), time_confidence=time_confidence
+    )
     return retrain_from_corrections(registry, corrections, validation, retrain, review=review_time)
+
+
+def gate_confidence(current: dict[str, Any], candidate: dict[str, Any]) -> float | None:
+    """How sure the candidate's annotator time saving is over the gate's sites (`saving_confidence`), when both
+    reviews carry each site's time."""
+    key = "per_site_correction_s"
+    if key not in current.get("review", {}) or key not in candidate.get("review", {}):
+        return None
+    return saving_confidence(current["review"][key], candidate["review"][key])
 
 
 def plot_path(out: Path) -> Path:
@@ -329,6 +345,12 @@ def main() -> None:
         help="element-mask retraining: the share of crops from the rehearsed sites",
     )
     parser.add_argument(
+        "--time-confidence",
+        type=float,
+        default=TIME_CONFIDENCE,
+        help="the gate's confidence in a time saving over its sites (0: the totals alone decide)",
+    )
+    parser.add_argument(
         "--propose-on",
         choices=("clean", "damaged"),
         default="damaged",
@@ -413,6 +435,7 @@ def main() -> None:
                 [*validation, *gate_recon],
                 args.steps,
                 (args.replay_sites, args.replay_reconstructions, args.replay_share),
+                args.time_confidence,
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -423,7 +446,13 @@ def main() -> None:
                     "review_counts": review_counts,
                     "candidate": result.candidate.name,
                     "promoted": result.promoted,
-                    "gate": {"current": result.current_metrics, "candidate": result.candidate_metrics},
+                    "gate": {
+                        "current": result.current_metrics,
+                        "candidate": result.candidate_metrics,
+                        "saving_confidence": gate_confidence(
+                            result.current_metrics, result.candidate_metrics
+                        ),
+                    },
                     "retrain_seconds": round(retrain_s, 1),
                     "heldout": measure_model(registry, heldout, held_out_reconstructions),
                 }
@@ -457,6 +486,7 @@ def main() -> None:
         + f"--replay-sites {args.replay_sites} "
         + (f"--replay-reconstructions {args.replay_reconstructions} " if args.replay_reconstructions else "")
         + f"--replay-share {args.replay_share} "
+        + (f"--time-confidence {args.time_confidence} " if args.time_confidence != TIME_CONFIDENCE else "")
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,
         "rule_based": rule,

@@ -39,23 +39,26 @@ def review_time(
     *,
     min_confidence: float = MIN_CONFIDENCE,
 ) -> dict[str, Any]:
-    """{"correction_s", "drawing_s", "speed_up", "sites"} of the scripted annotator on `propose`'s output over
-    each site's rasters (a path: its own; a `ValidationSite`: its `rasters`, a reconstruction's for a
-    reconstructed site)."""
+    """{"correction_s", "drawing_s", "speed_up", "sites", "per_site_correction_s"} of the scripted annotator on
+    `propose`'s output over each site's rasters (a path: its own; a `ValidationSite`: its `rasters`, a
+    reconstruction's for a reconstructed site); the last is each site's correction time, in `sites`' order (the
+    gate's confidence in a saving reads them)."""
     if not sites:
         raise ValueError("review_time: no validation sites given")
     config, costs = SimulationConfig(), ActionCosts()
-    correction_s = drawing_s = 0.0
+    per_site, drawing_s = [], 0.0
     for entry in sites:
         site = as_validation_site(entry)
         rasters = load_site_rasters(site.rasters)
         truths = observed_true_polylines(site.site, rasters, site.frame)
         _, queue = review_queue(propose(rasters), min_confidence)
-        correction_s += work_queue(queue, truths, config, costs).total_s
+        per_site.append(work_queue(queue, truths, config, costs).total_s)
         drawing_s += draw_from_scratch(MemoryQueue([]), truths, config, costs).total_s
+    correction_s = sum(per_site)
     return {
         "correction_s": correction_s,
         "drawing_s": drawing_s,
         "speed_up": drawing_s / correction_s if correction_s > 0 else None,
         "sites": [str(site) for site in sites],
+        "per_site_correction_s": per_site,
     }

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import torch
@@ -37,6 +37,7 @@ from models.vma.checkpoint import (
 )
 from models.vma.config import ModelConfig, TrainConfig, config_dict
 from models.vma.evaluate import evaluate_proposer
+from models.vma.gate import TIME_CONFIDENCE, check_time_confidence, gate_passes
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.loop import THRESHOLD_KEY
 from models.vma.model import VmaNet
@@ -76,6 +77,9 @@ class RetrainConfig:
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     time_tolerance: float = 0.0
     """With a `review` gate: promoted only when its correction time <= current time * (1 + time_tolerance)."""
+    time_confidence: float = TIME_CONFIDENCE
+    """... and, with each site's time, only when it saves time in at least this share of bootstrap resamples of
+    the validation sites (`saving_confidence`; 0: the totals alone decide)."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.replay_share < 1.0 or self.tolerance < 0 or self.min_labels < 1:
@@ -84,6 +88,7 @@ class RetrainConfig:
             )
         if self.time_tolerance < 0:
             raise ValueError(f"RetrainConfig: time_tolerance must be >= 0, got {self.time_tolerance}")
+        check_time_confidence(self.time_confidence, "RetrainConfig")
 
 
 Proposer = Callable[[SiteRasters], list[Vector]]
@@ -102,19 +107,6 @@ class RetrainResult:
     candidate_metrics: dict[str, Any]
     labels: int
     negatives: int
-
-
-def passes_gate(current_map: float | None, candidate_map: float | None, tolerance: float) -> bool:
-    """The evaluation gate: a candidate with no mAP never passes; one whose mAP did not drop does."""
-    if candidate_map is None:
-        return False
-    return current_map is None or candidate_map >= current_map - tolerance
-
-
-def passes_time_gate(current_s: float, candidate_s: float, tolerance: float) -> bool:
-    """The review gate: the candidate's proposals take the annotator no longer than the current model's (plus a
-    `tolerance` share)."""
-    return candidate_s <= current_s * (1.0 + tolerance)
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,27 +159,6 @@ def evaluate_model(
     if review is not None:
         metrics["review"] = review(model_proposer(model, inference), sites)
     return metrics
-
-
-class GateTolerances(Protocol):
-    """The gate's tolerances, as every retraining config carries them."""
-
-    @property
-    def tolerance(self) -> float: ...
-
-    @property
-    def time_tolerance(self) -> float: ...
-
-
-def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: GateTolerances) -> bool:
-    """Both gates on two models' `evaluate_model` metrics: mAP, and the review time when both have one."""
-    if not passes_gate(current["mean_ap"], candidate["mean_ap"], config.tolerance):
-        return False
-    if "review" not in current or "review" not in candidate:
-        return True
-    return passes_time_gate(
-        current["review"]["correction_s"], candidate["review"]["correction_s"], config.time_tolerance
-    )
 
 
 def retrain_from_corrections(

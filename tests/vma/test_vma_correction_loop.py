@@ -1,6 +1,8 @@
 """The human-in-the-loop: corrections of proposals retrain the model, and the evaluation gate guards promotion."""
 
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -10,14 +12,13 @@ from annotations.geometry import resample_fixed
 from cama_pipeline.evaluate.chamfer_ap import chamfer_distance
 from models.vma.checkpoint import current_version, load_checkpoint, promote, save_version
 from models.vma.config import ModelConfig, TrainConfig
+from models.vma.gate import gate_passes, passes_gate, saving_confidence
 from models.vma.model import VmaNet
 from models.vma.rasters import load_site_rasters, vector_map_of
 from models.vma.retrain import (
     Corrections,
     RetrainConfig,
     gate_checkpoint,
-    gate_passes,
-    passes_gate,
     retrain_from_corrections,
 )
 from models.vma.rule_based import propose_rule_based
@@ -115,6 +116,27 @@ def test_the_review_gate_refuses_a_model_that_costs_the_annotator_more_time() ->
     assert gate_passes({"mean_ap": 0.5}, {"mean_ap": 0.5}, config)  # no review gate: mAP alone
     with pytest.raises(ValueError, match="time_tolerance"):
         RetrainConfig(time_tolerance=-0.1)
+
+
+def test_the_review_gate_wants_a_saving_that_holds_across_the_validation_sites() -> None:
+    current = [100.0, 60.0, 80.0, 50.0, 70.0, 90.0]
+    # 22 s less in all, won on one site and lost a little on four; 18 s less, a little on every site
+    lucky = [100.0, 62.0, 82.0, 20.0, 72.0, 92.0]
+    steady = [96.0, 57.0, 77.0, 47.0, 67.0, 88.0]
+    assert saving_confidence(current, lucky) < 0.9 < saving_confidence(current, steady)
+    assert saving_confidence(current, current) == 0.0  # no saving at all
+    config = RetrainConfig(tolerance=0.0, time_tolerance=0.0)
+
+    def metrics(per_site: list[float]) -> dict[str, Any]:
+        return {"mean_ap": 0.5, "review": {"correction_s": sum(per_site), "per_site_correction_s": per_site}}
+
+    assert not gate_passes(metrics(current), metrics(lucky), config)
+    assert gate_passes(metrics(current), metrics(steady), config)
+    assert gate_passes(metrics(current), metrics(lucky), replace(config, time_confidence=0.0))  # totals alone
+    with pytest.raises(ValueError, match="time_confidence"):
+        RetrainConfig(time_confidence=1.0)
+    with pytest.raises(ValueError, match="same sites"):
+        saving_confidence(current, steady[:3])
 
 
 @pytest.mark.parametrize(("candidate_s", "promoted"), [(150.0, False), (80.0, True)])

@@ -38,6 +38,7 @@ from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.schemas import STRICT
 from app.backend.vma_loop import preaccept_threshold
 from cama_pipeline.io import atomic_write_json
+from models.vma.gate import TIME_CONFIDENCE, saving_confidence
 
 if TYPE_CHECKING:
     from models.vma.retrain import Corrections, RetrainConfig
@@ -88,6 +89,13 @@ class RetrainParams(BaseModel):
         ge=0.0,
         le=1.0,
         description="Annotator gate: promote when the correction time <= current * (1 + this).",
+    )
+    time_confidence: float = Field(
+        default=TIME_CONFIDENCE,
+        ge=0.0,
+        lt=1.0,
+        description="Annotator gate: promote only when the time saved holds in at least this share of bootstrap "
+        "resamples of the validation sites (0: the totals alone decide).",
     )
     replay_share: float = Field(
         default=0.0,
@@ -196,6 +204,7 @@ def _retrain_child(
                 config.time_tolerance,
                 config.min_labels,
                 replay_share=replay_share,
+                time_confidence=config.time_confidence,
             )
             result = retrain_masks_from_corrections(
                 registry, corrections, validation, mask_config, review=review
@@ -298,9 +307,12 @@ def _count(annotations: AnnotationSet, states: tuple[str, ...]) -> int:
     return sum(e.review_state in states for e in annotations.elements)
 
 
-def _gate_message(outcome: dict[str, Any], validation: list["ValidationEntry"]) -> str:
-    """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured), and
-    what the validation sites were (their own rasters or reconstructions)."""
+def _gate_message(
+    outcome: dict[str, Any], validation: list["ValidationEntry"], time_confidence: float
+) -> str:
+    """One line: the gate decision with both validation mAPs (and both annotator speed-ups when measured, with how
+    sure a saving is across the sites against the `time_confidence` asked), and what the validation sites were
+    (their own rasters or reconstructions)."""
     from models.vma.validation import reconstructions
 
     candidate, current = outcome["candidate_metrics"], outcome["current_metrics"]
@@ -313,6 +325,10 @@ def _gate_message(outcome: dict[str, Any], validation: list["ValidationEntry"]) 
             f"; simulated annotator {new_s:.0f} s vs {old_s:.0f} s before "
             f"({_speed_up(candidate['review'])} vs {_speed_up(current['review'])} faster than drawing)"
         )
+        per_site = "per_site_correction_s"
+        if new_s < old_s and per_site in candidate["review"] and per_site in current["review"]:
+            sure = saving_confidence(current["review"][per_site], candidate["review"][per_site])
+            review += f", a saving in {sure:.0%} of resamples of the sites ({time_confidence:.0%} needed)"
     return (
         f"{outcome['candidate']} {verdict}: validation mAP {candidate.get('mean_ap')} vs "
         f"{current.get('mean_ap')} before{review} on {where}; {outcome['labels']} labels, "
@@ -365,6 +381,7 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
         ),
         tolerance=params.tolerance,
         time_tolerance=params.time_tolerance,
+        time_confidence=params.time_confidence,
     )
     validation = validation_sites(settings)
     args = (
@@ -377,7 +394,7 @@ def run_retrain(context: JobContext, params: RetrainParams, *, settings: Setting
     )
     out = context.workdir / RETRAIN_FILE
     outcome = _run_child(context, args, out, stall_s=settings.retrain_stall_s)
-    message = _gate_message(outcome, validation)
+    message = _gate_message(outcome, validation, params.time_confidence)
     if outcome["promoted"] and params.refresh_after_promotion:
         message += f"; proposal refresh queued as job {context.follow_up('refresh_proposals', {})}"
     return JobResult(out, message)

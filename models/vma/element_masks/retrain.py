@@ -8,7 +8,7 @@ MapTR-style model). The promoted version is fine-tuned at a low rate on the corr
 rasters, optionally with `replay_share` of the crops cut from a few of its own generator training sites
 (`replay`, rehearsal against forgetting what the first model knew); candidate and current are scored on
 held-out validation sites (Chamfer-AP, and the `review` gate's annotator time when given); the candidate is
-saved either way with what it saw and promoted only if both gates pass (`models.vma.retrain.gate_passes`).
+saved either way with what it saw and promoted only if both gates pass (`models.vma.gate.gate_passes`).
 """
 
 import time
@@ -26,6 +26,7 @@ from models.vma.element_masks.propose import inference_for, predict_site_masks
 from models.vma.element_masks.replay import rehearsed_reconstructions, replay_sites
 from models.vma.element_masks.train import fit_masks, training_site
 from models.vma.evaluate import evaluate_proposer
+from models.vma.gate import TIME_CONFIDENCE, check_time_confidence, gate_passes
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.retrain import (
     LABEL_STATES,
@@ -34,7 +35,6 @@ from models.vma.retrain import (
     Corrections,
     RetrainResult,
     ReviewGate,
-    gate_passes,
     save_candidate,
 )
 from models.vma.train import DAMAGE_SEED_BASE
@@ -70,6 +70,9 @@ class MaskRetrainConfig:
     """The share of training crops cut from the rehearsed sites (the rest from the corrected sites); off by
     default: in the loop bench it helped the held-out BEV sites and hurt the annotator on the reconstructed one
     (README, "Rehearsal while retraining")."""
+    time_confidence: float = TIME_CONFIDENCE
+    """With a `review` gate and each site's time: promoted only when it saves time in at least this share of
+    bootstrap resamples of the validation sites (`models.vma.gate.saving_confidence`; 0: totals alone)."""
 
     def __post_init__(self) -> None:
         if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1 or self.context_m < 0:
@@ -81,6 +84,7 @@ class MaskRetrainConfig:
                 raise ValueError(f"MaskRetrainConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.replay_share < 1.0:
             raise ValueError(f"MaskRetrainConfig.replay_share must be in [0, 1), got {self.replay_share}")
+        check_time_confidence(self.time_confidence, "MaskRetrainConfig")
 
 
 def evaluate_mask_model(
