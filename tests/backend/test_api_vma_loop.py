@@ -210,7 +210,8 @@ def test_retrain_runs_the_gate_and_queues_a_refresh_after_promotion(
     reviewed = outcome["current_metrics"]["review"], outcome["candidate_metrics"]["review"]
     assert all(r["drawing_s"] > 0 and r["correction_s"] > 0 for r in reviewed)  # the annotator gate ran
     assert "simulated annotator" in done["message"] and "faster than drawing" in done["message"]
-    assert all(len(r["per_site_correction_s"]) == len(r["sites"]) for r in reviewed)  # what the confidence reads
+    # each site's time, which the gate's confidence in a saving reads
+    assert all(len(r["per_site_correction_s"]) == len(r["sites"]) for r in reviewed)
     saved = reviewed[1]["correction_s"] < reviewed[0]["correction_s"]
     assert ("of resamples of the sites (90% needed)" in done["message"]) == saved
     if outcome["promoted"]:  # both gates passed
