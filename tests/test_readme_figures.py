@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 from cama_pipeline.surface import SurfaceConfig
+from models.vma.gate import TIME_CONFIDENCE, saving_confidence
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -1724,6 +1725,39 @@ def test_loop_rehearsing_reconstructions_table() -> None:
     )
     assert "--replay-reconstructions 6 --replay-share 0.5 " in recorded["command"]
     _check_rounds(t, recorded, 5, 4)
+
+
+def _check_confident_rounds(t: MarkdownTable, recorded: dict[str, Any]) -> None:
+    """A loop table with the gate's confidence in a saving (column 4): the rounds as `_check_rounds` reads them,
+    and each confidence as recorded and as `saving_confidence` finds it again from the sites' own times."""
+    _check_rounds(t, recorded, 6, 5)
+    for entry in recorded["rounds"][1:]:
+        cells = row(t, next(name for name in t.rows if name.split(" ")[0] == str(entry["round"])))
+        gate = entry["gate"]
+        again = saving_confidence(
+            gate["current"]["review"]["per_site_correction_s"],
+            gate["candidate"]["review"]["per_site_correction_s"],
+        )
+        assert again == gate["saving_confidence"], entry["round"]
+        assert_shows(cells[4], [again], f"round {entry['round']} confidence")
+        saved = gate["candidate"]["review"]["correction_s"] < gate["current"]["review"]["correction_s"]
+        assert entry["promoted"] == (saved and again >= TIME_CONFIDENCE), entry["round"]
+
+
+def test_loop_with_a_confident_saving_table() -> None:
+    """The product's loop (no rehearsal) with the gate wanting a confident saving: the ten-reconstruction gate's
+    command with the confidence at its default, each round as recorded, and what README says of round 3."""
+    t = table("round, a confident saving", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds_confident.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds_confident.json")
+    assert recorded["command"] == results("vma_loop_masks_recon_rounds_gate10.json")["command"]
+    _check_confident_rounds(t, recorded)
+    text = " ".join(readme_text().split())
+    assert f"2 threads, {recorded['seconds']:.0f} s in all" in text
+    gate = recorded["rounds"][3]["gate"]
+    current, candidate = (gate[k]["review"]["per_site_correction_s"] for k in ("current", "candidate"))
+    dearer = sum(new > old for old, new in zip(current, candidate, strict=True))
+    assert (dearer, len(current)) == (9, 13) and "costs the annotator on nine of the thirteen sites" in text
 
 
 def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
