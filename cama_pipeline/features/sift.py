@@ -39,10 +39,11 @@ class SiftExtractor:
 
 
 def verification_options(config: FeaturesConfig) -> pycolmap.TwoViewGeometryOptions:
-    """COLMAP's two-view geometric verification with this project's inlier floor and RANSAC trial count."""
+    """COLMAP's two-view geometric verification with this project's inlier floor, RANSAC trial count and seed."""
     options = pycolmap.TwoViewGeometryOptions()
     options.min_num_inliers = config.min_num_inliers
     options.ransac.dyn_num_trials_multiplier = config.ransac_trials_multiplier
+    options.ransac.random_seed = config.ransac_seed
     return options
 
 
