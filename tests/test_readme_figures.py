@@ -1760,6 +1760,30 @@ def test_loop_with_a_confident_saving_table() -> None:
     assert (dearer, len(current)) == (9, 13) and "costs the annotator on nine of the thirteen sites" in text
 
 
+def test_loop_rehearsing_with_a_confident_saving_table() -> None:
+    """The rehearsing rounds again with the confident-saving gate: the same command, each round as recorded, and
+    round 2's candidate the one whose lower total the confidence refused."""
+    t = table("round, rehearsing, a confident saving", "bench/vma_loop.py")
+    assert_names_source(t, "vma_loop_masks_recon_rounds_rehearse_confident.json", "bench/vma_loop.py")
+    recorded = results("vma_loop_masks_recon_rounds_rehearse_confident.json")
+    assert recorded["command"] == results("vma_loop_masks_recon_rounds_rehearse.json")["command"]
+    _check_confident_rounds(t, recorded)
+    text = " ".join(readme_text().split())
+    assert f"2 threads, {recorded['seconds']:.0f} s in all" in text
+    gate = recorded["rounds"][2]["gate"]
+    current, candidate = (gate[k]["review"] for k in ("current", "candidate"))
+    saved = current["correction_s"] - candidate["correction_s"]
+    share = 100 * saved / current["correction_s"]
+    assert f"{saved:.0f} s ({share:.1f} %) less correction in all" in text
+    faster = sum(
+        new < old
+        for old, new in zip(current["per_site_correction_s"], candidate["per_site_correction_s"], strict=True)
+    )
+    assert faster == 7 and "faster on only seven of the thirteen sites" in text
+    assert f"a saving holds in {100 * gate['saving_confidence']:.0f} % of the resamples" in text
+    assert not recorded["rounds"][2]["promoted"] and saved > 0
+
+
 def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
     """Each refused candidate of the loop scored on the confirmation sites beside v0004, with the same command but
     the checkpoint; what the README concludes from them."""
@@ -1774,26 +1798,61 @@ def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
     assert set(files) == set(t.rows)
     kept = results(files["v0004 (kept)"])
 
-    def arguments(command: str) -> str:
-        return re.sub(r"--(checkpoint|out) \S+ ?", "", command)
-
-    def figures(run: dict[str, Any], condition: str) -> tuple[float, float]:
-        shown = run["results"][condition]["element_masks"]
-        mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
-        return mean_ap, shown["annotator"]["speed_up"]
-
     for label, name in files.items():
-        assert_names_source(t, name, "bench/vma_masks.py")
-        run = results(name)
-        assert arguments(run["command"]) == arguments(kept["command"])
-        assert run["checkpoint"]["version"] == label.split()[0]
-        cells = row(t, label)
-        for cell, condition in ((cells[1], "reconstructed"), (cells[2], "clean")):
-            assert_shows(cell, list(figures(run, condition)), f"{label} {condition}")
+        run = _check_confirmation_row(t, label, name, kept)
         if label != "v0004 (kept)":  # slower on both, lower mAP on the reconstructions, as the README says
-            assert figures(run, "reconstructed") < figures(kept, "reconstructed")
-            assert figures(run, "reconstructed")[1] < figures(kept, "reconstructed")[1]
-            assert figures(run, "clean")[1] < figures(kept, "clean")[1]
+            assert _confirmation_figures(run, "reconstructed") < _confirmation_figures(kept, "reconstructed")
+            assert (
+                _confirmation_figures(run, "reconstructed")[1]
+                < _confirmation_figures(kept, "reconstructed")[1]
+            )
+            assert _confirmation_figures(run, "clean")[1] < _confirmation_figures(kept, "clean")[1]
+
+
+def _confirmation_figures(run: dict[str, Any], condition: str) -> tuple[float, float]:
+    """A `bench/vma_masks.py` run's mAP and speed-up of the element-mask network in one condition."""
+    shown = run["results"][condition]["element_masks"]
+    mean_ap = shown["observed_truth"]["mean_ap"] if condition == "reconstructed" else shown["mean_ap"]
+    return mean_ap, shown["annotator"]["speed_up"]
+
+
+def _check_confirmation_row(t: MarkdownTable, label: str, name: str, kept: dict[str, Any]) -> dict[str, Any]:
+    """A candidate's row of a confirmation table (reconstructions, then BEV) as its results file `name` says, run
+    with the kept model's command but the checkpoint; the run's figures."""
+    assert_names_source(t, name, "bench/vma_masks.py")
+    run = results(name)
+    assert re.sub(r"--(checkpoint|out) \S+ ?", "", run["command"]) == re.sub(
+        r"--(checkpoint|out) \S+ ?", "", kept["command"]
+    )
+    assert run["checkpoint"]["version"] == label.split()[0]
+    cells = row(t, label)
+    for cell, condition in ((cells[1], "reconstructed"), (cells[2], "clean")):
+        assert_shows(cell, list(_confirmation_figures(run, condition)), f"{label} {condition}")
+    return run
+
+
+def test_candidate_the_confident_gate_refused_table() -> None:
+    """The rehearsing run's refused round-2 candidate and v0004 on the confirmation sites of the rebuilt sites:
+    level on the reconstructions, slower on BEV, as README says."""
+    t = table("candidate the confident gate refused", "bench/vma_masks.py")
+    loop = results("vma_loop_masks_recon_rounds_rehearse_confident.json")
+    assert loop["rounds"][2]["candidate"] == "v0006" and not loop["rounds"][2]["promoted"]
+    kept = results("vma_masks_confirm_rebuilt_v0004.json")
+    _check_confirmation_row(t, "v0004 (kept)", "vma_masks_confirm_rebuilt_v0004.json", kept)
+    run = _check_confirmation_row(
+        t, "v0006 (round 2, rehearsing)", "vma_masks_confirm_rehearse_confident_v0006.json", kept
+    )
+    text = " ".join(readme_text().split())
+    recon = [r["results"]["reconstructed"]["element_masks"]["annotator"] for r in (run, kept)]
+    faster = sum(
+        new < old
+        for new, old in zip(recon[0]["per_site_correction_s"], recon[1]["per_site_correction_s"], strict=True)
+    )
+    assert faster == 4 and "faster on four of the six sites" in text
+    assert f"({recon[0]['correction_s']:.0f} s of correction against {recon[1]['correction_s']:.0f} s" in text
+    bev = [r["results"]["clean"]["element_masks"]["annotator"]["correction_s"] for r in (run, kept)]
+    more = 100 * (bev[0] / bev[1] - 1)
+    assert f"costs the annotator {more:.0f} % more ({bev[0]:.0f} s against {bev[1]:.0f} s)" in text
 
 
 def _assert_gate_and_confirmation_cells(
