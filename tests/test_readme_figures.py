@@ -1744,16 +1744,27 @@ def _check_confident_rounds(t: MarkdownTable, recorded: dict[str, Any]) -> None:
         assert entry["promoted"] == (saved and again >= TIME_CONFIDENCE), entry["round"]
 
 
-def test_loop_with_a_confident_saving_table() -> None:
-    """The product's loop (no rehearsal) with the gate wanting a confident saving: the ten-reconstruction gate's
-    command with the confidence at its default, each round as recorded, and what README says of round 3."""
-    t = table("round, a confident saving", "bench/vma_loop.py")
-    assert_names_source(t, "vma_loop_masks_recon_rounds_confident.json", "bench/vma_loop.py")
-    recorded = results("vma_loop_masks_recon_rounds_confident.json")
-    assert recorded["command"] == results("vma_loop_masks_recon_rounds_gate10.json")["command"]
+def _confident_loop(header: str, name: str, command_of: str) -> tuple[dict[str, Any], str]:
+    """A confident-saving loop table checked against its results file `name`, run with the command of the earlier
+    run `command_of`; the recorded run and README's text (whitespace folded)."""
+    t = table(header, "bench/vma_loop.py")
+    assert_names_source(t, name, "bench/vma_loop.py")
+    recorded = results(name)
+    assert recorded["command"] == results(command_of)["command"]
     _check_confident_rounds(t, recorded)
     text = " ".join(readme_text().split())
     assert f"2 threads, {recorded['seconds']:.0f} s in all" in text
+    return recorded, text
+
+
+def test_loop_with_a_confident_saving_table() -> None:
+    """The product's loop (no rehearsal) with the gate wanting a confident saving: the ten-reconstruction gate's
+    command with the confidence at its default, each round as recorded, and what README says of round 3."""
+    recorded, text = _confident_loop(
+        "round, a confident saving",
+        "vma_loop_masks_recon_rounds_confident.json",
+        "vma_loop_masks_recon_rounds_gate10.json",
+    )
     gate = recorded["rounds"][3]["gate"]
     current, candidate = (gate[k]["review"]["per_site_correction_s"] for k in ("current", "candidate"))
     dearer = sum(new > old for old, new in zip(current, candidate, strict=True))
@@ -1763,13 +1774,11 @@ def test_loop_with_a_confident_saving_table() -> None:
 def test_loop_rehearsing_with_a_confident_saving_table() -> None:
     """The rehearsing rounds again with the confident-saving gate: the same command, each round as recorded, and
     round 2's candidate the one whose lower total the confidence refused."""
-    t = table("round, rehearsing, a confident saving", "bench/vma_loop.py")
-    assert_names_source(t, "vma_loop_masks_recon_rounds_rehearse_confident.json", "bench/vma_loop.py")
-    recorded = results("vma_loop_masks_recon_rounds_rehearse_confident.json")
-    assert recorded["command"] == results("vma_loop_masks_recon_rounds_rehearse.json")["command"]
-    _check_confident_rounds(t, recorded)
-    text = " ".join(readme_text().split())
-    assert f"2 threads, {recorded['seconds']:.0f} s in all" in text
+    recorded, text = _confident_loop(
+        "round, rehearsing, a confident saving",
+        "vma_loop_masks_recon_rounds_rehearse_confident.json",
+        "vma_loop_masks_recon_rounds_rehearse.json",
+    )
     gate = recorded["rounds"][2]["gate"]
     current, candidate = (gate[k]["review"] for k in ("current", "candidate"))
     saved = current["correction_s"] - candidate["correction_s"]
@@ -1782,6 +1791,34 @@ def test_loop_rehearsing_with_a_confident_saving_table() -> None:
     assert faster == 7 and "faster on only seven of the thirteen sites" in text
     assert f"a saving holds in {100 * gate['saving_confidence']:.0f} % of the resamples" in text
     assert not recorded["rounds"][2]["promoted"] and saved > 0
+
+
+def test_rebuild_spread_table() -> None:
+    """v0004's figures on three builds of each held-out site, the spread of each and of the total, as recorded, and
+    the README's reading of them."""
+    t = table("held-out site, three builds", "bench/rebuild_spread.py")
+    assert_names_source(t, "rebuild_spread.json", "bench/rebuild_spread.py")
+    recorded = results("rebuild_spread.json")
+    assert "--seeds 0-2 " in recorded["command"] and recorded["checkpoint"].endswith("v0004")
+    for site, entry in recorded["sites"].items():
+        builds = entry["builds"]
+        assert [b["seed"] for b in builds] == [0, 1, 2]
+        cells = row(t, site.split("random-")[-1])
+        assert_shows(cells[1], [b["correction_s"] for b in builds], f"{site} correction")
+        assert_shows(cells[2], [entry["correction_s_spread"]], f"{site} spread")
+        assert_shows(cells[3], [b["speed_up"] for b in builds], f"{site} speed-up")
+        assert_shows(cells[4], [b["mean_ap"] for b in builds], f"{site} mAP")
+    totals = recorded["total_correction_s"]
+    assert_shows(row(t, "all five (total)")[1], totals, "total")
+    spreads = [entry["correction_s_spread"] for entry in recorded["sites"].values()]
+    share = 100 * (max(totals) - min(totals)) / min(totals)
+    text = " ".join(readme_text().split())
+    assert f"moves by {min(spreads):.0f}-{max(spreads):.0f} s from build to build" in text
+    assert (
+        f"total by {recorded['total_correction_s_spread']:.0f} s ({min(totals):.0f}-{max(totals):.0f} s, {share:.1f} %)"
+        in text
+    )
+    assert f"{recorded['seconds']:.0f} s on 2 threads" in text
 
 
 def test_candidates_the_ten_reconstruction_gate_refused_table() -> None:
