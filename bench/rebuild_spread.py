@@ -20,6 +20,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +32,10 @@ from cama_studio.pipeline import run as run_pipeline
 from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
-from models.vma.element_masks.propose import inference_for, predict_site_masks
+from models.vma.element_masks.propose import product_proposer
+from models.vma.rasters import SiteRasters
 from models.vma.validation import reconstruction_of
+from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -58,7 +61,9 @@ def copy_site(site: Path, into: Path) -> Path:
     return into
 
 
-def rebuilt_figures(site: Path, seed: int, scratch: Path, propose: Any) -> dict[str, Any]:
+def rebuilt_figures(
+    site: Path, seed: int, scratch: Path, propose: Callable[[SiteRasters], list[Vector]]
+) -> dict[str, Any]:
     """The whole path on a fresh copy of `site` with verification seed `seed`, and the proposer's figures on it."""
     copy = copy_site(site, scratch / f"{site.name}-seed-{seed}")
     config = PipelineConfig()
@@ -96,11 +101,7 @@ def main() -> None:
     checkpoint = load_mask_checkpoint(args.checkpoint)
     for site in args.site:
         ensure_unseen(checkpoint, site)
-    model = checkpoint.model
-
-    def propose(rasters: Any) -> Any:
-        return predict_site_masks(model, rasters, inference_for(rasters))
-
+    propose = product_proposer(checkpoint.model)
     seeds = seed_range(args.seeds)
     if len(seeds) < 2:
         raise SystemExit(f"--seeds: a spread needs two seeds at least, got {args.seeds!r}")

@@ -61,11 +61,11 @@ from models.vma.element_masks.checkpoint import KIND as MASK_KIND
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import MaskInferenceConfig, inference_for, predict_site_masks
+from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks, product_proposer
 from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
 from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
-from models.vma.gate import TIME_CONFIDENCE, saving_confidence
+from models.vma.gate import TIME_CONFIDENCE, review_saving_confidence
 from models.vma.infer import InferenceConfig
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.retrain import (
@@ -197,8 +197,7 @@ def promoted_proposer(registry: Path) -> Proposer:
     """The registry's promoted model as the product proposes with it (the element-mask network with the
     product's settings for the rasters: `inference_for`)."""
     if checkpoint_kind(registry) == MASK_KIND:
-        model = load_mask_checkpoint(registry).model
-        return lambda rasters: predict_site_masks(model, rasters, inference_for(rasters))
+        return product_proposer(load_mask_checkpoint(registry).model)
     return model_proposer(load_checkpoint(registry).model, InferenceConfig())
 
 
@@ -226,15 +225,6 @@ def retrain_round(
         train=TrainConfig(steps=steps, learning_rate=2e-4), time_confidence=time_confidence
     )
     return retrain_from_corrections(registry, corrections, validation, retrain, review=review_time)
-
-
-def gate_confidence(current: dict[str, Any], candidate: dict[str, Any]) -> float | None:
-    """How sure the candidate's annotator time saving is over the gate's sites (`saving_confidence`), when both
-    reviews carry each site's time."""
-    key = "per_site_correction_s"
-    if key not in current.get("review", {}) or key not in candidate.get("review", {}):
-        return None
-    return saving_confidence(current["review"][key], candidate["review"][key])
 
 
 def plot_path(out: Path) -> Path:
@@ -449,8 +439,9 @@ def main() -> None:
                     "gate": {
                         "current": result.current_metrics,
                         "candidate": result.candidate_metrics,
-                        "saving_confidence": gate_confidence(
-                            result.current_metrics, result.candidate_metrics
+                        "saving_confidence": review_saving_confidence(
+                            result.current_metrics.get("review", {}),
+                            result.candidate_metrics.get("review", {}),
                         ),
                     },
                     "retrain_seconds": round(retrain_s, 1),

@@ -57,6 +57,18 @@ def saving_confidence(current_s: Sequence[float], candidate_s: Sequence[float]) 
     return float((saving[picks].sum(axis=1) > 0).mean())
 
 
+PER_SITE = "per_site_correction_s"
+"""The key of each validation site's correction time in a review (`app.review_effort.review_time`)."""
+
+
+def review_saving_confidence(current: dict[str, Any], candidate: dict[str, Any]) -> float | None:
+    """`saving_confidence` of two models' reviews (`review_time`'s figures) from each site's time; None when either
+    review lacks them (one recorded before they were)."""
+    if PER_SITE not in current or PER_SITE not in candidate:
+        return None
+    return saving_confidence(current[PER_SITE], candidate[PER_SITE])
+
+
 class GateTolerances(Protocol):
     """The gate's tolerances, as every retraining config carries them."""
 
@@ -80,7 +92,5 @@ def gate_passes(current: dict[str, Any], candidate: dict[str, Any], config: Gate
     ours, theirs = current["review"], candidate["review"]
     if not passes_time_gate(ours["correction_s"], theirs["correction_s"], config.time_tolerance):
         return False
-    per_site = "per_site_correction_s"
-    if config.time_confidence == 0 or per_site not in ours or per_site not in theirs:
-        return True
-    return saving_confidence(ours[per_site], theirs[per_site]) >= config.time_confidence
+    sure = review_saving_confidence(ours, theirs) if config.time_confidence > 0 else None
+    return sure is None or sure >= config.time_confidence

@@ -38,7 +38,7 @@ from app.backend.jobs.runner import JobCancelled, JobContext, JobKind, JobResult
 from app.backend.schemas import STRICT
 from app.backend.vma_loop import preaccept_threshold
 from cama_pipeline.io import atomic_write_json
-from models.vma.gate import TIME_CONFIDENCE, saving_confidence
+from models.vma.gate import TIME_CONFIDENCE, review_saving_confidence
 
 if TYPE_CHECKING:
     from models.vma.retrain import Corrections, RetrainConfig
@@ -325,9 +325,8 @@ def _gate_message(
             f"; simulated annotator {new_s:.0f} s vs {old_s:.0f} s before "
             f"({_speed_up(candidate['review'])} vs {_speed_up(current['review'])} faster than drawing)"
         )
-        per_site = "per_site_correction_s"
-        if new_s < old_s and per_site in candidate["review"] and per_site in current["review"]:
-            sure = saving_confidence(current["review"][per_site], candidate["review"][per_site])
+        sure = review_saving_confidence(current["review"], candidate["review"])
+        if new_s < old_s and sure is not None:
             review += f", a saving in {sure:.0%} of resamples of the sites ({time_confidence:.0%} needed)"
     return (
         f"{outcome['candidate']} {verdict}: validation mAP {candidate.get('mean_ap')} vs "

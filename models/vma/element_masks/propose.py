@@ -10,6 +10,7 @@ the tracing only turns masks into polylines. A vector's confidence is the mean p
 """
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -424,3 +425,9 @@ def predict_site_masks(
     vectors = vectors_from_probabilities(rasters, probabilities, config)
     logger.info("element-mask proposer: %d vectors on %s", len(vectors), rasters.name)
     return vectors
+
+
+def product_proposer(model: ElementMaskNet) -> Callable[[SiteRasters], list[Vector]]:
+    """The network proposing as the product does, with the settings for each site's rasters (`inference_for`):
+    what the retrain gate, the loop and the benches score."""
+    return lambda rasters: predict_site_masks(model, rasters, inference_for(rasters))

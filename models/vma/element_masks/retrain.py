@@ -22,12 +22,12 @@ from models.vma.config import config_dict
 from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import inference_for, predict_site_masks
+from models.vma.element_masks.propose import product_proposer
 from models.vma.element_masks.replay import rehearsed_reconstructions, replay_sites
 from models.vma.element_masks.train import fit_masks, training_site
 from models.vma.evaluate import evaluate_proposer
 from models.vma.gate import TIME_CONFIDENCE, check_time_confidence, gate_passes
-from models.vma.rasters import SiteRasters, load_site_rasters
+from models.vma.rasters import load_site_rasters
 from models.vma.retrain import (
     LABEL_STATES,
     NEGATIVE_STATES,
@@ -39,7 +39,7 @@ from models.vma.retrain import (
 )
 from models.vma.train import DAMAGE_SEED_BASE
 from models.vma.validation import ValidationEntry
-from models.vma.vectors import Vector, vectors_from_annotations
+from models.vma.vectors import vectors_from_annotations
 
 REPLAY_FOLDER = "replay-sites"
 """The registry's cache of the generator sites its versions rehearse (`replay`)."""
@@ -91,10 +91,7 @@ def evaluate_mask_model(
     model: ElementMaskNet, sites: Sequence[ValidationEntry], review: ReviewGate | None = None
 ) -> dict[str, Any]:
     """Chamfer-AP of the network's proposals on validation sites, with the `review` figures (key "review")."""
-
-    def propose(rasters: SiteRasters) -> list[Vector]:
-        return predict_site_masks(model, rasters, inference_for(rasters))
-
+    propose = product_proposer(model)
     metrics = evaluate_proposer(propose, sites)
     if review is not None:
         metrics["review"] = review(propose, sites)
