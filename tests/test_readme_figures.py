@@ -2049,3 +2049,39 @@ def test_moving_an_element_whole_table() -> None:
     ]
     text = " ".join(readme_text().split())
     assert f"v0004 falls from {corrections[0]:.0f} s to {corrections[1]:.0f} s" in text
+
+
+def test_crossing_fit_table() -> None:
+    """Both crossing fits on the tuning and the confirmation reconstructions, as recorded, and the BEV figures the
+    README quotes for the change."""
+    t = table("crossings on reconstructions, v0004 proposing", "bench/crossing_fit.py")
+    for name in ("crossing_fit_tuning.json", "crossing_fit_confirm.json"):
+        assert_names_source(t, name, "bench/crossing_fit.py")
+    tuning, confirm = results("crossing_fit_tuning.json"), results("crossing_fit_confirm.json")
+    assert [s.rsplit("-", 1)[-1] for s in tuning["sites"]] == [str(s) for s in range(9113, 9124)]
+    assert len(confirm["sites"]) == 6 and "data/synthetic/default" in confirm["sites"]
+    for label, fit in (
+        ("smallest rectangle round the stripes", "rectangle"),
+        ("block read from the stripes", "stripes"),
+    ):
+        cells = row(t, label)
+        for column, recorded in ((1, tuning), (3, confirm)):
+            figures_of = recorded["fits"][fit]
+            shown = [figures_of["mean_iou"], figures_of["mean_chamfer_m"], figures_of["acceptable_share"]]
+            assert_shows(cells[column], shown, f"{label} crossings")
+            assert_shows(
+                cells[column + 1], [figures_of["correction_s"], figures_of["speed_up"]], f"{label} time"
+            )
+    saved = tuning["fits"]["rectangle"]["correction_s"] - tuning["fits"]["stripes"]["correction_s"]
+    text = " ".join(readme_text().split())
+    assert (
+        f"the annotator saves {saved:.0f} s ({100 * (1 - tuning['correction_ratio_stripes_to_rectangle']):.0f} %)"
+        in text
+    )
+    before = results("vma_masks_confirm_rebuilt_v0004.json")["results"]
+    after = results("vma_masks_confirm_crossing_fit_v0004.json")["results"]
+    for condition in ("clean", "degraded"):
+        old, new = before[condition]["element_masks"], after[condition]["element_masks"]
+        assert f"{old['mean_ap']:.4f} -> {new['mean_ap']:.4f}" in text
+        assert f"{old['class_ap']['ped_crossing']:.3f} to {new['class_ap']['ped_crossing']:.3f}" in text
+        assert old["annotator"]["speed_up"] == pytest.approx(new["annotator"]["speed_up"])

@@ -125,11 +125,12 @@ def drawing_seconds(line: Polyline, config: SimulationConfig, costs: ActionCosts
     return costs.draw_start_s + vertices * costs.draw_vertex_s + costs.draw_finish_s
 
 
-def _chamfer(a: Polyline, b: Polyline) -> float:
+def chamfer(a: Polyline, b: Polyline) -> float:
+    """Chamfer distance of the two shapes, each resampled to the same number of points (metres)."""
     return chamfer_distance(resample_fixed(a.points, _SAMPLES), resample_fixed(b.points, _SAMPLES))
 
 
-def _worst(a: Polyline, b: Polyline) -> float:
+def worst_gap(a: Polyline, b: Polyline) -> float:
     """The largest gap between the two shapes either way (vertices and resampled points): a kink of one, or a
     corner of the other that it cuts or falls short of."""
 
@@ -140,6 +141,11 @@ def _worst(a: Polyline, b: Polyline) -> float:
         )
 
     return max(one_way(a, b), one_way(b, a))
+
+
+def acceptable_as_is(proposal: Polyline, truth: Polyline, config: SimulationConfig) -> bool:
+    """Whether the proposal's shape is close enough to the truth's to accept it unchanged (class aside)."""
+    return chamfer(proposal, truth) <= config.accept_m and worst_gap(proposal, truth) <= config.accept_max_m
 
 
 def _mean_distance_to(line: LineString, points: np.ndarray) -> float:
@@ -262,11 +268,7 @@ def decide(
         return Decision("reject")
     truth = truths[index]
     relabel = truth.cls if truth.cls != proposal.cls else None
-    if (
-        relabel is None
-        and _chamfer(proposal, truth) <= config.accept_m
-        and _worst(proposal, truth) <= config.accept_max_m
-    ):
+    if relabel is None and acceptable_as_is(proposal, truth, config):
         return Decision("accept", target=index)
     merged = tuple(
         k

@@ -23,6 +23,7 @@ from shapely.geometry import LineString
 from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
+from models.vma.crossing_block import stripe_block
 from models.vma.element_masks.net import STRIDE, ElementMaskNet
 from models.vma.infer import window_origins
 from models.vma.patches import site_grid
@@ -76,6 +77,10 @@ class MaskInferenceConfig:
     than this straight ahead, is carried on to it (`carried_to_border`; 0: never) ..."""
     border_min_m: float = 0.4
     """... when the edge is at least this far ahead."""
+    crossing_fit: Literal["rectangle", "stripes"] = "stripes"
+    """How a crossing's block is read off the stripes the rasters show (`read_crossing`): the smallest rectangle
+    round them (`rule_based.crosswalk_vectors`), or its axis from the stripes' edges and its width where their
+    profile holds (`models.vma.crossing_block`), which stray smeared cells do not tilt or widen."""
     boundary_evidence: Literal["none", "road_edge"] = "none"
     """What boundaries snap to where the rasters show it: nothing (a generator's rasters: the network's band is
     nearer the true kerb line than the curb label's centre), or the road's sharp edge next to observed off-road
@@ -99,6 +104,10 @@ class MaskInferenceConfig:
             raise ValueError(
                 "MaskInferenceConfig: need 0 <= border_min_m <= border_reach_m, got "
                 f"{self.border_min_m}, {self.border_reach_m}"
+            )
+        if self.crossing_fit not in ("rectangle", "stripes"):
+            raise ValueError(
+                f"MaskInferenceConfig.crossing_fit must be 'rectangle' or 'stripes', got {self.crossing_fit!r}"
             )
         if self.boundary_evidence not in ("none", "road_edge"):
             raise ValueError(
@@ -256,7 +265,7 @@ def read_crossing(
     The network finds the crossing (missed or worn stripes included) but its block's edges are as soft as its
     band; where the stripes inside it (within `refine_reach_m`) cover at least a sixth of its area (a third of
     what zebra stripes cover), the rule-based block of those stripes, carried to the kerbs as the rules carry it,
-    is the sharper ring."""
+    is the sharper ring, fitted to the stripes as `config.crossing_fit` says."""
     res = rasters.resolution_m
     reach = max(1, round(config.refine_reach_m / res))
     region = (
@@ -269,7 +278,13 @@ def read_crossing(
     if stripes.sum() < inside.sum() / 6:  # zebra stripes cover about half of a block
         return ring
     blocks = crosswalk_vectors(rasters, stripes, config.rule)
-    return blocks[0].points if len(blocks) == 1 else ring
+    if len(blocks) != 1:
+        return ring
+    fitted = None
+    if config.crossing_fit == "stripes":
+        observed = rasters.semantic != int(Semantic.UNOBSERVED)
+        fitted = stripe_block(rasters, stripes, observed, config.rule, rectangle=blocks[0].points)
+    return blocks[0].points if fitted is None else fitted
 
 
 def road_edge_band(rasters: SiteRasters, rule: RuleConfig) -> np.ndarray:
