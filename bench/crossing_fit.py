@@ -28,12 +28,14 @@ from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is,
 from app.review_effort.review_time import MIN_CONFIDENCE, review_time
 from app.review_effort.truth import observed_true_polylines
 from cama_pipeline.io import atomic_write_json
-from models.vma.checkpoint import ensure_unseen
-from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.propose import inference_for, predict_probabilities, vectors_from_probabilities
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.validation import ValidationSite, reconstruction_of
 from models.vma.vectors import Vector
+
+# the shared conditions: `bench` is a package at the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.vma_measures import unseen_mask_checkpoint  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 FITS = ("rectangle", "stripes")
@@ -119,9 +121,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS / "crossing_fit.json")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    checkpoint = load_mask_checkpoint(args.checkpoint)
-    for site in args.site:
-        ensure_unseen(checkpoint, site)
+    checkpoint = unseen_mask_checkpoint(args.checkpoint, args.site)
     started = time.perf_counter()
     figures = measure([reconstruction_of(site) for site in args.site], checkpoint.model)
     report = {

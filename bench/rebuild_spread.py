@@ -29,9 +29,7 @@ import torch
 from cama_pipeline.io import atomic_write_json
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
-from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
-from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.propose import product_proposer
 from models.vma.rasters import SiteRasters
 from models.vma.validation import reconstruction_of
@@ -39,7 +37,7 @@ from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.vma_measures import reconstructed_figures  # noqa: E402
+from bench.vma_measures import reconstructed_figures, unseen_mask_checkpoint  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SITE_PARTS = ("nuscenes", "ground_truth", "manifest.json")
@@ -98,9 +96,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS / "rebuild_spread.json")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    checkpoint = load_mask_checkpoint(args.checkpoint)
-    for site in args.site:
-        ensure_unseen(checkpoint, site)
+    checkpoint = unseen_mask_checkpoint(args.checkpoint, args.site)
     propose = product_proposer(checkpoint.model)
     seeds = seed_range(args.seeds)
     if len(seeds) < 2:

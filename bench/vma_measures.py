@@ -6,16 +6,28 @@ rasters of full synthetic sites; this module is that one definition of both cond
 """
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from app.review_effort.review_time import review_time
+from models.vma.checkpoint import ensure_unseen
 from models.vma.degrade import DegradeConfig, degrade_rasters
+from models.vma.element_masks.checkpoint import MaskCheckpoint, load_mask_checkpoint
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
 from models.vma.validation import ValidationSite, true_vectors
 from models.vma.vectors import Vector, read_vectors
 
 Proposer = Callable[[SiteRasters], list[Vector]]
+
+
+def unseen_mask_checkpoint(path: Path, sites: list[Path]) -> MaskCheckpoint:
+    """The element-mask network of `path` (a version folder or a registry's promoted one), refused
+    (`ensure_unseen`) when it trained on any of `sites`: a bench never scores a network on what it saw."""
+    checkpoint = load_mask_checkpoint(path)
+    for site in sites:
+        ensure_unseen(checkpoint, site)
+    return checkpoint
 
 
 def on_damaged(propose: Proposer) -> Proposer:
