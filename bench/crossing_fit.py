@@ -12,11 +12,9 @@ Usage: .venv/bin/python bench/crossing_fit.py --site data/synthetic/random-9113 
        [--checkpoint models/vma/element_masks/checkpoints] [--threads 2] [--out bench/results/crossing_fit.json]
 """
 
-import argparse
-import platform
 import sys
-import time
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -25,17 +23,14 @@ import torch
 from shapely.geometry import Polygon
 
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer
-from app.review_effort.review_time import MIN_CONFIDENCE, review_time
-from app.review_effort.truth import observed_true_polylines
-from cama_pipeline.io import atomic_write_json
-from models.vma.element_masks.propose import inference_for, predict_probabilities, vectors_from_probabilities
-from models.vma.rasters import SiteRasters, load_site_rasters
-from models.vma.validation import ValidationSite, reconstruction_of
+from app.review_effort.review_time import MIN_CONFIDENCE
+from models.vma.element_masks.propose import MaskInferenceConfig
+from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.vma_measures import unseen_mask_checkpoint  # noqa: E402
+from bench.vma_measures import compare_settings, settings_bench  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 FITS = ("rectangle", "stripes")
@@ -82,62 +77,28 @@ def fit_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> dict[s
 
 def measure(sites: list[ValidationSite], model: torch.nn.Module) -> dict[str, Any]:
     """Both fits on every site (the network run once a site)."""
-    probabilities: dict[str, np.ndarray] = {}
-
-    def proposer(fit: str):
-        def propose(rasters: SiteRasters) -> list[Vector]:
-            config = replace(inference_for(rasters), crossing_fit=fit)
-            key = rasters.georeference.model_dump_json()  # where the raster lies: one per site
-            if key not in probabilities:
-                probabilities[key] = predict_probabilities(model, rasters, config)
-            return vectors_from_probabilities(rasters, probabilities[key], config)
-
-        return propose
-
-    config, figures = SimulationConfig(), {}
-    for fit in FITS:
-        propose, rows = proposer(fit), []
-        for site in sites:
-            rasters = load_site_rasters(site.rasters)
-            rows += crossing_errors(
-                propose(rasters), observed_true_polylines(site.site, rasters, site.frame), config
-            )
-        figures[fit] = fit_figures(rows, review_time(propose, sites))
-        print(
-            f"{fit}: {figures[fit]['crossings']} crossings, IoU {figures[fit]['mean_iou']:.3f}, "
-            f"{figures[fit]['correction_s']:.1f} s of correction ({figures[fit]['speed_up']:.2f}x)",
-            flush=True,
-        )
-    return figures
+    settings = {fit: partial(_with_fit, fit) for fit in FITS}
+    compared = compare_settings(sites, model, settings, crossing_errors)
+    return {fit: fit_figures(c["rows"], c["annotator"]) for fit, c in compared.items()}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--site", type=Path, action="append", required=True, help="reconstructed site (repeatable)"
-    )
-    parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/element_masks/checkpoints"))
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=RESULTS / "crossing_fit.json")
-    args = parser.parse_args()
-    torch.set_num_threads(args.threads)
-    checkpoint = unseen_mask_checkpoint(args.checkpoint, args.site)
-    started = time.perf_counter()
-    figures = measure([reconstruction_of(site) for site in args.site], checkpoint.model)
-    report = {
-        "command": "python bench/crossing_fit.py "
-        + "".join(f"--site {site} " for site in args.site)
-        + f"--checkpoint {args.checkpoint} --threads {args.threads}",
-        "checkpoint": str(checkpoint.path),
-        "sites": [str(site) for site in args.site],
+def _with_fit(fit: str, config: MaskInferenceConfig) -> MaskInferenceConfig:
+    return replace(config, crossing_fit=fit)
+
+
+def summary(figures: dict[str, Any]) -> dict[str, Any]:
+    """The report's figures: both fits and the ratio of their correction times."""
+    return {
         "fits": figures,
         "correction_ratio_stripes_to_rectangle": figures["stripes"]["correction_s"]
         / figures["rectangle"]["correction_s"],
-        "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
-        "seconds": round(time.perf_counter() - started, 1),
     }
-    atomic_write_json(args.out, report)
-    print(f"written to {args.out}")
+
+
+def main() -> None:
+    settings_bench(
+        "bench/crossing_fit.py", __doc__.splitlines()[0], RESULTS / "crossing_fit.json", measure, summary
+    )
 
 
 if __name__ == "__main__":

@@ -5,17 +5,33 @@ score a proposer on held-out BEV sites with reconstruction-like damage and on th
 rasters of full synthetic sites; this module is that one definition of both conditions.
 """
 
+import argparse
+import platform
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import torch
+
+from app.review_effort.plan import Polyline, SimulationConfig
 from app.review_effort.review_time import review_time
+from app.review_effort.truth import observed_true_polylines
+from cama_pipeline.io import atomic_write_json
+from cama_pipeline.site_identity import SeenSiteError
 from models.vma.checkpoint import ensure_unseen
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import MaskCheckpoint, load_mask_checkpoint
+from models.vma.element_masks.propose import (
+    MaskInferenceConfig,
+    inference_for,
+    predict_probabilities,
+    vectors_from_probabilities,
+)
 from models.vma.evaluate import evaluate_sites
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
-from models.vma.validation import ValidationSite, true_vectors
+from models.vma.validation import ValidationSite, reconstruction_of, true_vectors
 from models.vma.vectors import Vector, read_vectors
 
 Proposer = Callable[[SiteRasters], list[Vector]]
@@ -65,3 +81,89 @@ def reconstructed_figures(propose: Proposer, reconstructions: list[ValidationSit
         "annotator": review_time(propose, reconstructions),
         "sites": [str(s.site) for s in reconstructions],
     }
+
+
+Setting = Callable[[MaskInferenceConfig], MaskInferenceConfig]
+"""A change of the product's inference settings (`inference_for`) for one site's rasters."""
+ElementErrors = Callable[[list[Vector], list[Polyline], SimulationConfig], list[dict[str, Any]]]
+"""One row per proposal of interest, scored against the observed true elements of its site."""
+
+
+def compare_settings(
+    sites: list[ValidationSite],
+    model: torch.nn.Module,
+    settings: dict[str, Setting],
+    element_errors: ElementErrors,
+) -> dict[str, dict[str, Any]]:
+    """Each named setting of the element-mask network's tracing on every reconstruction in one run, the network
+    run once a site for all of them: per setting the `element_errors` rows over all sites and the scripted
+    annotator's review (`review_time`)."""
+    probabilities: dict[str, np.ndarray] = {}
+
+    def proposer(setting: Setting) -> Proposer:
+        def propose(rasters: SiteRasters) -> list[Vector]:
+            config = setting(inference_for(rasters))
+            key = rasters.georeference.model_dump_json()  # where the raster lies: one per site
+            if key not in probabilities:
+                probabilities[key] = predict_probabilities(model, rasters, config)
+            return vectors_from_probabilities(rasters, probabilities[key], config)
+
+        return propose
+
+    config, compared = SimulationConfig(), {}
+    for name, setting in settings.items():
+        propose, rows = proposer(setting), []
+        for site in sites:
+            rasters = load_site_rasters(site.rasters)
+            rows += element_errors(
+                propose(rasters), observed_true_polylines(site.site, rasters, site.frame), config
+            )
+        annotator = review_time(propose, sites)
+        compared[name] = {"rows": rows, "annotator": annotator}
+        print(
+            f"{name}: {len(rows)} elements scored, {annotator['correction_s']:.1f} s of correction "
+            f"({annotator['speed_up']:.2f}x)",
+            flush=True,
+        )
+    return compared
+
+
+def settings_bench(
+    script: str,
+    description: str,
+    default_out: Path,
+    measure: Callable[[list[ValidationSite], torch.nn.Module], dict[str, Any]],
+    summary: Callable[[dict[str, Any]], dict[str, Any]],
+) -> None:
+    """The command line of a bench that compares tracing settings of the element-mask network on reconstructions:
+    `--site` (repeatable), `--checkpoint`, `--threads`, `--out`. The checkpoint is refused on a site it saw (exit 2,
+    the site named, nothing written); the
+    report (the command, checkpoint and sites, the `summary` of `measure`'s figures, the machine and the run's
+    seconds) is written atomically."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument(
+        "--site", type=Path, action="append", required=True, help="reconstructed site (repeatable)"
+    )
+    parser.add_argument("--checkpoint", type=Path, default=Path("models/vma/element_masks/checkpoints"))
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=default_out)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    try:
+        checkpoint = unseen_mask_checkpoint(args.checkpoint, args.site)
+    except SeenSiteError as error:
+        parser.exit(2, f"{script}: {error}\n")
+    started = time.perf_counter()
+    figures = measure([reconstruction_of(site) for site in args.site], checkpoint.model)
+    report = {
+        "command": f"python {script} "
+        + "".join(f"--site {site} " for site in args.site)
+        + f"--checkpoint {args.checkpoint} --threads {args.threads}",
+        "checkpoint": str(checkpoint.path),
+        "sites": [str(site) for site in args.site],
+        **summary(figures),
+        "machine": {"cpu_threads": args.threads, "platform": platform.platform(), "device": "cpu"},
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    atomic_write_json(args.out, report)
+    print(f"written to {args.out}")

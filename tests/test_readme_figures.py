@@ -2085,3 +2085,52 @@ def test_crossing_fit_table() -> None:
         assert f"{old['mean_ap']:.4f} -> {new['mean_ap']:.4f}" in text
         assert f"{old['class_ap']['ped_crossing']:.3f} to {new['class_ap']['ped_crossing']:.3f}" in text
         assert old["annotator"]["speed_up"] == pytest.approx(new["annotator"]["speed_up"])
+
+
+def test_boundary_gap_table() -> None:
+    """Both boundary bands on the tuning, confirmation and gate-validation reconstructions, as recorded, and the
+    mAP figures the README quotes for the change."""
+    t = table("boundaries on reconstructions, v0004 proposing", "bench/boundary_gap.py")
+    files = {
+        "tuning 9113-9123": "boundary_gap_tuning.json",
+        "confirmation, six sites": "boundary_gap_confirm.json",
+        "gate validation 9007, 9011": "boundary_gap_9007_9011.json",
+    }
+    for prefix, name in files.items():
+        assert_names_source(t, name, "bench/boundary_gap.py")
+        recorded = results(name)
+        (label,) = [label for label in t.rows if label.startswith(prefix)]
+        assert f"({recorded['settings']['road_edge']['boundaries']} boundaries)" in label or (
+            f"({recorded['settings']['road_edge']['boundaries']})" in label
+        )
+        cells = row(t, label)
+        for column, setting in ((1, "road_edge"), (2, "across_gap")):
+            shown = recorded["settings"][setting]
+            assert_shows(
+                cells[column],
+                [
+                    shown["acceptable_share"],
+                    shown["vertices_off_share"],
+                    shown["correction_s"],
+                    shown["speed_up"],
+                ],
+                f"{label} {setting}",
+            )
+        assert_shows(
+            cells[3],
+            [recorded["correction_ratio_across_gap_to_road_edge"], recorded["saving_confidence"]],
+            f"{label} ratio",
+        )
+    assert [s.rsplit("-", 1)[-1] for s in results(files["tuning 9113-9123"])["sites"]] == [
+        str(s) for s in range(9113, 9124)
+    ]
+    before = results("vma_masks_confirm_crossing_fit_v0004.json")["results"]["reconstructed"]["element_masks"]
+    after = results("vma_masks_confirm_kerb_gap_v0004.json")["results"]["reconstructed"]["element_masks"]
+    text = " ".join(readme_text().split())
+    old, new = before["observed_truth"], after["observed_truth"]
+    assert (
+        f"boundary AP falls from {old['class_ap']['boundary']:.3f} to {new['class_ap']['boundary']:.3f}"
+        in text
+    )
+    assert f"(mAP {old['mean_ap']:.3f} -> {new['mean_ap']:.3f}" in text
+    assert f"from {before['annotator']['speed_up']:.2f}x to {after['annotator']['speed_up']:.2f}x" in text

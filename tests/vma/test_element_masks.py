@@ -31,7 +31,7 @@ from models.vma.element_masks.propose import (
 from models.vma.element_masks.targets import element_masks
 from models.vma.element_masks.train import jitter_appearance, smeared_kerbs, train_masks, training_site
 from models.vma.patches import site_grid
-from models.vma.rasters import NUM_SEMANTIC, load_site_rasters
+from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters
 from models.vma.rule_based import RuleConfig
 from models.vma.vectors import CLASSES, Vector
 from tests.vma.vma_test_sites import ORIGIN_XY, global_xy
@@ -228,6 +228,38 @@ def test_the_road_edge_band_straddles_the_edge_and_configs_name_bad_evidence(dra
     assert set(np.nonzero(band.any(axis=0))[0].tolist()) == {299, 300}  # the cells on both sides of the edge
     with pytest.raises(ValueError, match="boundary_evidence"):
         MaskInferenceConfig(boundary_evidence="curb")  # type: ignore[arg-type]
+
+
+def _kerb_with_hidden_face(drawn_site: Path, hidden_cells: int) -> SiteRasters:
+    """Road west of x = 30 m, then `hidden_cells` unobserved columns (a kerb's face no camera saw), then observed
+    ground, and unobserved again from x = 45 m."""
+    rasters = load_site_rasters(drawn_site)
+    semantic = np.full(rasters.shape, int(Semantic.BACKGROUND), np.uint8)
+    semantic[:, :300] = int(Semantic.ROAD)
+    semantic[:, 300 : 300 + hidden_cells] = int(Semantic.UNOBSERVED)
+    semantic[:, 450:] = int(Semantic.UNOBSERVED)
+    return replace(rasters, semantic=semantic)
+
+
+def test_the_road_edge_band_spans_the_kerbs_hidden_face_and_boundaries_lie_in_its_middle(
+    drawn_site: Path,
+) -> None:
+    rasters = _kerb_with_hidden_face(drawn_site, 3)  # unobserved x = 30.0-30.2 m: the kerb lies at 30.1 m
+    columns = set(np.nonzero(road_edge_band(rasters, RuleConfig()).any(axis=0))[0].tolist())
+    assert columns == {299, 300, 301, 302, 303}  # last road cell, the strip, first ground cell
+    at_edge = road_edge_band(rasters, RuleConfig(), across_gap=False)
+    assert set(np.nonzero(at_edge.any(axis=0))[0].tolist()) == {299, 300}
+    # the network's band at the road's edge (x = 29.95 m); its refined line moves to the strip's middle
+    xs = np.arange(rasters.shape[1]) * rasters.resolution_m
+    probability = np.tile(np.clip(1.0 - np.abs(xs - 29.95) / 0.4, 0.0, 1.0), (rasters.shape[0], 1))
+    traced = np.array([global_xy(29.9, 5), global_xy(29.9, 35)])
+    config = MaskInferenceConfig()
+    for band, kerb_x in ((road_edge_band(rasters, config.rule), 30.1), (at_edge, 29.95)):
+        line = refined_line(rasters, probability.astype(np.float32), traced, config, band)
+        assert np.abs(line[:, 0] - ORIGIN_XY[0] - kerb_x).max() < 0.03
+    # ground 2 m beyond the road is no kerb: the road runs into unseen cells there, and no band is drawn
+    wide = _kerb_with_hidden_face(drawn_site, 20)
+    assert not road_edge_band(wide, RuleConfig()).any()
 
 
 def test_a_boundary_end_pulled_aside_goes_back_on_the_lines_course() -> None:

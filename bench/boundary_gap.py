@@ -1,0 +1,121 @@
+"""Where the element-mask proposer's boundaries lie on reconstructions: the road's edge as their evidence against
+the middle of the unobserved strip between the road and the ground beside it (`MaskInferenceConfig.across_kerb_gap`,
+`element_masks.propose.road_edge_band`), in one run.
+
+On each `--site`'s reconstruction (a synthetic site with a finished workspace, `reconstruction_of`) the promoted
+network of `--checkpoint` predicts once; both settings trace its masks with the product's other settings. Per
+setting: each proposed boundary (at the review's confidence floor) against the observed true boundary it lies along
+(mean distance within the annotator's match reach): its Chamfer distance, its farthest point from the truth, the
+share of its vertices farther than the annotator's vertex tolerance (each one a drag), and whether the scripted
+annotator would accept it as it is (Chamfer <= 0.25 m, no point beyond 0.5 m); then the annotator's correction time
+over all elements per site (`review_time`), with the ratio of the two settings' totals and the confidence that the saving holds across sites (`saving_confidence`, the gate's bootstrap). A checkpoint is refused on a
+site it saw (`ensure_unseen`).
+
+Usage: .venv/bin/python bench/boundary_gap.py --site data/synthetic/random-9113 [--site ...]
+       [--checkpoint models/vma/element_masks/checkpoints] [--threads 2] [--out bench/results/boundary_gap.json]
+"""
+
+import sys
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from shapely.geometry import LineString, Point
+
+from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer, worst_gap
+from app.review_effort.review_time import MIN_CONFIDENCE
+from models.vma.element_masks.propose import MaskInferenceConfig
+from models.vma.gate import saving_confidence
+from models.vma.validation import ValidationSite
+from models.vma.vectors import Vector
+
+# the shared conditions: `bench` is a package at the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.vma_measures import compare_settings, settings_bench  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+SETTINGS = {"road_edge": False, "across_gap": True}
+"""Name of each setting in the results -> `MaskInferenceConfig.across_kerb_gap`."""
+
+
+def boundary_errors(
+    proposals: list[Vector], truths: list[Polyline], config: SimulationConfig
+) -> list[dict[str, Any]]:
+    """Each proposed boundary against the true boundary it lies along (none within `config.match_m`: left out)."""
+    lines = [(t, LineString(t.points)) for t in truths if t.cls == "boundary"]
+    rows = []
+    for vector in proposals:
+        if vector.cls != "boundary" or vector.score < MIN_CONFIDENCE or not lines:
+            continue
+        distances = [np.mean([line.distance(Point(p)) for p in vector.points]) for _, line in lines]
+        nearest = int(np.argmin(distances))
+        if distances[nearest] > config.match_m:
+            continue
+        truth, line = lines[nearest]
+        proposal = Polyline(vector.cls, vector.points)
+        off = [line.distance(Point(p)) > config.vertex_tolerance_m for p in vector.points]
+        rows.append(
+            {
+                "chamfer_m": chamfer(proposal, truth),
+                "worst_gap_m": worst_gap(proposal, truth),
+                "vertices_off_share": float(np.mean(off)),
+                "acceptable": acceptable_as_is(proposal, truth, config),
+            }
+        )
+    return rows
+
+
+def setting_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> dict[str, Any]:
+    """The boundaries' means and the annotator's totals of one setting."""
+
+    def mean(key: str) -> float | None:
+        return float(np.mean([r[key] for r in rows])) if rows else None
+
+    return {
+        "boundaries": len(rows),
+        "mean_chamfer_m": mean("chamfer_m"),
+        "median_chamfer_m": float(np.median([r["chamfer_m"] for r in rows])) if rows else None,
+        "mean_worst_gap_m": mean("worst_gap_m"),
+        "vertices_off_share": mean("vertices_off_share"),
+        "acceptable_share": mean("acceptable"),
+        "correction_s": annotator["correction_s"],
+        "drawing_s": annotator["drawing_s"],
+        "speed_up": annotator["speed_up"],
+        "per_site_correction_s": annotator["per_site_correction_s"],
+    }
+
+
+def measure(sites: list[ValidationSite], model: torch.nn.Module) -> dict[str, Any]:
+    """Both settings on every site (the network run once a site)."""
+    settings = {name: partial(_across_gap, across) for name, across in SETTINGS.items()}
+    compared = compare_settings(sites, model, settings, boundary_errors)
+    return {name: setting_figures(c["rows"], c["annotator"]) for name, c in compared.items()}
+
+
+def _across_gap(across: bool, config: MaskInferenceConfig) -> MaskInferenceConfig:
+    return replace(config, across_kerb_gap=across)
+
+
+def summary(figures: dict[str, Any]) -> dict[str, Any]:
+    """The report's figures: both bands, the ratio of their correction times and the saving's confidence."""
+    return {
+        "settings": figures,
+        "correction_ratio_across_gap_to_road_edge": figures["across_gap"]["correction_s"]
+        / figures["road_edge"]["correction_s"],
+        "saving_confidence": saving_confidence(
+            figures["road_edge"]["per_site_correction_s"], figures["across_gap"]["per_site_correction_s"]
+        ),
+    }
+
+
+def main() -> None:
+    settings_bench(
+        "bench/boundary_gap.py", __doc__.splitlines()[0], RESULTS / "boundary_gap.json", measure, summary
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

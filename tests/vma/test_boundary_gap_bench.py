@@ -1,0 +1,57 @@
+"""`bench/boundary_gap.py` scores each proposed boundary against the true boundary it lies along."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.review_effort.plan import Polyline, SimulationConfig
+from bench import boundary_gap, vma_measures
+from bench.boundary_gap import boundary_errors
+from cama_pipeline.site_identity import SeenSiteError
+from models.vma.vectors import Vector
+
+
+def line(y: float, x0: float = 0.0, x1: float = 30.0) -> np.ndarray:
+    return np.column_stack([np.linspace(x0, x1, 31), np.full(31, y)])
+
+
+def test_each_boundary_is_scored_against_the_truth_it_lies_along() -> None:
+    truths = [
+        Polyline("boundary", line(0.0)),
+        Polyline("boundary", line(20.0)),
+        Polyline("divider", line(10.0)),
+    ]
+    hooked = line(20.3)
+    hooked[-1] = [30.0, 19.2]  # 0.3 m on the road side, and its end bent 0.8 m into the road
+    proposals = [
+        Vector("boundary", line(0.1), 0.9),  # within the acceptance
+        Vector("boundary", hooked, 0.9),
+        Vector("boundary", line(50.0), 0.9),  # along no true boundary: left out
+        Vector("boundary", line(0.0), 0.01),  # under the review's confidence floor
+        Vector("divider", line(10.0), 0.9),
+    ]
+    rows = boundary_errors(proposals, truths, SimulationConfig())
+    assert len(rows) == 2
+    assert rows[0]["acceptable"] and rows[0]["chamfer_m"] == pytest.approx(0.1)
+    assert rows[0]["vertices_off_share"] == 0.0
+    assert not rows[1]["acceptable"] and rows[1]["worst_gap_m"] == pytest.approx(0.8)
+    assert rows[1]["vertices_off_share"] == 1.0
+
+
+def test_the_bench_refuses_a_checkpoint_on_a_site_it_saw(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def seen(path: Path, sites: list[Path]) -> None:
+        raise SeenSiteError(f"{sites[0]}: VMA checkpoint {path} was trained on this folder")
+
+    monkeypatch.setattr(vma_measures, "unseen_mask_checkpoint", seen)
+    out = tmp_path / "boundary_gap.json"
+    monkeypatch.setattr(sys, "argv", ["boundary_gap.py", "--site", "data/synthetic/seen", "--out", str(out)])
+    with pytest.raises(SystemExit) as exited:
+        boundary_gap.main()
+    assert exited.value.code == 2
+    error = capsys.readouterr().err
+    assert "bench/boundary_gap.py: data/synthetic/seen" in error and "trained on" in error
+    assert not out.exists()
