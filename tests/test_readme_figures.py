@@ -2095,6 +2095,7 @@ def test_boundary_gap_table() -> None:
         "tuning 9113-9123": "boundary_gap_tuning.json",
         "confirmation, six sites": "boundary_gap_confirm.json",
         "gate validation 9007, 9011": "boundary_gap_9007_9011.json",
+        "fresh 9201-9210": "boundary_gap_fresh.json",
     }
     for prefix, name in files.items():
         assert_names_source(t, name, "bench/boundary_gap.py")
@@ -2121,9 +2122,8 @@ def test_boundary_gap_table() -> None:
             [recorded["correction_ratio_across_gap_to_road_edge"], recorded["saving_confidence"]],
             f"{label} ratio",
         )
-    assert [s.rsplit("-", 1)[-1] for s in results(files["tuning 9113-9123"])["sites"]] == [
-        str(s) for s in range(9113, 9124)
-    ]
+    for prefix, seeds in (("tuning 9113-9123", range(9113, 9124)), ("fresh 9201-9210", range(9201, 9211))):
+        assert [s.rsplit("-", 1)[-1] for s in results(files[prefix])["sites"]] == [str(s) for s in seeds]
     before = results("vma_masks_confirm_crossing_fit_v0004.json")["results"]["reconstructed"]["element_masks"]
     after = results("vma_masks_confirm_kerb_gap_v0004.json")["results"]["reconstructed"]["element_masks"]
     text = " ".join(readme_text().split())

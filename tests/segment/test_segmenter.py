@@ -372,7 +372,9 @@ def test_a_time_budget_fills_its_seconds_and_records_the_passes(training_site: P
     assert meta["epochs"] == round(meta["metrics"]["steps"] / steps_per_pass, 2)
     assert len(meta["metrics"]["loss"]) == -(-meta["metrics"]["steps"] // steps_per_pass)
     assert meta["device"] == "cpu" and meta["metrics"]["crops_per_second"] > 0
-    assert 3.5 < meta["seconds"] < 120.0  # the budget, not the one pass `epochs` asks for
+    # about the budget, not the one pass `epochs` asks for (the steps above say so exactly); the run plans its
+    # steps at the probe's speed, so with the machine's load changing after the probe it ends early or late
+    assert 2.0 < meta["seconds"] < 120.0
 
 
 @pytest.mark.parametrize(

@@ -245,21 +245,22 @@ def test_the_road_edge_band_spans_the_kerbs_hidden_face_and_boundaries_lie_in_it
     drawn_site: Path,
 ) -> None:
     rasters = _kerb_with_hidden_face(drawn_site, 3)  # unobserved x = 30.0-30.2 m: the kerb lies at 30.1 m
-    columns = set(np.nonzero(road_edge_band(rasters, RuleConfig()).any(axis=0))[0].tolist())
+    across = road_edge_band(rasters, RuleConfig(), across_gap=True)
+    columns = set(np.nonzero(across.any(axis=0))[0].tolist())
     assert columns == {299, 300, 301, 302, 303}  # last road cell, the strip, first ground cell
-    at_edge = road_edge_band(rasters, RuleConfig(), across_gap=False)
+    at_edge = road_edge_band(rasters, RuleConfig())  # the product's band
     assert set(np.nonzero(at_edge.any(axis=0))[0].tolist()) == {299, 300}
     # the network's band at the road's edge (x = 29.95 m); its refined line moves to the strip's middle
     xs = np.arange(rasters.shape[1]) * rasters.resolution_m
     probability = np.tile(np.clip(1.0 - np.abs(xs - 29.95) / 0.4, 0.0, 1.0), (rasters.shape[0], 1))
     traced = np.array([global_xy(29.9, 5), global_xy(29.9, 35)])
     config = MaskInferenceConfig()
-    for band, kerb_x in ((road_edge_band(rasters, config.rule), 30.1), (at_edge, 29.95)):
+    for band, kerb_x in ((across, 30.1), (at_edge, 29.95)):
         line = refined_line(rasters, probability.astype(np.float32), traced, config, band)
         assert np.abs(line[:, 0] - ORIGIN_XY[0] - kerb_x).max() < 0.03
     # ground 2 m beyond the road is no kerb: the road runs into unseen cells there, and no band is drawn
     wide = _kerb_with_hidden_face(drawn_site, 20)
-    assert not road_edge_band(wide, RuleConfig()).any()
+    assert not road_edge_band(wide, RuleConfig(), across_gap=True).any()
 
 
 def test_a_boundary_end_pulled_aside_goes_back_on_the_lines_course() -> None:
