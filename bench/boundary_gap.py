@@ -22,11 +22,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 from shapely.geometry import LineString, Point
 
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer, worst_gap
 from app.review_effort.review_time import MIN_CONFIDENCE
+from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import MaskInferenceConfig
 from models.vma.gate import saving_confidence
 from models.vma.validation import ValidationSite
@@ -88,7 +88,7 @@ def setting_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> di
     }
 
 
-def measure(sites: list[ValidationSite], model: torch.nn.Module) -> dict[str, Any]:
+def measure(sites: list[ValidationSite], model: ElementMaskNet) -> dict[str, Any]:
     """Both settings on every site (the network run once a site)."""
     settings = {name: partial(_across_gap, across) for name, across in SETTINGS.items()}
     compared = compare_settings(sites, model, settings, boundary_errors)
@@ -118,4 +118,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

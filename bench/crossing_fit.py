@@ -16,24 +16,25 @@ import sys
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
-import torch
 from shapely.geometry import Polygon
 
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer
 from app.review_effort.review_time import MIN_CONFIDENCE
+from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import MaskInferenceConfig
 from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.vma_measures import compare_settings, settings_bench  # noqa: E402
+from bench.vma_measures import Setting, compare_settings, settings_bench  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-FITS = ("rectangle", "stripes")
+CrossingFit = Literal["rectangle", "stripes"]
+FITS: tuple[CrossingFit, ...] = ("rectangle", "stripes")
 
 
 def crossing_errors(
@@ -75,14 +76,14 @@ def fit_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> dict[s
     }
 
 
-def measure(sites: list[ValidationSite], model: torch.nn.Module) -> dict[str, Any]:
+def measure(sites: list[ValidationSite], model: ElementMaskNet) -> dict[str, Any]:
     """Both fits on every site (the network run once a site)."""
-    settings = {fit: partial(_with_fit, fit) for fit in FITS}
+    settings: dict[str, Setting] = {fit: partial(_with_fit, fit) for fit in FITS}
     compared = compare_settings(sites, model, settings, crossing_errors)
     return {fit: fit_figures(c["rows"], c["annotator"]) for fit, c in compared.items()}
 
 
-def _with_fit(fit: str, config: MaskInferenceConfig) -> MaskInferenceConfig:
+def _with_fit(fit: CrossingFit, config: MaskInferenceConfig) -> MaskInferenceConfig:
     return replace(config, crossing_fit=fit)
 
 
@@ -102,4 +103,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -8,7 +8,7 @@ rasters of full synthetic sites; this module is that one definition of both cond
 import argparse
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ from cama_pipeline.site_identity import SeenSiteError
 from models.vma.checkpoint import ensure_unseen
 from models.vma.degrade import DegradeConfig, degrade_rasters
 from models.vma.element_masks.checkpoint import MaskCheckpoint, load_mask_checkpoint
+from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
     inference_for,
@@ -91,8 +92,8 @@ ElementErrors = Callable[[list[Vector], list[Polyline], SimulationConfig], list[
 
 def compare_settings(
     sites: list[ValidationSite],
-    model: torch.nn.Module,
-    settings: dict[str, Setting],
+    model: ElementMaskNet,
+    settings: Mapping[str, Setting],
     element_errors: ElementErrors,
 ) -> dict[str, dict[str, Any]]:
     """Each named setting of the element-mask network's tracing on every reconstruction in one run, the network
@@ -132,7 +133,7 @@ def settings_bench(
     script: str,
     description: str,
     default_out: Path,
-    measure: Callable[[list[ValidationSite], torch.nn.Module], dict[str, Any]],
+    measure: Callable[[list[ValidationSite], ElementMaskNet], dict[str, Any]],
     summary: Callable[[dict[str, Any]], dict[str, Any]],
 ) -> None:
     """The command line of a bench that compares tracing settings of the element-mask network on reconstructions:
