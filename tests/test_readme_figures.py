@@ -2072,6 +2072,35 @@ def test_crossing_fit_table() -> None:
             assert_shows(
                 cells[column + 1], [figures_of["correction_s"], figures_of["speed_up"]], f"{label} time"
             )
+    further = table("crossings held out further, v0004 proposing", "bench/crossing_fit.py")
+    for column, name in ((1, "crossing_fit_fresh.json"), (3, "crossing_fit_9007_9011.json")):
+        assert_names_source(further, name, "bench/crossing_fit.py")
+        for label, fit in (
+            ("smallest rectangle round the stripes", "rectangle"),
+            ("block read from the stripes", "stripes"),
+        ):
+            figures_of = results(name)["fits"][fit]
+            shown = [figures_of["mean_iou"], figures_of["mean_chamfer_m"], figures_of["acceptable_share"]]
+            assert_shows(row(further, label)[column], shown, f"{name} {label} crossings")
+            assert_shows(
+                row(further, label)[column + 1],
+                [figures_of["correction_s"], figures_of["speed_up"]],
+                f"{name} {label} time",
+            )
+    fresh = results("crossing_fit_fresh.json")["fits"]
+    lost = [
+        s - r
+        for s, r in zip(
+            fresh["stripes"]["per_site_correction_s"],
+            fresh["rectangle"]["per_site_correction_s"],
+            strict=True,
+        )
+    ]
+    assert len(lost) == 10 and min(lost) > 0  # "every one of the ten loses time"
+    assert (
+        f"({sum(lost):.0f} s in all, {100 * (sum(lost) / fresh['rectangle']['correction_s']):.0f} %)"
+        in " ".join(readme_text().split())
+    )
     saved = tuning["fits"]["rectangle"]["correction_s"] - tuning["fits"]["stripes"]["correction_s"]
     text = " ".join(readme_text().split())
     assert (

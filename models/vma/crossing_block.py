@@ -18,6 +18,9 @@ within a cell of the true block). A person reads a crossing by its stripes, and 
 
 Where the stripes do not show one direction clearly (coherence under `min_coherence`: a worn crossing whose
 stripes merged into a blob), the caller keeps the rectangle.
+
+The product proposes with the rectangle (`MaskInferenceConfig.crossing_fit`): this fit's saving on the
+reconstructions it was chosen on did not hold on fresh ones (README, "Crossings read from their stripes").
 """
 
 import cv2
