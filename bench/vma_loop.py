@@ -60,8 +60,7 @@ from models.vma.config import TrainConfig
 from models.vma.element_masks.checkpoint import KIND as MASK_KIND
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
-from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks, product_proposer
+from models.vma.element_masks.propose import product_proposer
 from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
 from models.vma.element_masks.train import train_masks
 from models.vma.evaluate import evaluate_proposer
@@ -148,10 +147,10 @@ def measure_model(registry: Path, sites: list[Path], reconstructions: list[Valid
         masks = load_mask_checkpoint(registry)
         for site in [*sites, *map(truth_folder, reconstructions)]:
             ensure_unseen(masks, site)
-        figures = {"version": masks.path.name, **measure(mask_proposer(masks.model), sites)}
+        propose = product_proposer(masks.model)
+        figures = {"version": masks.path.name, **measure(propose, sites)}
         if reconstructions:
-            on_reconstruction = mask_proposer(masks.model, MaskInferenceConfig(boundary_evidence="road_edge"))
-            figures["reconstructed"] = reconstructed_figures(on_reconstruction, reconstructions)
+            figures["reconstructed"] = reconstructed_figures(propose, reconstructions)
         return figures
     loaded = load_checkpoint(registry)
     for site in sites:
@@ -161,11 +160,6 @@ def measure_model(registry: Path, sites: list[Path], reconstructions: list[Valid
         own = model_proposer(loaded.model, InferenceConfig(anchored_output="refined"))
         figures["own_points"] = measure(own, sites)
     return figures
-
-
-def mask_proposer(model: ElementMaskNet, config: MaskInferenceConfig | None = None) -> Proposer:
-    """A site's proposals by the element-mask network."""
-    return lambda rasters: predict_site_masks(model, rasters, config)
 
 
 def measure_rule_based(sites: list[Path], reconstructions: list[ValidationSite]) -> dict[str, Any]:
@@ -195,7 +189,7 @@ def bootstrap_model(registry: Path, sites: list[Path], steps: int, refused: list
 
 def promoted_proposer(registry: Path) -> Proposer:
     """The registry's promoted model as the product proposes with it (the element-mask network with the
-    product's settings for the rasters: `inference_for`)."""
+    product's settings: `product_proposer`)."""
     if checkpoint_kind(registry) == MASK_KIND:
         return product_proposer(load_mask_checkpoint(registry).model)
     return model_proposer(load_checkpoint(registry).model, InferenceConfig())

@@ -33,7 +33,7 @@ from models.vma.bev_sites import ensure_bev_sites
 from models.vma.checkpoint import ensure_unseen
 from models.vma.commands import seed_range
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
-from models.vma.element_masks.propose import MaskInferenceConfig, predict_site_masks
+from models.vma.element_masks.propose import predict_site_masks
 from models.vma.evaluate import evaluate_proposer
 from models.vma.rasters import SiteRasters
 from models.vma.rule_based import RuleConfig, propose_rule_based
@@ -74,18 +74,13 @@ def main() -> None:
     def network(rasters: SiteRasters) -> list[Vector]:
         return predict_site_masks(checkpoint.model, rasters)
 
-    def network_on_reconstruction(rasters: SiteRasters) -> list[Vector]:
-        return predict_site_masks(
-            checkpoint.model, rasters, MaskInferenceConfig(boundary_evidence="road_edge")
-        )
-
     def rule_on_reconstruction(rasters: SiteRasters) -> list[Vector]:
         return propose_rule_based(rasters, RuleConfig(boundary_source="road_edge"))
 
     results: dict[str, dict[str, Any]] = {"clean": {}, "degraded": {}, "reconstructed": {}}
     for name, propose, recon_propose in (
         ("rule_based", propose_rule_based, rule_on_reconstruction),
-        ("element_masks", network, network_on_reconstruction),
+        ("element_masks", network, network),
     ):
         console.print(f"evaluating {name} ...")
         for condition, run in (("clean", propose), ("degraded", on_damaged(propose))):

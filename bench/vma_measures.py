@@ -26,7 +26,6 @@ from models.vma.element_masks.checkpoint import MaskCheckpoint, load_mask_checkp
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
-    inference_for,
     predict_probabilities,
     vectors_from_probabilities,
 )
@@ -85,7 +84,7 @@ def reconstructed_figures(propose: Proposer, reconstructions: list[ValidationSit
 
 
 Setting = Callable[[MaskInferenceConfig], MaskInferenceConfig]
-"""A change of the product's inference settings (`inference_for`) for one site's rasters."""
+"""A change of the product's inference settings (the default `MaskInferenceConfig`)."""
 ElementErrors = Callable[[list[Vector], list[Polyline], SimulationConfig], list[dict[str, Any]]]
 """One row per proposal of interest, scored against the observed true elements of its site."""
 
@@ -103,7 +102,7 @@ def compare_settings(
 
     def proposer(setting: Setting) -> Proposer:
         def propose(rasters: SiteRasters) -> list[Vector]:
-            config = setting(inference_for(rasters))
+            config = setting(MaskInferenceConfig())
             key = rasters.georeference.model_dump_json()  # where the raster lies: one per site
             if key not in probabilities:
                 probabilities[key] = predict_probabilities(model, rasters, config)

@@ -2116,25 +2116,24 @@ def test_crossing_fit_table() -> None:
         assert old["annotator"]["speed_up"] == pytest.approx(new["annotator"]["speed_up"])
 
 
-def test_boundary_gap_table() -> None:
-    """Both boundary bands on the tuning, confirmation and gate-validation reconstructions, as recorded, and the
-    mAP figures the README quotes for the change."""
-    t = table("boundaries on reconstructions, v0004 proposing", "bench/boundary_gap.py")
+def test_boundary_evidence_table() -> None:
+    """The three boundary settings on the tuning, confirmation, gate-validation and fresh reconstructions, as
+    recorded, and the totals the README quotes."""
+    t = table("boundaries on reconstructions, v0004 proposing", "bench/boundary_evidence.py")
     files = {
-        "tuning 9113-9123": "boundary_gap_tuning.json",
-        "confirmation, six sites": "boundary_gap_confirm.json",
-        "gate validation 9007, 9011": "boundary_gap_9007_9011.json",
-        "fresh 9201-9210": "boundary_gap_fresh.json",
+        "tuning 9113-9123": "boundary_evidence_tuning.json",
+        "confirmation, six sites": "boundary_evidence_confirm.json",
+        "gate validation 9007, 9011": "boundary_evidence_9007_9011.json",
+        "fresh 9201-9210": "boundary_evidence_fresh.json",
     }
+    before = after = 0.0
     for prefix, name in files.items():
-        assert_names_source(t, name, "bench/boundary_gap.py")
+        assert_names_source(t, name, "bench/boundary_evidence.py")
         recorded = results(name)
         (label,) = [label for label in t.rows if label.startswith(prefix)]
-        assert f"({recorded['settings']['road_edge']['boundaries']} boundaries)" in label or (
-            f"({recorded['settings']['road_edge']['boundaries']})" in label
-        )
+        assert f"({recorded['settings']['road_edge']['boundaries']}" in label
         cells = row(t, label)
-        for column, setting in ((1, "road_edge"), (2, "across_gap")):
+        for column, setting in ((1, "network_band"), (2, "road_edge"), (3, "across_gap")):
             shown = recorded["settings"][setting]
             assert_shows(
                 cells[column],
@@ -2146,20 +2145,25 @@ def test_boundary_gap_table() -> None:
                 ],
                 f"{label} {setting}",
             )
-        assert_shows(
-            cells[3],
-            [recorded["correction_ratio_across_gap_to_road_edge"], recorded["saving_confidence"]],
-            f"{label} ratio",
-        )
+        for column, setting in ((4, "network_band"), (5, "across_gap")):
+            against = recorded["against_road_edge"][setting]
+            assert_shows(
+                cells[column],
+                [against["correction_ratio"], against["saving_confidence"]],
+                f"{label} {setting}",
+            )
+        before += recorded["settings"]["road_edge"]["correction_s"]
+        after += recorded["settings"]["network_band"]["correction_s"]
     for prefix, seeds in (("tuning 9113-9123", range(9113, 9124)), ("fresh 9201-9210", range(9201, 9211))):
         assert [s.rsplit("-", 1)[-1] for s in results(files[prefix])["sites"]] == [str(s) for s in seeds]
-    before = results("vma_masks_confirm_crossing_fit_v0004.json")["results"]["reconstructed"]["element_masks"]
-    after = results("vma_masks_confirm_kerb_gap_v0004.json")["results"]["reconstructed"]["element_masks"]
     text = " ".join(readme_text().split())
-    old, new = before["observed_truth"], after["observed_truth"]
-    assert (
-        f"boundary AP falls from {old['class_ap']['boundary']:.3f} to {new['class_ap']['boundary']:.3f}"
-        in text
-    )
-    assert f"(mAP {old['mean_ap']:.3f} -> {new['mean_ap']:.3f}" in text
-    assert f"from {before['annotator']['speed_up']:.2f}x to {after['annotator']['speed_up']:.2f}x" in text
+    assert f"falls from {before:,.0f} s to {after:,.0f} s ({100 * (1 - after / before):.0f} %)" in text
+    edge = results("vma_masks_confirm_rebuilt_v0004.json")["results"]
+    band = results("vma_masks_confirm_band_v0004.json")["results"]
+    old, new = edge["reconstructed"]["element_masks"], band["reconstructed"]["element_masks"]
+    assert old["observed_truth"]["mean_ap"] == pytest.approx(new["observed_truth"]["mean_ap"], abs=5e-4)
+    assert f"unchanged at {new['observed_truth']['mean_ap']:.3f}" in text
+    assert f"(boundary AP {new['observed_truth']['class_ap']['boundary']:.3f} both ways" in text
+    assert f"goes from {old['annotator']['speed_up']:.2f}x to {new['annotator']['speed_up']:.2f}x" in text
+    for condition in ("clean", "degraded"):
+        assert edge[condition]["element_masks"]["mean_ap"] == band[condition]["element_masks"]["mean_ap"]

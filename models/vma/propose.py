@@ -20,7 +20,7 @@ from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date, m
 from cama_pipeline.surface.outputs import is_surface_bev
 from models.vma.checkpoint import META, load_checkpoint
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
-from models.vma.element_masks.propose import inference_for, predict_site_masks
+from models.vma.element_masks.propose import predict_site_masks
 from models.vma.infer import InferenceConfig, predict_site
 from models.vma.rasters import SiteInputError, SiteRasters, load_site_rasters, raster_dir_of
 from models.vma.rule_based import BoundarySource, RuleConfig, propose_rule_based
@@ -115,9 +115,7 @@ def propose(
     vectors: list[Vector]
     if proposer == "masks" and version is not None:
         masks = load_mask_checkpoint(version, device=str(device_for()))
-        vectors = predict_site_masks(
-            masks.model, rasters, inference_for(rasters), show_progress=show_progress
-        )
+        vectors = predict_site_masks(masks.model, rasters, show_progress=show_progress)
         author = f"vma-masks-{masks.path.name}"
     elif version is not None:
         loaded = load_checkpoint(version, device=str(device_for()))

@@ -85,9 +85,12 @@ class MaskInferenceConfig:
     the stripes' fit saved the scripted annotator 6 % on the reconstructions it was chosen on and cost it 7 % on
     ten fresh ones (README, "Crossings read from their stripes")."""
     boundary_evidence: Literal["none", "road_edge"] = "none"
-    """What boundaries snap to where the rasters show it: nothing (a generator's rasters: the network's band is
-    nearer the true kerb line than the curb label's centre), or the road's sharp edge next to observed off-road
-    ground (a surface stage's rasters, whose kerb labels are smeared; `models.vma.rule_based.road_edge`)."""
+    """What boundaries snap to where the rasters show it: nothing, the network's band (the product, on every kind
+    of rasters), or the road's sharp edge next to observed off-road ground (`models.vma.rule_based.road_edge`).
+    The road's edge was the product's choice on a surface stage's rasters, whose kerb labels are smeared, while
+    the network had seen none; v0004, trained on reconstructions, traces their kerbs better without it: the
+    scripted annotator's correction on 29 reconstructions falls 2,232 -> 2,073 s (README, "What boundaries
+    follow on reconstructions")."""
     across_kerb_gap: bool = False
     """With `boundary_evidence='road_edge'`: the evidence spans the unobserved strip between the road and the
     ground beside it, so boundaries lie in its middle rather than at the road's side of it (`road_edge_band`).
@@ -124,12 +127,6 @@ class MaskInferenceConfig:
             raise ValueError(
                 "MaskInferenceConfig.rule.boundary_source must be 'curb' (boundaries follow their mask)"
             )
-
-
-def inference_for(rasters: SiteRasters) -> MaskInferenceConfig:
-    """The product's inference settings for these rasters: on a reconstruction boundaries snap to the road's
-    edge where it is seen, on a generator's rasters they follow the network's band."""
-    return MaskInferenceConfig(boundary_evidence="road_edge" if rasters.reconstructed else "none")
 
 
 @torch.no_grad()
@@ -481,6 +478,6 @@ def predict_site_masks(
 
 
 def product_proposer(model: ElementMaskNet) -> Callable[[SiteRasters], list[Vector]]:
-    """The network proposing as the product does, with the settings for each site's rasters (`inference_for`):
-    what the retrain gate, the loop and the benches score."""
-    return lambda rasters: predict_site_masks(model, rasters, inference_for(rasters))
+    """The network proposing as the product does (the default `MaskInferenceConfig`, on a generator's rasters and
+    a reconstruction's alike): what the retrain gate, the loop and the benches score."""
+    return lambda rasters: predict_site_masks(model, rasters)

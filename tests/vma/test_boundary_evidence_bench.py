@@ -1,4 +1,4 @@
-"""`bench/boundary_gap.py` scores each proposed boundary against the true boundary it lies along."""
+"""`bench/boundary_evidence.py` scores each proposed boundary against the true boundary it lies along."""
 
 import sys
 from pathlib import Path
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from app.review_effort.plan import Polyline, SimulationConfig
-from bench import boundary_gap, vma_measures
-from bench.boundary_gap import boundary_errors
+from bench import boundary_evidence, vma_measures
+from bench.boundary_evidence import boundary_errors
 from cama_pipeline.site_identity import SeenSiteError
 from models.vma.vectors import Vector
 
@@ -47,11 +47,13 @@ def test_the_bench_refuses_a_checkpoint_on_a_site_it_saw(
         raise SeenSiteError(f"{sites[0]}: VMA checkpoint {path} was trained on this folder")
 
     monkeypatch.setattr(vma_measures, "unseen_mask_checkpoint", seen)
-    out = tmp_path / "boundary_gap.json"
-    monkeypatch.setattr(sys, "argv", ["boundary_gap.py", "--site", "data/synthetic/seen", "--out", str(out)])
+    out = tmp_path / "boundary_evidence.json"
+    monkeypatch.setattr(
+        sys, "argv", ["boundary_evidence.py", "--site", "data/synthetic/seen", "--out", str(out)]
+    )
     with pytest.raises(SystemExit) as exited:
-        boundary_gap.main()
+        boundary_evidence.main()
     assert exited.value.code == 2
     error = capsys.readouterr().err
-    assert "bench/boundary_gap.py: data/synthetic/seen" in error and "trained on" in error
+    assert "bench/boundary_evidence.py: data/synthetic/seen" in error and "trained on" in error
     assert not out.exists()
