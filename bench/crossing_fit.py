@@ -1,12 +1,14 @@
-"""How the element-mask proposer's crossings fit on reconstructions: the smallest rectangle round the stripes against
-the block read from them (`MaskInferenceConfig.crossing_fit`, `models.vma.crossing_block`), in one run.
+"""How the element-mask proposer's crossings fit on reconstructions: the smallest rectangle round the stripes, the
+block read from them, and that block only where it is narrower than the rectangle (`MaskInferenceConfig.crossing_fit`,
+`models.vma.crossing_block`), in one run.
 
 On each `--site`'s reconstruction (a synthetic site with a finished workspace, `reconstruction_of`) the promoted
-network of `--checkpoint` predicts once; both fits trace its masks with the product's other settings. Per fit: each
+network of `--checkpoint` predicts once; every fit traces its masks with the product's other settings. Per fit: each
 proposed crossing (at the review's confidence floor) against the observed true crossing it overlaps most (IoU,
 Chamfer distance, and whether the scripted annotator would accept its shape as it is:
 Chamfer <= 0.25 m, no point beyond 0.5 m), and the annotator's correction time over all elements per site
-(`review_time`), with the ratio of the two fits' totals. A checkpoint is refused on a site it saw (`ensure_unseen`).
+(`review_time`), with each fit's total against the rectangle's and the confidence that its saving holds across
+sites (`saving_confidence`, the gate's bootstrap). A checkpoint is refused on a site it saw (`ensure_unseen`).
 
 Usage: .venv/bin/python bench/crossing_fit.py --site data/synthetic/random-9113 [--site ...]
        [--checkpoint models/vma/element_masks/checkpoints] [--threads 2] [--out bench/results/crossing_fit.json]
@@ -16,7 +18,7 @@ import sys
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, get_args
 
 import numpy as np
 from shapely.geometry import Polygon
@@ -24,7 +26,8 @@ from shapely.geometry import Polygon
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer
 from app.review_effort.review_time import MIN_CONFIDENCE
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import MaskInferenceConfig
+from models.vma.element_masks.propose import CrossingFit, MaskInferenceConfig
+from models.vma.gate import saving_confidence
 from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
 
@@ -33,8 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.vma_measures import Setting, compare_settings, settings_bench  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-CrossingFit = Literal["rectangle", "stripes"]
-FITS: tuple[CrossingFit, ...] = ("rectangle", "stripes")
+FITS: tuple[CrossingFit, ...] = get_args(CrossingFit)
 
 
 def crossing_errors(
@@ -88,11 +90,22 @@ def _with_fit(fit: CrossingFit, config: MaskInferenceConfig) -> MaskInferenceCon
 
 
 def summary(figures: dict[str, Any]) -> dict[str, Any]:
-    """The report's figures: both fits and the ratio of their correction times."""
+    """The report's figures: every fit, and each one's correction time against the rectangle's with the confidence
+    that its saving holds."""
+    base = figures["rectangle"]
     return {
         "fits": figures,
-        "correction_ratio_stripes_to_rectangle": figures["stripes"]["correction_s"]
-        / figures["rectangle"]["correction_s"],
+        "correction_ratio_stripes_to_rectangle": figures["stripes"]["correction_s"] / base["correction_s"],
+        "against_rectangle": {
+            fit: {
+                "correction_ratio": f["correction_s"] / base["correction_s"],
+                "saving_confidence": saving_confidence(
+                    base["per_site_correction_s"], f["per_site_correction_s"]
+                ),
+            }
+            for fit, f in figures.items()
+            if fit != "rectangle"
+        },
     }
 
 

@@ -8,8 +8,8 @@ import pytest
 
 from cama_pipeline.semantics import Semantic
 from models.vma.crossing_block import plateau_span, stripe_block
-from models.vma.element_masks.propose import MaskInferenceConfig
-from models.vma.rasters import load_site_rasters
+from models.vma.element_masks.propose import MaskInferenceConfig, read_crossing, ring_cells, ring_width
+from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.rule_based import RuleConfig, crosswalk_vectors
 from tests.vma.vma_test_sites import drawn_semantic, global_xy, pixel, write_raster_site
 
@@ -78,3 +78,36 @@ def test_a_blob_without_stripes_gives_no_block_and_the_setting_is_checked(tmp_pa
     assert stripe_block(rasters, np.zeros(rasters.shape, bool), observed, RuleConfig()) is None
     with pytest.raises(ValueError, match="crossing_fit"):
         MaskInferenceConfig(crossing_fit="hull")  # type: ignore[arg-type]
+
+
+def _network_ring(rasters: SiteRasters, x0: float, x1: float) -> tuple[np.ndarray, np.ndarray]:
+    """A soft ring round the drawn crossing as the network traces it, and the cells inside it."""
+    corners = np.array([global_xy(x0, 12.5), global_xy(x1, 12.5), global_xy(x1, 27.5), global_xy(x0, 27.5)])
+    ring = np.vstack([corners, corners[:1]])
+    return ring, ring_cells(rasters, ring) > 0
+
+
+def test_the_narrower_fit_takes_the_stripes_block_only_where_stray_cells_widened_the_rectangle(
+    tmp_path: Path,
+) -> None:
+    narrower = MaskInferenceConfig(crossing_fit="narrower")
+    semantic, vectors = drawn_semantic()
+    clean = load_site_rasters(write_raster_site(tmp_path / "clean", semantic.copy(), vectors))
+    ring, inside = _network_ring(clean, 29.6, 34.4)
+    rectangle = read_crossing(clean, ring, inside, MaskInferenceConfig(crossing_fit="rectangle"))
+    # nothing smeared: the block read from the stripes is no narrower, and the rectangle stays
+    np.testing.assert_array_equal(read_crossing(clean, ring, inside, narrower), rectangle)
+
+    crosswalk = int(Semantic.CROSSWALK)
+    semantic[pixel(0, 12.6)[1] : pixel(0, 12.8)[1], pixel(34, 0)[0] : pixel(35.2, 0)[0]] = crosswalk
+    semantic[pixel(0, 27.2)[1] : pixel(0, 27.4)[1], pixel(28.8, 0)[0] : pixel(30, 0)[0]] = crosswalk
+    smeared = load_site_rasters(write_raster_site(tmp_path / "smeared", semantic, vectors))
+    ring, inside = _network_ring(smeared, 28.6, 35.4)
+    wide = read_crossing(smeared, ring, inside, MaskInferenceConfig(crossing_fit="rectangle"))
+    assert ring_width(wide) > 5.0  # the rectangle takes in the smear
+    read = read_crossing(smeared, ring, inside, narrower)
+    assert ring_width(read) == pytest.approx(4.0, abs=0.15)
+    low, high = _extent_along_road(read)
+    assert low == pytest.approx(529.95, abs=0.1) and high == pytest.approx(533.95, abs=0.1), (low, high)
+    with pytest.raises(ValueError, match="crossing_margin_m"):
+        MaskInferenceConfig(crossing_fit="narrower", crossing_margin_m=-0.1)
