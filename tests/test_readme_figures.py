@@ -2167,3 +2167,38 @@ def test_boundary_evidence_table() -> None:
     assert f"goes from {old['annotator']['speed_up']:.2f}x to {new['annotator']['speed_up']:.2f}x" in text
     for condition in ("clean", "degraded"):
         assert edge[condition]["element_masks"]["mean_ap"] == band[condition]["element_masks"]["mean_ap"]
+
+
+def test_narrower_crossing_table() -> None:
+    """The rectangle against the narrower block on every set of reconstructions, as recorded."""
+    t = table("crossings, the narrower block, v0004 proposing", "bench/crossing_fit.py")
+    files = {
+        "tuning 9113-9123": "crossing_fit_narrower_tuning.json",
+        "fresh 9211-9220": "crossing_fit_narrower_fresh2.json",
+        "confirmation, six sites": "crossing_fit_narrower_confirm.json",
+        "gate validation 9007, 9011": "crossing_fit_narrower_9007_9011.json",
+        "fresh 9201-9210": "crossing_fit_narrower_fresh.json",
+    }
+    before = after = 0.0
+    for prefix, name in files.items():
+        assert_names_source(t, name, "bench/crossing_fit.py")
+        recorded = results(name)
+        (label,) = [label for label in t.rows if label.startswith(prefix)]
+        cells = row(t, label)
+        for column, fit in ((1, "rectangle"), (2, "narrower")):
+            shown = recorded["fits"][fit]
+            assert_shows(
+                cells[column],
+                [shown["mean_iou"], shown["acceptable_share"], shown["correction_s"], shown["speed_up"]],
+                f"{label} {fit}",
+            )
+        against = recorded["against_rectangle"]["narrower"]
+        assert_shows(cells[3], [against["correction_ratio"], against["saving_confidence"]], f"{label} ratio")
+        if not prefix.startswith("tuning"):
+            before += recorded["fits"]["rectangle"]["correction_s"]
+            after += recorded["fits"]["narrower"]["correction_s"]
+    assert [s.rsplit("-", 1)[-1] for s in results(files["fresh 9211-9220"])["sites"]] == [
+        str(s) for s in range(9211, 9221)
+    ]
+    text = " ".join(readme_text().split())
+    assert f"it is level ({before:,.0f} s -> {after:,.0f} s)" in text
