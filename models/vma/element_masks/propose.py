@@ -337,8 +337,9 @@ def road_edge_band(rasters: SiteRasters, rule: RuleConfig, *, across_gap: bool =
     m), and the true kerb line lies across it, not at the road's side of it. Banded at the road's edge alone,
     boundaries came out 0.2-0.3 m on the road side and ends bent into the road where seams of unobserved cells
     meet the kerb. Across the strip the scripted annotator's correction on the gate reconstructions 9113-9123
-    fell from 783 to 732 s, but on ten fresh reconstructions it rose from 799 to 807 s, so the product keeps the
-    road's edge (README, "Boundaries across the kerb's hidden face")."""
+    fell from 783 to 732 s, but on ten fresh reconstructions it rose from 799 to 807 s, so it is off (README,
+    "Across the kerb's hidden face"); and the product now follows the network's own band instead of either
+    (`MaskInferenceConfig.boundary_evidence`)."""
     road = road_mask(rasters.semantic, rasters.resolution_m, rule)
     edge = road_edge(rasters.semantic, road, rasters.resolution_m, rule)
     touching = np.ones((3, 3), np.uint8)
