@@ -2202,3 +2202,23 @@ def test_narrower_crossing_table() -> None:
     ]
     text = " ".join(readme_text().split())
     assert f"it is level ({before:,.0f} s -> {after:,.0f} s)" in text
+
+
+def test_end_to_end_band_sentence() -> None:
+    """The default site's end-to-end figures with the network's band, and the run before, as recorded."""
+    text = " ".join(readme_text().split())
+    now, before = results("end_to_end_band_default.json"), results("end_to_end_border_default.json")
+    world, frame = now["annotator"]["speed_up"], now["annotator_in_reconstruction_frame"]["speed_up"]
+    assert f"annotator is {world:.2f}x faster than drawing in the world frame and {frame:.2f}x in the" in text
+    old_world, old_frame = (
+        before["annotator"]["speed_up"],
+        before["annotator_in_reconstruction_frame"]["speed_up"],
+    )
+    assert (
+        f"against {old_world:.2f}x and {old_frame:.2f}x in `bench/results/end_to_end_border_default.json`"
+        in text
+    )
+    new_ap, old_ap = (r["proposals_ap"]["observed_truth"]["mean_ap"] for r in (now, before))
+    assert f"observed truth {new_ap:.3f} ({old_ap:.3f} before)" in text
+    assert now["proposed_by"] == ["vma-masks-v0004"]
+    assert "0.04x short" in text and round(2.2 - frame, 2) == 0.04
