@@ -18,8 +18,6 @@ Usage: .venv/bin/python bench/boundary_evidence.py --site data/synthetic/random-
 """
 
 import sys
-from dataclasses import replace
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -29,14 +27,12 @@ from shapely.geometry import LineString, Point
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer, worst_gap
 from app.review_effort.review_time import MIN_CONFIDENCE
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import MaskInferenceConfig
-from models.vma.gate import saving_confidence
 from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.vma_measures import Setting, compare_settings, settings_bench  # noqa: E402
+from bench.vma_measures import against_baseline, compare_settings, setting_of, settings_bench  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -97,32 +93,15 @@ def setting_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> di
 
 def measure(sites: list[ValidationSite], model: ElementMaskNet) -> dict[str, Any]:
     """Every setting on every site (the network run once a site)."""
-    settings: dict[str, Setting] = {name: partial(_with, fields) for name, fields in SETTINGS.items()}
+    settings = {name: setting_of(fields) for name, fields in SETTINGS.items()}
     compared = compare_settings(sites, model, settings, boundary_errors)
     return {name: setting_figures(c["rows"], c["annotator"]) for name, c in compared.items()}
-
-
-def _with(fields: dict[str, Any], config: MaskInferenceConfig) -> MaskInferenceConfig:
-    return replace(config, **fields)
 
 
 def summary(figures: dict[str, Any]) -> dict[str, Any]:
     """The report's figures: every setting, and each one's correction time against the road's edge's with the
     confidence that its saving holds."""
-    base = figures[BASELINE]
-    return {
-        "settings": figures,
-        "against_road_edge": {
-            name: {
-                "correction_ratio": f["correction_s"] / base["correction_s"],
-                "saving_confidence": saving_confidence(
-                    base["per_site_correction_s"], f["per_site_correction_s"]
-                ),
-            }
-            for name, f in figures.items()
-            if name != BASELINE
-        },
-    }
+    return {"settings": figures, "against_road_edge": against_baseline(figures, BASELINE)}
 
 
 def main() -> None:

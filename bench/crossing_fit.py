@@ -15,8 +15,6 @@ Usage: .venv/bin/python bench/crossing_fit.py --site data/synthetic/random-9113 
 """
 
 import sys
-from dataclasses import replace
-from functools import partial
 from pathlib import Path
 from typing import Any, get_args
 
@@ -26,14 +24,19 @@ from shapely.geometry import Polygon
 from app.review_effort.plan import Polyline, SimulationConfig, acceptable_as_is, chamfer
 from app.review_effort.review_time import MIN_CONFIDENCE
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import CrossingFit, MaskInferenceConfig
-from models.vma.gate import saving_confidence
+from models.vma.element_masks.propose import CrossingFit
 from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.vma_measures import Setting, compare_settings, settings_bench  # noqa: E402
+from bench.vma_measures import (  # noqa: E402
+    Setting,
+    against_baseline,
+    compare_settings,
+    setting_of,
+    settings_bench,
+)
 
 RESULTS = Path(__file__).parent / "results"
 FITS: tuple[CrossingFit, ...] = get_args(CrossingFit)
@@ -80,32 +83,19 @@ def fit_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> dict[s
 
 def measure(sites: list[ValidationSite], model: ElementMaskNet) -> dict[str, Any]:
     """Both fits on every site (the network run once a site)."""
-    settings: dict[str, Setting] = {fit: partial(_with_fit, fit) for fit in FITS}
+    settings: dict[str, Setting] = {fit: setting_of({"crossing_fit": fit}) for fit in FITS}
     compared = compare_settings(sites, model, settings, crossing_errors)
     return {fit: fit_figures(c["rows"], c["annotator"]) for fit, c in compared.items()}
-
-
-def _with_fit(fit: CrossingFit, config: MaskInferenceConfig) -> MaskInferenceConfig:
-    return replace(config, crossing_fit=fit)
 
 
 def summary(figures: dict[str, Any]) -> dict[str, Any]:
     """The report's figures: every fit, and each one's correction time against the rectangle's with the confidence
     that its saving holds."""
-    base = figures["rectangle"]
     return {
         "fits": figures,
-        "correction_ratio_stripes_to_rectangle": figures["stripes"]["correction_s"] / base["correction_s"],
-        "against_rectangle": {
-            fit: {
-                "correction_ratio": f["correction_s"] / base["correction_s"],
-                "saving_confidence": saving_confidence(
-                    base["per_site_correction_s"], f["per_site_correction_s"]
-                ),
-            }
-            for fit, f in figures.items()
-            if fit != "rectangle"
-        },
+        "correction_ratio_stripes_to_rectangle": figures["stripes"]["correction_s"]
+        / figures["rectangle"]["correction_s"],
+        "against_rectangle": against_baseline(figures, "rectangle"),
     }
 
 

@@ -9,6 +9,7 @@ import argparse
 import platform
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ from models.vma.element_masks.propose import (
     vectors_from_probabilities,
 )
 from models.vma.evaluate import evaluate_sites
+from models.vma.gate import saving_confidence
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
 from models.vma.validation import ValidationSite, reconstruction_of, true_vectors
 from models.vma.vectors import Vector, read_vectors
@@ -85,6 +87,27 @@ def reconstructed_figures(propose: Proposer, reconstructions: list[ValidationSit
 
 Setting = Callable[[MaskInferenceConfig], MaskInferenceConfig]
 """A change of the product's inference settings (the default `MaskInferenceConfig`)."""
+
+
+def setting_of(fields: dict[str, Any]) -> Setting:
+    """The setting that changes these `MaskInferenceConfig` fields."""
+    return lambda config: replace(config, **fields)
+
+
+def against_baseline(figures: dict[str, dict[str, Any]], baseline: str) -> dict[str, dict[str, Any]]:
+    """Each setting's correction time against the `baseline` setting's, with the confidence that its saving holds
+    across sites (`saving_confidence`, the gate's bootstrap)."""
+    base = figures[baseline]
+    return {
+        name: {
+            "correction_ratio": f["correction_s"] / base["correction_s"],
+            "saving_confidence": saving_confidence(base["per_site_correction_s"], f["per_site_correction_s"]),
+        }
+        for name, f in figures.items()
+        if name != baseline
+    }
+
+
 ElementErrors = Callable[[list[Vector], list[Polyline], SimulationConfig], list[dict[str, Any]]]
 """One row per proposal of interest, scored against the observed true elements of its site."""
 

@@ -112,6 +112,17 @@ def assert_names_source(t: MarkdownTable, results_file: str, script: str) -> Non
     assert script in t.context, f"table after {t.context!r} does not name the command ({script})"
 
 
+def row_starting(t: MarkdownTable, prefix: str) -> tuple[str, list[str]]:
+    """The one row whose label starts with `prefix` (labels end with counts the results give), and its cells."""
+    (label,) = [label for label in t.rows if label.startswith(prefix)]
+    return label, t.rows[label]
+
+
+def assert_shows_saving(cell: str, against: dict[str, Any], where: str) -> None:
+    """A cell showing a setting's correction ratio and saving confidence (`bench.vma_measures.against_baseline`)."""
+    assert_shows(cell, [against["correction_ratio"], against["saving_confidence"]], where)
+
+
 def test_every_results_file_named_exists() -> None:
     named = {m.group(0).rstrip("/.") for m in RESULTS_PATH.finditer(readme_text())}
     assert named
@@ -1578,8 +1589,7 @@ def test_segment_annotator_in_own_frame_table() -> None:
         assert_names_source(t, f"segment_frame_{seed}.json", "bench/segment.py")
         runs = results(f"segment_frame_{seed}.json")["runs"]
         reference, predicted = runs["generator_masks"], runs["predicted_masks"]
-        (label,) = [label for label in t.rows if label.startswith(f"{seed},")]
-        cells = row(t, label)
+        label, cells = row_starting(t, f"{seed},")
         assert_shows(label, [int(seed), reference["reconstruction_frame"]["shift_cm"]], label)
         for cell, run in ((cells[1], reference), (cells[2], predicted)):
             assert_shows(
@@ -2130,9 +2140,8 @@ def test_boundary_evidence_table() -> None:
     for prefix, name in files.items():
         assert_names_source(t, name, "bench/boundary_evidence.py")
         recorded = results(name)
-        (label,) = [label for label in t.rows if label.startswith(prefix)]
+        label, cells = row_starting(t, prefix)
         assert f"({recorded['settings']['road_edge']['boundaries']}" in label
-        cells = row(t, label)
         for column, setting in ((1, "network_band"), (2, "road_edge"), (3, "across_gap")):
             shown = recorded["settings"][setting]
             assert_shows(
@@ -2146,12 +2155,7 @@ def test_boundary_evidence_table() -> None:
                 f"{label} {setting}",
             )
         for column, setting in ((4, "network_band"), (5, "across_gap")):
-            against = recorded["against_road_edge"][setting]
-            assert_shows(
-                cells[column],
-                [against["correction_ratio"], against["saving_confidence"]],
-                f"{label} {setting}",
-            )
+            assert_shows_saving(cells[column], recorded["against_road_edge"][setting], f"{label} {setting}")
         before += recorded["settings"]["road_edge"]["correction_s"]
         after += recorded["settings"]["network_band"]["correction_s"]
     for prefix, seeds in (("tuning 9113-9123", range(9113, 9124)), ("fresh 9201-9210", range(9201, 9211))):
@@ -2183,8 +2187,7 @@ def test_narrower_crossing_table() -> None:
     for prefix, name in files.items():
         assert_names_source(t, name, "bench/crossing_fit.py")
         recorded = results(name)
-        (label,) = [label for label in t.rows if label.startswith(prefix)]
-        cells = row(t, label)
+        label, cells = row_starting(t, prefix)
         for column, fit in ((1, "rectangle"), (2, "narrower")):
             shown = recorded["fits"][fit]
             assert_shows(
@@ -2192,8 +2195,7 @@ def test_narrower_crossing_table() -> None:
                 [shown["mean_iou"], shown["acceptable_share"], shown["correction_s"], shown["speed_up"]],
                 f"{label} {fit}",
             )
-        against = recorded["against_rectangle"]["narrower"]
-        assert_shows(cells[3], [against["correction_ratio"], against["saving_confidence"]], f"{label} ratio")
+        assert_shows_saving(cells[3], recorded["against_rectangle"]["narrower"], f"{label} ratio")
         if not prefix.startswith("tuning"):
             before += recorded["fits"]["rectangle"]["correction_s"]
             after += recorded["fits"]["narrower"]["correction_s"]
