@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 from cama_pipeline.surface import SurfaceConfig
+from models.vma.element_masks.propose import MaskInferenceConfig
 from models.vma.gate import TIME_CONFIDENCE, saving_confidence
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,6 +122,16 @@ def row_starting(t: MarkdownTable, prefix: str) -> tuple[str, list[str]]:
 def assert_shows_saving(cell: str, against: dict[str, Any], where: str) -> None:
     """A cell showing a setting's correction ratio and saving confidence (`bench.vma_measures.against_baseline`)."""
     assert_shows(cell, [against["correction_ratio"], against["saving_confidence"]], where)
+
+
+def assert_shows_boundaries(cell: str, shown: dict[str, Any], where: str) -> None:
+    """A cell showing a boundary setting's accepted share, vertices off, correction seconds and speed-up
+    (`bench/boundary_evidence.py`'s `setting_figures`)."""
+    assert_shows(
+        cell,
+        [shown["acceptable_share"], shown["vertices_off_share"], shown["correction_s"], shown["speed_up"]],
+        where,
+    )
 
 
 def test_every_results_file_named_exists() -> None:
@@ -2143,17 +2154,7 @@ def test_boundary_evidence_table() -> None:
         label, cells = row_starting(t, prefix)
         assert f"({recorded['settings']['road_edge']['boundaries']}" in label
         for column, setting in ((1, "network_band"), (2, "road_edge"), (3, "across_gap")):
-            shown = recorded["settings"][setting]
-            assert_shows(
-                cells[column],
-                [
-                    shown["acceptable_share"],
-                    shown["vertices_off_share"],
-                    shown["correction_s"],
-                    shown["speed_up"],
-                ],
-                f"{label} {setting}",
-            )
+            assert_shows_boundaries(cells[column], recorded["settings"][setting], f"{label} {setting}")
         for column, setting in ((4, "network_band"), (5, "across_gap")):
             assert_shows_saving(cells[column], recorded["against_road_edge"][setting], f"{label} {setting}")
         before += recorded["settings"]["road_edge"]["correction_s"]
@@ -2224,3 +2225,41 @@ def test_end_to_end_band_sentence() -> None:
     assert f"observed truth {new_ap:.3f} ({old_ap:.3f} before)" in text
     assert now["proposed_by"] == ["vma-masks-v0004"]
     assert "0.04x short" in text and round(2.2 - frame, 2) == 0.04
+
+
+def test_boundary_offset_table() -> None:
+    """The band alone and the product's boundaries moved off the road, on the gate and five held-out sets, as
+    recorded; the product's offset is the gate's median, and the held-out totals the README quotes."""
+    t = table("boundaries moved off the road, v0004 proposing", "bench/boundary_offset.py")
+    files = {
+        "gate 9113-9123": ("boundary_offset_gate.json", range(9113, 9124)),
+        "fresh 9201-9210": ("boundary_offset_fresh.json", range(9201, 9211)),
+        "fresh 9211-9220": ("boundary_offset_fresh2.json", range(9211, 9221)),
+        "fresh 9221-9230": ("boundary_offset_fresh3.json", range(9221, 9231)),
+        "confirmation, six sites": ("boundary_offset_confirm.json", None),
+        "gate validation 9007, 9011": ("boundary_offset_9007_9011.json", (9007, 9011)),
+    }
+    band = product = 0.0
+    for prefix, (name, seeds) in files.items():
+        assert_names_source(t, name, "bench/boundary_offset.py")
+        recorded = results(name)
+        if seeds is not None:
+            assert [s.rsplit("-", 1)[-1] for s in recorded["sites"]] == [str(s) for s in seeds]
+        label, cells = row_starting(t, prefix)
+        assert f"({recorded['settings']['band']['boundaries']}" in label
+        for column, setting in ((1, "band"), (2, "product")):
+            assert_shows_boundaries(cells[column], recorded["settings"][setting], f"{label} {setting}")
+        assert_shows_saving(cells[3], recorded["against_band"]["product"], label)
+        offsets = recorded["band_offsets"]
+        assert_shows(cells[4], [offsets["proposal_median_roadward_m"], offsets["stations"]], label)
+        assert recorded["product_outward_m"] == MaskInferenceConfig().boundary_outward_m
+        assert recorded["against_band"]["product"]["correction_ratio"] < 1.0  # "every held-out set saves"
+        if prefix != "gate 9113-9123":
+            band += recorded["settings"]["band"]["correction_s"]
+            product += recorded["settings"]["product"]["correction_s"]
+    gate = results("boundary_offset_gate.json")["band_offsets"]
+    assert round(gate["proposal_median_roadward_m"], 2) == MaskInferenceConfig().boundary_outward_m
+    text = " ".join(readme_text().split())
+    assert f"falls from {band:,.0f} s to {product:,.0f} s ({100 * (1 - product / band):.1f} %)" in text
+    assert f"the road's edge lies a median {gate['road_edge_median_roadward_m']:.2f} m inside" in text
+    assert f"correlate at {gate['proposal_road_edge_correlation']:.2f}" in text

@@ -1,13 +1,15 @@
-"""`bench/boundary_evidence.py` scores each proposed boundary against the true boundary it lies along."""
+"""`bench/boundary_evidence.py` scores each proposed boundary against the true boundary it lies along; it and
+`bench/boundary_offset.py` refuse a checkpoint on a site it saw."""
 
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
 
 from app.review_effort.plan import Polyline, SimulationConfig
-from bench import boundary_evidence, vma_measures
+from bench import boundary_evidence, boundary_offset, vma_measures
 from bench.boundary_evidence import boundary_errors
 from cama_pipeline.site_identity import SeenSiteError
 from models.vma.vectors import Vector
@@ -40,20 +42,20 @@ def test_each_boundary_is_scored_against_the_truth_it_lies_along() -> None:
     assert rows[1]["vertices_off_share"] == 1.0
 
 
-def test_the_bench_refuses_a_checkpoint_on_a_site_it_saw(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+@pytest.mark.parametrize("bench", [boundary_evidence, boundary_offset], ids=lambda m: m.__name__)
+def test_the_boundary_benches_refuse_a_checkpoint_on_a_site_it_saw(
+    bench: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     def seen(path: Path, sites: list[Path]) -> None:
         raise SeenSiteError(f"{sites[0]}: VMA checkpoint {path} was trained on this folder")
 
     monkeypatch.setattr(vma_measures, "unseen_mask_checkpoint", seen)
-    out = tmp_path / "boundary_evidence.json"
-    monkeypatch.setattr(
-        sys, "argv", ["boundary_evidence.py", "--site", "data/synthetic/seen", "--out", str(out)]
-    )
+    script = bench.__name__.rsplit(".", 1)[-1]
+    out = tmp_path / f"{script}.json"
+    monkeypatch.setattr(sys, "argv", [f"{script}.py", "--site", "data/synthetic/seen", "--out", str(out)])
     with pytest.raises(SystemExit) as exited:
-        boundary_evidence.main()
+        bench.main()
     assert exited.value.code == 2
     error = capsys.readouterr().err
-    assert "bench/boundary_evidence.py: data/synthetic/seen" in error and "trained on" in error
+    assert f"bench/{script}.py: data/synthetic/seen" in error and "trained on" in error
     assert not out.exists()

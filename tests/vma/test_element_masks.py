@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from shapely.geometry import LineString
 
 from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.semantics import Semantic
@@ -24,6 +25,7 @@ from models.vma.element_masks.propose import (
     refined_line,
     ring_cells,
     road_edge_band,
+    road_side,
     straightened_ends,
     traced_semantic,
     vectors_from_probabilities,
@@ -330,3 +332,50 @@ def test_an_element_reaching_the_rasters_last_cell_centres_crops_inside_the_grid
     assert rows.size and (rows >= 0).all() and (cols >= 0).all()
     assert (rows < site.targets.shape[1]).all() and (cols < site.targets.shape[2]).all()
     assert cols.max() == site.targets.shape[2] - 1  # the end point's own cell is a crop centre
+
+
+def _kerb_site(drawn_site: Path) -> tuple:
+    """Road north of y = 20 m (rows above it), observed ground south of it, and a boundary probability band
+    centred on the edge."""
+    rasters = load_site_rasters(drawn_site)
+    semantic = np.full(rasters.shape, int(Semantic.BACKGROUND), np.uint8)
+    semantic[:200] = int(Semantic.ROAD)
+    rows = np.arange(rasters.shape[0]) * rasters.resolution_m
+    band = np.clip(1.0 - np.abs(rows - 20.0) / 0.4, 0.0, 1.0).astype(np.float32)
+    probability = np.repeat(band[:, None], rasters.shape[1], axis=1)
+    return replace(rasters, semantic=semantic), probability
+
+
+def test_a_boundary_moves_off_the_road_by_the_outward_offset_and_a_line_in_the_road_stays(
+    drawn_site: Path,
+) -> None:
+    rasters, probability = _kerb_site(drawn_site)
+    traced = np.array([global_xy(5, 20.0), global_xy(55, 20.0)])
+    normal = np.tile([[0.0, 1.0]], (2, 1))  # north, where the road is
+    assert road_side(rasters, traced, normal).tolist() == [1.0, 1.0]
+    assert road_side(rasters, traced, -normal).tolist() == [-1.0, -1.0]
+    config = MaskInferenceConfig()
+    kept = refined_line(rasters, probability, traced, config)
+    moved = refined_line(rasters, probability, traced, config, outward_m=0.07)
+    assert np.abs((ORIGIN_XY[1] - kept[:, 1]) - 20.0).max() < 0.01
+    assert np.abs((ORIGIN_XY[1] - moved[:, 1]) - 20.07).max() < 0.01  # 7 cm south, off the road
+    in_road = np.array([global_xy(5, 10.0), global_xy(55, 10.0)])  # road on both sides: nowhere to move to
+    assert road_side(rasters, in_road, normal).tolist() == [0.0, 0.0]
+    assert np.allclose(refined_line(rasters, probability, in_road, config, outward_m=0.07), in_road)
+
+
+def test_boundaries_move_off_the_road_on_a_reconstruction_only(drawn_site: Path) -> None:
+    rasters, band = _kerb_site(drawn_site)
+    probabilities = np.zeros((len(CLASSES), *rasters.shape), np.float32)
+    probabilities[CLASSES.index("boundary")] = band
+
+    def boundary_y(site: SiteRasters) -> float:
+        (vector,) = [v for v in vectors_from_probabilities(site, probabilities) if v.cls == "boundary"]
+        line = LineString(vector.points)
+        return float(ORIGIN_XY[1] - line.interpolate(0.5, normalized=True).y)
+
+    assert boundary_y(replace(rasters, reconstructed=False)) == pytest.approx(20.0, abs=0.02)
+    outward = MaskInferenceConfig().boundary_outward_m
+    assert boundary_y(replace(rasters, reconstructed=True)) == pytest.approx(20.0 + outward, abs=0.02)
+    with pytest.raises(ValueError, match="boundary_outward_m"):
+        MaskInferenceConfig(boundary_outward_m=-0.1)
