@@ -2263,3 +2263,43 @@ def test_boundary_offset_table() -> None:
     assert f"falls from {band:,.0f} s to {product:,.0f} s ({100 * (1 - product / band):.1f} %)" in text
     assert f"the road's edge lies a median {gate['road_edge_median_roadward_m']:.2f} m inside" in text
     assert f"correlate at {gate['proposal_road_edge_correlation']:.2f}" in text
+
+
+def test_surface_range_table() -> None:
+    """The height error by distance from the track on both fresh sets, as recorded, and the curvature range the
+    README quotes."""
+    t = table("distance from the camera track", "bench/surface_range.py")
+    recorded = {
+        "9201-9210": results("surface_range_fresh.json"),
+        "9221-9230": results("surface_range_fresh3.json"),
+    }
+    for name in ("surface_range_fresh.json", "surface_range_fresh3.json"):
+        assert_names_source(t, name, "bench/surface_range.py")
+    for seeds, report in zip(("9201-9210", "9221-9230"), recorded.values(), strict=True):
+        first, last = (int(s) for s in seeds.split("-"))
+        assert [s.rsplit("-", 1)[-1] for s in report["sites"]] == [str(n) for n in range(first, last + 1)]
+    columns = [("9201-9210", "reconstruction"), ("9201-9210", "extrapolation")]
+    columns += [("9221-9230", "reconstruction"), ("9221-9230", "extrapolation")]
+    bands = recorded["9201-9210"]["pooled"]["reconstruction"]
+    assert len(t.rows) == len(bands)
+    for k, band in enumerate(bands):
+        label, cells = row_starting(t, f"{band['band_m'][0]}-{band['band_m'][1]} m")
+        for column, (seeds, surface) in enumerate(columns, start=1):
+            row = recorded[seeds]["pooled"][surface][k]
+            assert_shows(
+                cells[column],
+                [100 * row["median_m"], 100 * row["rms_m"], row["beyond_4cm_share"]],
+                f"{label} {seeds} {surface}",
+            )
+    curvature = [
+        site["lateral_curvature"]["4_m"]
+        for report in recorded.values()
+        for site in report["per_site"].values()
+    ]
+    assert len(curvature) == 20 and all(c["median_per_m"] < 0 for c in curvature)
+    text = " ".join(readme_text().split())
+    steepest = min(c["median_per_m"] for c in curvature)
+    flattest = max(c["median_per_m"] for c in curvature)
+    share = (min(c["negative_share"] for c in curvature), max(c["negative_share"] for c in curvature))
+    assert f"a median of {flattest:.5f} to {steepest:.4f} per metre per site" in text
+    assert f"negative at {100 * share[0]:.0f}-{100 * share[1]:.0f} % of the key frames" in text

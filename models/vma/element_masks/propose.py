@@ -105,7 +105,9 @@ class MaskInferenceConfig:
     the network's band follows that edge. 0.07 m is the median roadward offset of the band's boundaries against
     the true kerbs on the gate reconstructions 9113-9123 (`bench/boundary_offset.py`); moved by it, the scripted
     annotator's correction falls on every held-out set (README, "Boundaries moved off the road by the band's
-    offset"). Generator rasters are left alone: the network's band there is centred on the kerb."""
+    offset"). Generator rasters are left alone: the network's band there is centred on the kerb. The offset is the
+    synthetic sites', whose ground falls away from every track (`bench/surface_range.py`); on real data measure it
+    again with the bench on reviewed sites."""
     across_kerb_gap: bool = False
     """With `boundary_evidence='road_edge'`: the evidence spans the unobserved strip between the road and the
     ground beside it, so boundaries lie in its middle rather than at the road's side of it (`road_edge_band`).
