@@ -28,11 +28,11 @@ from shapely.geometry import LineString
 from app.review_effort.plan import Polyline
 from app.review_effort.review_time import MIN_CONFIDENCE
 from app.review_effort.truth import observed_true_polylines
-from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
     predict_probabilities,
+    road_at,
     road_side,
     vectors_from_probabilities,
 )
@@ -96,12 +96,7 @@ def _nearest_crossing(lines: list[LineString], at: np.ndarray, towards_road: np.
 
 def _road_edge(rasters: SiteRasters, at: np.ndarray, towards_road: np.ndarray) -> float:
     """Offset of the first road cell of the road's run that reaches the probes' road-side end (NaN: none)."""
-    colrow = np.rint(rasters.pixel_from_global(at[None] + EDGE_PROBES_M[:, None] * towards_road[None]))
-    col, row = colrow[:, 0].astype(np.int64), colrow[:, 1].astype(np.int64)
-    height, width = rasters.shape
-    inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
-    road = np.zeros(len(EDGE_PROBES_M), bool)
-    road[inside] = np.isin(rasters.semantic[row[inside], col[inside]], ROAD_SURFACE_IDS)
+    road = road_at(rasters, at[None] + EDGE_PROBES_M[:, None] * towards_road[None])
     if not road[-1] or road.all():
         return float("nan")
     return float(EDGE_PROBES_M[len(road) - int(np.argmin(road[::-1]))])

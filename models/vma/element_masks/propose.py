@@ -284,19 +284,26 @@ ROAD_SIDE_PROBES_M = (0.4, 0.7, 1.0)
 """Distances across a line at which `road_side` reads the raster on either side."""
 
 
+def road_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
+    """(N,) whether each global (x, y) falls on a road cell (road, marking or crosswalk) of the rasters; False
+    outside them."""
+    colrow = np.rint(rasters.pixel_from_global(xy))
+    col, row = colrow[:, 0].astype(np.int64), colrow[:, 1].astype(np.int64)
+    height, width = rasters.shape
+    inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
+    road = np.zeros(len(xy), bool)
+    road[inside] = np.isin(rasters.semantic[row[inside], col[inside]], ROAD_SURFACE_IDS)
+    return road
+
+
 def road_side(rasters: SiteRasters, points: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """(N,) per point (global metres) with its unit `normal`: +1 where more road (road, marking or crosswalk
-    cells) lies on the normal's side than on the other within `ROAD_SIDE_PROBES_M`, -1 the other way round, 0
-    where both sides read as much (a line in the road's middle, or away from it)."""
+    """(N,) per point (global metres) with its unit `normal`: +1 where more road (`road_at`) lies on the normal's
+    side than on the other within `ROAD_SIDE_PROBES_M`, -1 the other way round, 0 where both sides read as much
+    (a line in the road's middle, or away from it)."""
 
     def road_share(sign: float) -> np.ndarray:
         across = np.asarray(ROAD_SIDE_PROBES_M)[None, :, None] * normal[:, None, :]
-        colrow = np.rint(rasters.pixel_from_global((points[:, None, :] + sign * across).reshape(-1, 2)))
-        col, row = colrow[:, 0].astype(np.int64), colrow[:, 1].astype(np.int64)
-        height, width = rasters.shape
-        inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
-        road = np.zeros(len(colrow), bool)
-        road[inside] = np.isin(rasters.semantic[row[inside], col[inside]], ROAD_SURFACE_IDS)
+        road = road_at(rasters, (points[:, None, :] + sign * across).reshape(-1, 2))
         return road.reshape(len(points), -1).mean(axis=1)
 
     return np.sign(road_share(1.0) - road_share(-1.0))
