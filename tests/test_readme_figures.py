@@ -2263,6 +2263,20 @@ def test_boundary_offset_table() -> None:
     assert f"falls from {band:,.0f} s to {product:,.0f} s ({100 * (1 - product / band):.1f} %)" in text
     assert f"the road's edge lies a median {gate['road_edge_median_roadward_m']:.2f} m inside" in text
     assert f"correlate at {gate['proposal_road_edge_correlation']:.2f}" in text
+    band_e2e, outward_e2e = (
+        results("end_to_end_band_default.json"),
+        results("end_to_end_outward_default.json"),
+    )
+    quoted = (
+        f"{outward_e2e['annotator']['speed_up']:.2f}x faster than drawing in the world frame and "
+        f"{outward_e2e['annotator_in_reconstruction_frame']['speed_up']:.2f}x in the reconstruction's frame, against "
+        f"{band_e2e['annotator']['speed_up']:.2f}x and {band_e2e['annotator_in_reconstruction_frame']['speed_up']:.2f}x"
+    )
+    assert quoted in text
+    kinds = ("accept", "fix", "reject", "drawn")
+    now, before = (r["annotator"]["corrected"]["counts"] for r in (outward_e2e, band_e2e))
+    counts = f"({now['accept']} accepted, {now['fix']} fixed, {now['reject']} rejected, {now['drawn']} drawn against "
+    assert counts + ", ".join(str(before[k]) for k in kinds) + ")" in text
 
 
 def test_surface_range_table() -> None:
