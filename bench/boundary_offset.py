@@ -28,14 +28,15 @@ from shapely.geometry import LineString
 from app.review_effort.plan import Polyline
 from app.review_effort.review_time import MIN_CONFIDENCE
 from app.review_effort.truth import observed_true_polylines
+from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
     predict_probabilities,
-    road_at,
     road_side,
     vectors_from_probabilities,
 )
+from models.vma.raster_rays import labels_at
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.validation import ValidationSite
 from models.vma.vectors import Vector
@@ -96,7 +97,9 @@ def _nearest_crossing(lines: list[LineString], at: np.ndarray, towards_road: np.
 
 def _road_edge(rasters: SiteRasters, at: np.ndarray, towards_road: np.ndarray) -> float:
     """Offset of the first road cell of the road's run that reaches the probes' road-side end (NaN: none)."""
-    road = road_at(rasters, at[None] + EDGE_PROBES_M[:, None] * towards_road[None])
+    road = np.isin(
+        labels_at(rasters, at[None] + EDGE_PROBES_M[:, None] * towards_road[None]), ROAD_SURFACE_IDS
+    )
     if not road[-1] or road.all():
         return float("nan")
     return float(EDGE_PROBES_M[len(road) - int(np.argmin(road[::-1]))])

@@ -8,6 +8,7 @@ SRE is checked at 960x540 (`sre_ref_px`), the paper's and CAMA's scale.
 
 import json
 import re
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -122,6 +123,22 @@ def row_starting(t: MarkdownTable, prefix: str) -> tuple[str, list[str]]:
 def assert_shows_saving(cell: str, against: dict[str, Any], where: str) -> None:
     """A cell showing a setting's correction ratio and saving confidence (`bench.vma_measures.against_baseline`)."""
     assert_shows(cell, [against["correction_ratio"], against["saving_confidence"]], where)
+
+
+def recorded_rows(
+    t: MarkdownTable, files: dict[str, str], script: str
+) -> Iterator[tuple[str, str, list[str], dict[str, Any]]]:
+    """For each row label's start -> results file: the file and `script` named above the table, then the row's
+    start, its label, its cells and the recorded figures."""
+    for prefix, name in files.items():
+        assert_names_source(t, name, script)
+        label, cells = row_starting(t, prefix)
+        yield prefix, label, cells, results(name)
+
+
+def assert_seeds(recorded: dict[str, Any], seeds: Iterable[int]) -> None:
+    """The results file measured exactly the randomised sites of these seeds, in order."""
+    assert [site.rsplit("-", 1)[-1] for site in recorded["sites"]] == [str(seed) for seed in seeds]
 
 
 def assert_shows_boundaries(cell: str, shown: dict[str, Any], where: str) -> None:
@@ -2079,7 +2096,7 @@ def test_crossing_fit_table() -> None:
     for name in ("crossing_fit_tuning.json", "crossing_fit_confirm.json"):
         assert_names_source(t, name, "bench/crossing_fit.py")
     tuning, confirm = results("crossing_fit_tuning.json"), results("crossing_fit_confirm.json")
-    assert [s.rsplit("-", 1)[-1] for s in tuning["sites"]] == [str(s) for s in range(9113, 9124)]
+    assert_seeds(tuning, range(9113, 9124))
     assert len(confirm["sites"]) == 6 and "data/synthetic/default" in confirm["sites"]
     for label, fit in (
         ("smallest rectangle round the stripes", "rectangle"),
@@ -2148,10 +2165,7 @@ def test_boundary_evidence_table() -> None:
         "fresh 9201-9210": "boundary_evidence_fresh.json",
     }
     before = after = 0.0
-    for prefix, name in files.items():
-        assert_names_source(t, name, "bench/boundary_evidence.py")
-        recorded = results(name)
-        label, cells = row_starting(t, prefix)
+    for _, label, cells, recorded in recorded_rows(t, files, "bench/boundary_evidence.py"):
         assert f"({recorded['settings']['road_edge']['boundaries']}" in label
         for column, setting in ((1, "network_band"), (2, "road_edge"), (3, "across_gap")):
             assert_shows_boundaries(cells[column], recorded["settings"][setting], f"{label} {setting}")
@@ -2160,7 +2174,7 @@ def test_boundary_evidence_table() -> None:
         before += recorded["settings"]["road_edge"]["correction_s"]
         after += recorded["settings"]["network_band"]["correction_s"]
     for prefix, seeds in (("tuning 9113-9123", range(9113, 9124)), ("fresh 9201-9210", range(9201, 9211))):
-        assert [s.rsplit("-", 1)[-1] for s in results(files[prefix])["sites"]] == [str(s) for s in seeds]
+        assert_seeds(results(files[prefix]), seeds)
     text = " ".join(readme_text().split())
     assert f"falls from {before:,.0f} s to {after:,.0f} s ({100 * (1 - after / before):.0f} %)" in text
     edge = results("vma_masks_confirm_rebuilt_v0004.json")["results"]
@@ -2185,10 +2199,7 @@ def test_narrower_crossing_table() -> None:
         "fresh 9201-9210": "crossing_fit_narrower_fresh.json",
     }
     before = after = 0.0
-    for prefix, name in files.items():
-        assert_names_source(t, name, "bench/crossing_fit.py")
-        recorded = results(name)
-        label, cells = row_starting(t, prefix)
+    for prefix, label, cells, recorded in recorded_rows(t, files, "bench/crossing_fit.py"):
         for column, fit in ((1, "rectangle"), (2, "narrower")):
             shown = recorded["fits"][fit]
             assert_shows(
@@ -2200,9 +2211,7 @@ def test_narrower_crossing_table() -> None:
         if not prefix.startswith("tuning"):
             before += recorded["fits"]["rectangle"]["correction_s"]
             after += recorded["fits"]["narrower"]["correction_s"]
-    assert [s.rsplit("-", 1)[-1] for s in results(files["fresh 9211-9220"])["sites"]] == [
-        str(s) for s in range(9211, 9221)
-    ]
+    assert_seeds(results(files["fresh 9211-9220"]), range(9211, 9221))
     text = " ".join(readme_text().split())
     assert f"it is level ({before:,.0f} s -> {after:,.0f} s)" in text
 
@@ -2232,20 +2241,24 @@ def test_boundary_offset_table() -> None:
     recorded; the product's offset is the gate's median, and the held-out totals the README quotes."""
     t = table("boundaries moved off the road, v0004 proposing", "bench/boundary_offset.py")
     files = {
-        "gate 9113-9123": ("boundary_offset_gate.json", range(9113, 9124)),
-        "fresh 9201-9210": ("boundary_offset_fresh.json", range(9201, 9211)),
-        "fresh 9211-9220": ("boundary_offset_fresh2.json", range(9211, 9221)),
-        "fresh 9221-9230": ("boundary_offset_fresh3.json", range(9221, 9231)),
-        "confirmation, six sites": ("boundary_offset_confirm.json", None),
-        "gate validation 9007, 9011": ("boundary_offset_9007_9011.json", (9007, 9011)),
+        "gate 9113-9123": "boundary_offset_gate.json",
+        "fresh 9201-9210": "boundary_offset_fresh.json",
+        "fresh 9211-9220": "boundary_offset_fresh2.json",
+        "fresh 9221-9230": "boundary_offset_fresh3.json",
+        "confirmation, six sites": "boundary_offset_confirm.json",
+        "gate validation 9007, 9011": "boundary_offset_9007_9011.json",
+    }
+    seeds = {
+        "gate 9113-9123": range(9113, 9124),
+        "fresh 9201-9210": range(9201, 9211),
+        "fresh 9211-9220": range(9211, 9221),
+        "fresh 9221-9230": range(9221, 9231),
+        "gate validation 9007, 9011": (9007, 9011),
     }
     band = product = 0.0
-    for prefix, (name, seeds) in files.items():
-        assert_names_source(t, name, "bench/boundary_offset.py")
-        recorded = results(name)
-        if seeds is not None:
-            assert [s.rsplit("-", 1)[-1] for s in recorded["sites"]] == [str(s) for s in seeds]
-        label, cells = row_starting(t, prefix)
+    for prefix, label, cells, recorded in recorded_rows(t, files, "bench/boundary_offset.py"):
+        if prefix in seeds:
+            assert_seeds(recorded, seeds[prefix])
         assert f"({recorded['settings']['band']['boundaries']}" in label
         for column, setting in ((1, "band"), (2, "product")):
             assert_shows_boundaries(cells[column], recorded["settings"][setting], f"{label} {setting}")
@@ -2291,7 +2304,7 @@ def test_surface_range_table() -> None:
         assert_names_source(t, name, "bench/surface_range.py")
     for seeds, report in zip(("9201-9210", "9221-9230"), recorded.values(), strict=True):
         first, last = (int(s) for s in seeds.split("-"))
-        assert [s.rsplit("-", 1)[-1] for s in report["sites"]] == [str(n) for n in range(first, last + 1)]
+        assert_seeds(report, range(first, last + 1))
     columns = [("9201-9210", "reconstruction"), ("9201-9210", "extrapolation")]
     columns += [("9221-9230", "reconstruction"), ("9221-9230", "extrapolation")]
     bands = recorded["9201-9210"]["pooled"]["reconstruction"]

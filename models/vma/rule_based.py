@@ -257,11 +257,9 @@ def _confidence(rasters: SiteRasters, support: np.ndarray, points: np.ndarray, c
     line = LineString(points)
     stations = np.linspace(0.0, line.length, max(2, int(line.length / 0.25)))
     samples = np.array([line.interpolate(s).coords[0] for s in stations])
-    colrow = np.rint(rasters.pixel_from_global(samples)).astype(int)
-    h, w = support.shape
-    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    rows, cols, inside = cells_at(rasters, samples)  # `support` is a mask of the raster's own cells
     hits = np.zeros(len(samples), bool)
-    hits[inside] = support[colrow[inside, 1], colrow[inside, 0]]
+    hits[inside] = support[rows[inside], cols[inside]]
     damping = min(1.0, line.length / config.full_confidence_length_m) ** 0.5
     return float(hits.mean() * damping)
 

@@ -27,7 +27,7 @@ from models.vma.crossing_block import stripe_block
 from models.vma.element_masks.net import STRIDE, ElementMaskNet
 from models.vma.infer import window_origins
 from models.vma.patches import site_grid
-from models.vma.raster_rays import OFF_ROAD_IDS
+from models.vma.raster_rays import OFF_ROAD_IDS, cells_at, labels_at
 from models.vma.rasters import SiteRasters
 from models.vma.rule_based import (
     RuleConfig,
@@ -213,11 +213,9 @@ def mean_probability(
     line = LineString(points)
     stations = np.linspace(0.0, line.length, max(2, int(line.length / step_m) + 1))
     samples = np.array([line.interpolate(s).coords[0] for s in stations])
-    colrow = np.rint(rasters.pixel_from_global(samples)).astype(int)
-    h, w = probability.shape
-    inside = (colrow[:, 0] >= 0) & (colrow[:, 0] < w) & (colrow[:, 1] >= 0) & (colrow[:, 1] < h)
+    rows, cols, inside = cells_at(rasters, samples)
     values = np.zeros(len(samples), np.float64)
-    values[inside] = probability[colrow[inside, 1], colrow[inside, 0]]
+    values[inside] = probability[rows[inside], cols[inside]]
     return float(values.mean())
 
 
@@ -284,26 +282,16 @@ ROAD_SIDE_PROBES_M = (0.4, 0.7, 1.0)
 """Distances across a line at which `road_side` reads the raster on either side."""
 
 
-def road_at(rasters: SiteRasters, xy: np.ndarray) -> np.ndarray:
-    """(N,) whether each global (x, y) falls on a road cell (road, marking or crosswalk) of the rasters; False
-    outside them."""
-    colrow = np.rint(rasters.pixel_from_global(xy))
-    col, row = colrow[:, 0].astype(np.int64), colrow[:, 1].astype(np.int64)
-    height, width = rasters.shape
-    inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
-    road = np.zeros(len(xy), bool)
-    road[inside] = np.isin(rasters.semantic[row[inside], col[inside]], ROAD_SURFACE_IDS)
-    return road
-
-
 def road_side(rasters: SiteRasters, points: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """(N,) per point (global metres) with its unit `normal`: +1 where more road (`road_at`) lies on the normal's
-    side than on the other within `ROAD_SIDE_PROBES_M`, -1 the other way round, 0 where both sides read as much
-    (a line in the road's middle, or away from it)."""
+    """(N,) per point (global metres) with its unit `normal`: +1 where more road (road, marking or crosswalk
+    cells, `raster_rays.labels_at`) lies on the normal's side than on the other within `ROAD_SIDE_PROBES_M`, -1
+    the other way round, 0 where both sides read as much (a line in the road's middle, or away from it)."""
 
     def road_share(sign: float) -> np.ndarray:
         across = np.asarray(ROAD_SIDE_PROBES_M)[None, :, None] * normal[:, None, :]
-        road = road_at(rasters, (points[:, None, :] + sign * across).reshape(-1, 2))
+        road = np.isin(
+            labels_at(rasters, (points[:, None, :] + sign * across).reshape(-1, 2)), ROAD_SURFACE_IDS
+        )
         return road.reshape(len(points), -1).mean(axis=1)
 
     return np.sign(road_share(1.0) - road_share(-1.0))
