@@ -116,6 +116,8 @@ def corrections_of(entry: ValidationEntry, propose: Proposer) -> tuple[Correctio
             reviewed.append((Vector(cls, np.asarray(decision.points), 1.0), "fixed"))
         else:
             reviewed.append((proposal, {"accept": "accepted", "reject": "rejected"}[decision.kind]))
+        if decision.split_off is not None:  # the part split off is a new element, as the editor's split makes
+            reviewed.append((Vector(proposal.cls, np.asarray(decision.split_off.points), 1.0), "accepted"))
     reviewed += [(Vector(t.cls, t.points, 1.0), "accepted") for t in queue.drawn]
     georeference = Georeference.of(rasters.georeference, site_origin_xy=rasters.origin_xy)
     labelled = proposals_as_annotations([v for v, _ in reviewed], georeference, site.site.name, "annotator")

@@ -38,6 +38,8 @@ class ActionCosts:
     """Move the selected element whole (Ctrl/Cmd-drag): hold the key, point at it, press, drag, release."""
     merge_s: float = P_S + B_S + K_S + K_S
     """Shift-click a second polyline to add it to the selection, press the merge key."""
+    split_s: float = P_S + K_S
+    """Split the selected polyline at the vertex under the pointer (the editor's K): point at it, press the key."""
     scan_per_100m_s: float = 10.0
     """Looking over 100 m of road for elements nobody proposed: spent in both workflows."""
 

@@ -37,6 +37,9 @@ class SimulationConfig:
     """The vertices a person clicks: the true line simplified to this tolerance."""
     editor_simplify_m: float = 0.2
     """Tolerance of the editor's simplify command (its default), which a person may run before fixing."""
+    split: bool = True
+    """A proposal that runs along two true elements may be split in two (the editor's split, `split.py`); off: the
+    annotator of the figures recorded before the split was modelled."""
 
     def __post_init__(self) -> None:
         if not 0 < self.accept_m <= self.match_m:
@@ -83,6 +86,11 @@ class Decision:
     """The editor's simplify was run on it first (fewer vertices to drag or delete)."""
     moved_whole: bool = False
     """It was moved whole onto its true line first (Ctrl/Cmd-drag), then its vertices edited."""
+    split_off: "Decision | None" = None
+    """The part split off the proposal (the editor's split) and corrected into a second true element: that part's
+    own decision, booked within this one (no second inspection)."""
+    split_inserted: bool = False
+    """No vertex lay where the split goes: one was inserted on the segment first."""
 
     @property
     def added(self) -> int:
@@ -111,7 +119,20 @@ class Decision:
             + (costs.simplify_s if self.simplified else 0.0)
             + (costs.move_element_s if self.moved_whole else 0.0)
         )
-        return costs.inspect_s + edits + costs.verdict_s
+        return costs.inspect_s + edits + costs.verdict_s + self._split_seconds(costs)
+
+    def _split_seconds(self, costs: ActionCosts) -> float:
+        """Time the split takes: the split itself, the vertex inserted for it, and the part's edits and verdict."""
+        if self.split_off is None:
+            return 0.0
+        inserted = costs.add_vertex_s if self.split_inserted else 0.0
+        return costs.split_s + inserted + self.split_off.seconds(costs) - costs.inspect_s
+
+    @property
+    def targets(self) -> tuple[int, ...]:
+        """The true elements this decision covers: its own and the split-off part's."""
+        own = () if self.target is None else (self.target,)
+        return own + (() if self.split_off is None else self.split_off.targets)
 
 
 def clicked_vertices(line: Polyline, config: SimulationConfig) -> np.ndarray:
@@ -195,7 +216,7 @@ def _vertex_edits(
     return moved, removed, tuple(int(n) for n in ends - starts)
 
 
-def _nearest_truth(
+def nearest_truth(
     proposal: Polyline, truths: Sequence[Polyline], used: set[int], config: SimulationConfig
 ) -> int | None:
     """The unused true element the proposal lies along (mean distance within `match_m`), nearest first."""
@@ -250,6 +271,30 @@ def _fix(
     )
 
 
+def cheapest_fix(
+    index: int,
+    truth: Polyline,
+    relabel: str | None,
+    merged: tuple[int, ...],
+    pieces: list[np.ndarray],
+    config: SimulationConfig,
+    costs: ActionCosts,
+) -> Decision:
+    """The quickest fix of the pieces (the proposal's first) into true element `index`: with or without the
+    editor's simplify first, and for a proposal alone with or without moving it whole first."""
+    simplify_options = (False,) if truth.closed else (False, True)  # the editor does not simplify rings
+    # a proposal alone may be moved whole first; pieces to merge are edited where they lie
+    move_options = [None, *([] if merged else move_offsets(pieces[0], truth))]
+    return min(
+        (
+            _fix(index, truth, relabel, merged, pieces, config, simplify_first=s, move_by=m)
+            for m in move_options
+            for s in simplify_options
+        ),
+        key=lambda d: d.seconds(costs),
+    )
+
+
 def decide(
     proposal: Polyline,
     truths: Sequence[Polyline],
@@ -263,7 +308,7 @@ def decide(
     A fix that would take longer than rejecting and drawing the element anew is not made: the proposal is
     rejected and the element drawn later, as a person short of time would."""
     costs = costs or ActionCosts()
-    index = _nearest_truth(proposal, truths, used, config)
+    index = nearest_truth(proposal, truths, used, config)
     if index is None:
         return Decision("reject")
     truth = truths[index]
@@ -273,20 +318,10 @@ def decide(
     merged = tuple(
         k
         for k, other in enumerate(pending)
-        if not truth.closed and _nearest_truth(other, truths, used, config) == index
+        if not truth.closed and nearest_truth(other, truths, used, config) == index
     )
     pieces = [proposal.points, *(pending[k].points for k in merged)]
-    simplify_options = (False,) if truth.closed else (False, True)  # the editor does not simplify rings
-    # a proposal alone may be moved whole first; pieces to merge are edited where they lie
-    move_options = [None, *([] if merged else move_offsets(proposal.points, truth))]
-    fix = min(
-        (
-            _fix(index, truth, relabel, merged, pieces, config, simplify_first=s, move_by=m)
-            for m in move_options
-            for s in simplify_options
-        ),
-        key=lambda d: d.seconds(costs),
-    )
+    fix = cheapest_fix(index, truth, relabel, merged, pieces, config, costs)
     redraw_s = Decision("reject").seconds(costs) + drawing_seconds(truth, config, costs)
     return fix if fix.seconds(costs) < redraw_s else Decision("reject")
 

@@ -1,5 +1,6 @@
-"""One annotator's session over a queue of proposals: lease, decide (`plan.decide`), apply, then draw what no
-proposal covered; the time booked per action (`costs`).
+"""One annotator's session over a queue of proposals: lease, decide (`plan.decide`, or split the proposal in two
+where that is quicker: `split.with_split`), apply, then draw what no proposal covered; the time booked per action
+(`costs`).
 
 The queue is anything with the `ReviewQueue` methods: the backend's annotator queue over HTTP
 (`app.simulation.annotator`) or `MemoryQueue`, which hands proposals out in the backend's queue order for
@@ -21,6 +22,7 @@ from app.review_effort.plan import (
     drawing_seconds,
     road_length_km,
 )
+from app.review_effort.split import with_split
 
 
 @dataclass
@@ -66,7 +68,8 @@ class ReviewQueue(Protocol):
         """The other items still waiting for a verdict."""
 
     def apply(self, item: Any, decision: Decision, pending: Sequence[Any]) -> None:
-        """Carry out a decision: merged pending items deleted, a fix's points and class set, the verdict given."""
+        """Carry out a decision: merged pending items deleted, a fix's points and class set, a split-off part made a
+        new element and accepted, the verdict given."""
 
     def draw(self, truth: Polyline, config: SimulationConfig) -> None:
         """Draw a new element along a true one and accept it."""
@@ -88,11 +91,10 @@ def work_queue(
         if item is None:
             break
         pending = queue.pending(item)
-        decision = decide(
-            queue.polyline(item), truths, used, config, [queue.polyline(p) for p in pending], costs
-        )
-        if decision.target is not None:
-            used.add(decision.target)
+        proposal, around = queue.polyline(item), [queue.polyline(p) for p in pending]
+        decision = decide(proposal, truths, used, config, around, costs)
+        decision = with_split(decision, proposal, truths, used, config, around, costs)
+        used.update(decision.targets)
         queue.apply(item, decision, pending)
         log.seconds[decision.kind] += decision.seconds(costs)
         log.counts[decision.kind] += 1
@@ -100,6 +102,7 @@ def work_queue(
         log.counts["elements_moved_whole"] += int(decision.moved_whole)
         log.counts["pieces_merged"] += len(decision.merged)
         log.counts["gaps_drawn"] += decision.gaps
+        log.counts["splits"] += int(decision.split_off is not None)
     else:
         raise UnfinishedQueue(f"queue not empty after {max_items} items")
     draw_all(log, queue, [t for i, t in enumerate(truths) if i not in used], config, costs)

@@ -76,7 +76,8 @@ class HttpQueue:
 
     def apply(self, item: dict[str, Any], decision: Decision, pending: Sequence[dict[str, Any]]) -> None:
         """A fix deletes the pieces merged into it (as the editor's merge does), PATCHes the points and gives the
-        `fixed` verdict; accept and reject are verdicts."""
+        `fixed` verdict; accept and reject are verdicts. A split keeps the first part in the element and creates
+        the second as a new one (as the editor's split does), accepted with its corrected points."""
         base = f"/api/sites/{self.site_id}/elements/{item['id']}"
         version = int(item["version"])
         for k in decision.merged:
@@ -93,11 +94,16 @@ class HttpQueue:
             version = int(self.session.call("PATCH", base, json=body)["version"])
         verdict = {"accept": "accepted", "fix": "fixed", "reject": "rejected"}[decision.kind]
         self.session.call("POST", f"{base}/review", json={"state": verdict, "version": version})
+        if decision.split_off is not None:
+            self._create_accepted(item["class"], np.asarray(decision.split_off.points).tolist())
 
     def draw(self, truth: Polyline, config: SimulationConfig) -> None:
         """Draw a new element and give it the `accepted` verdict, as the editor's draw-then-accept does."""
-        points = clicked_vertices(truth, config).tolist()
-        body = {"class": truth.cls, "points": points, "source": "human"}
+        self._create_accepted(truth.cls, clicked_vertices(truth, config).tolist())
+
+    def _create_accepted(self, cls: str, points: list[list[float]]) -> None:
+        """A new element made by the annotator, with the `accepted` verdict."""
+        body = {"class": cls, "points": points, "source": "human"}
         element = self.session.call("POST", f"/api/sites/{self.site_id}/elements", json=body)
         verdict = {"state": "accepted", "version": int(element["version"])}
         self.session.call("POST", f"/api/sites/{self.site_id}/elements/{element['id']}/review", json=verdict)

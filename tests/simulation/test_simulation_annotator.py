@@ -83,6 +83,7 @@ def test_correcting_proposals_accepts_fixes_rejects_and_draws_what_is_missing(
         "elements_moved_whole": 0,
         "pieces_merged": 0,
         "gaps_drawn": 0,
+        "splits": 0,
     }
     assert annotator.call("POST", f"/api/sites/{site_id}/queue/next") is None
     final = annotator.call("GET", f"/api/sites/{site_id}/elements")
@@ -114,6 +115,30 @@ def test_pieces_of_a_long_element_are_merged_into_one_through_the_api(
     final = annotator.call("GET", f"/api/sites/{site_id}/elements")
     assert [e["state"] for e in final] == ["fixed"]  # the merged piece is deleted, as the editor's merge does
     np.testing.assert_allclose(final[0]["points"], TRUTH[0].points - ORIGIN_XY)
+
+
+def test_a_proposal_bridging_two_elements_is_split_into_both_through_the_api(
+    client: TestClient, tmp_path: Path
+) -> None:
+    pieces = [  # one divider, cut where a parked car hid 1035-1045 m: two elements in the truth
+        Polyline("divider", np.array([[1010.0, 2020.0], [1035.0, 2020.0]])),
+        Polyline("divider", np.array([[1045.0, 2020.0], [1090.0, 2020.0]])),
+    ]
+    bridged = ("divider", np.array([[1010.0, 2020.05], [1090.0, 2020.05]]))
+    site_id = _site(client, tmp_path, [bridged])
+    annotator = ApiSession(client, "ann", PASSWORD)
+    log = correct_proposals(annotator, site_id, pieces)
+    assert (log.counts["splits"], log.counts["fix"], log.counts["drawn"]) == (1, 1, 0)
+    final = annotator.call("GET", f"/api/sites/{site_id}/elements")
+    assert sorted(e["state"] for e in final) == ["accepted", "fixed"]  # the split-off part is a new element
+    ends = sorted(np.asarray(e["points"])[[0, -1], 0].round(6).tolist() for e in final)
+    assert ends == [
+        [1010.0 - ORIGIN_XY[0], 1035.0 - ORIGIN_XY[0]],
+        [1045.0 - ORIGIN_XY[0], 1090.0 - ORIGIN_XY[0]],
+    ]
+    queue = MemoryQueue([(Polyline(*bridged), 0.5)])
+    in_memory = work_queue(queue, pieces, SimulationConfig(), ActionCosts())
+    assert in_memory.counts == log.counts and in_memory.seconds == pytest.approx(log.seconds)
 
 
 def test_good_proposals_cost_less_than_drawing_from_scratch(client: TestClient, tmp_path: Path) -> None:
