@@ -2330,3 +2330,35 @@ def test_surface_range_table() -> None:
     share = (min(c["negative_share"] for c in curvature), max(c["negative_share"] for c in curvature))
     assert f"a median of {flattest:.5f} to {steepest:.4f} per metre per site" in text
     assert f"negative at {100 * share[0]:.0f}-{100 * share[1]:.0f} % of the key frames" in text
+
+
+def test_annotator_split_table() -> None:
+    """The annotator without and with the editor's split on the same proposals, as recorded; its "without" column
+    is the boundary-offset table's product, and the held-out totals are the ones the README quotes."""
+    t = table("the editor's split, v0004 proposing", "bench/annotator_split.py")
+    files = {
+        "gate 9113-9123": "annotator_split_gate.json",
+        "fresh 9201-9210": "annotator_split_fresh.json",
+        "fresh 9211-9220": "annotator_split_fresh2.json",
+        "fresh 9221-9230": "annotator_split_fresh3.json",
+        "confirmation, six sites": "annotator_split_confirm.json",
+        "gate validation 9007, 9011": "annotator_split_9007_9011.json",
+    }
+    without = with_split = 0.0
+    for prefix, label, cells, recorded in recorded_rows(t, files, "bench/annotator_split.py"):
+        shown = recorded["settings"]
+        for column, setting in ((1, "no_split"), (2, "split")):
+            figure = shown[setting]
+            assert_shows(cells[column], [figure["correction_s"], figure["speed_up"], figure["drawn"]], label)
+        assert_shows(cells[2][cells[2].index("drawn") :], [shown["split"]["splits"]], label)
+        assert_shows_saving(cells[3], recorded["against_no_split"]["split"], label)
+        offset = results(files[prefix].replace("annotator_split", "boundary_offset"))
+        assert shown["no_split"]["per_site_correction_s"] == pytest.approx(
+            offset["settings"]["product"]["per_site_correction_s"]
+        )
+        if prefix != "gate 9113-9123":
+            without += shown["no_split"]["correction_s"]
+            with_split += shown["split"]["correction_s"]
+    text = " ".join(readme_text().split())
+    saving = 100 * (1 - with_split / without)
+    assert f"falls from {without:,.0f} s to {with_split:,.0f} s ({saving:.2f} %)" in text
