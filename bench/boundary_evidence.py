@@ -48,10 +48,18 @@ def boundary_errors(
     proposals: list[Vector], truths: list[Polyline], config: SimulationConfig
 ) -> list[dict[str, Any]]:
     """Each proposed boundary against the true boundary it lies along (none within `config.match_m`: left out)."""
-    lines = [(t, LineString(t.points)) for t in truths if t.cls == "boundary"]
+    return line_errors(proposals, truths, config, "boundary")
+
+
+def line_errors(
+    proposals: list[Vector], truths: list[Polyline], config: SimulationConfig, cls: str
+) -> list[dict[str, Any]]:
+    """Each proposed line of class `cls` against the true one it lies along (none within `config.match_m`: left
+    out): Chamfer distance, farthest point, share of vertices off the true line, acceptance as it is."""
+    lines = [(t, LineString(t.points)) for t in truths if t.cls == cls]
     rows = []
     for vector in proposals:
-        if vector.cls != "boundary" or vector.score < MIN_CONFIDENCE or not lines:
+        if vector.cls != cls or vector.score < MIN_CONFIDENCE or not lines:
             continue
         distances = [np.mean([line.distance(Point(p)) for p in vector.points]) for _, line in lines]
         nearest = int(np.argmin(distances))
@@ -71,14 +79,16 @@ def boundary_errors(
     return rows
 
 
-def setting_figures(rows: list[dict[str, Any]], annotator: dict[str, Any]) -> dict[str, Any]:
-    """The boundaries' means and the annotator's totals of one setting."""
+def setting_figures(
+    rows: list[dict[str, Any]], annotator: dict[str, Any], counted: str = "boundaries"
+) -> dict[str, Any]:
+    """The scored lines' means (their count under `counted`) and the annotator's totals of one setting."""
 
     def mean(key: str) -> float | None:
         return float(np.mean([r[key] for r in rows])) if rows else None
 
     return {
-        "boundaries": len(rows),
+        counted: len(rows),
         "mean_chamfer_m": mean("chamfer_m"),
         "median_chamfer_m": float(np.median([r["chamfer_m"] for r in rows])) if rows else None,
         "mean_worst_gap_m": mean("worst_gap_m"),

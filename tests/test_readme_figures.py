@@ -2362,3 +2362,42 @@ def test_annotator_split_table() -> None:
     text = " ".join(readme_text().split())
     saving = 100 * (1 - with_split / without)
     assert f"falls from {without:,.0f} s to {with_split:,.0f} s ({saving:.2f} %)" in text
+
+
+def test_divider_carry_table() -> None:
+    """Dividers carried as before and as the product carries them through the dash gap, as recorded; the
+    product's settings are the ones the bench measured, and the held-out totals the README quotes."""
+    t = table("dividers carried through the dash gap, v0004 proposing", "bench/divider_carry.py")
+    files = {
+        "gate 9113-9123": "divider_carry_gate.json",
+        "fresh 9201-9210": "divider_carry_fresh.json",
+        "fresh 9211-9220": "divider_carry_fresh2.json",
+        "fresh 9221-9230": "divider_carry_fresh3.json",
+        "confirmation, six sites": "divider_carry_confirm.json",
+        "gate validation 9007, 9011": "divider_carry_9007_9011.json",
+    }
+    before = product = 0.0
+    for prefix, label, cells, recorded in recorded_rows(t, files, "bench/divider_carry.py"):
+        shown = recorded["settings"]
+        assert (
+            f"({shown['before']['dividers']})" in label
+            or f"({shown['before']['dividers']} dividers)" in label
+        )
+        for column, setting in ((1, "before"), (2, "product")):
+            figure = shown[setting]
+            expected = [
+                figure["acceptable_share"],
+                figure["mean_chamfer_m"],
+                figure["correction_s"],
+                figure["speed_up"],
+            ]
+            assert_shows(cells[column], expected, f"{label} {setting}")
+        assert_shows_saving(cells[3], recorded["against_before"]["product"], label)
+        assert recorded["against_before"]["product"]["correction_ratio"] <= 1.0  # "no set loses"
+        if prefix != "gate 9113-9123":
+            before += shown["before"]["correction_s"]
+            product += shown["product"]["correction_s"]
+    config = MaskInferenceConfig()
+    assert (config.divider_border_reach_m, config.divider_course_fit_m) == (6.0, 4.0)
+    text = " ".join(readme_text().split())
+    assert f"falls from {before:,.0f} s to {product:,.0f} s ({100 * (1 - product / before):.2f} %)" in text

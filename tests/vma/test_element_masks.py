@@ -16,17 +16,16 @@ from cama_pipeline.site_identity import SeenSiteError
 from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint
 from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
+from models.vma.element_masks.line_ends import carried_to_border, straightened_ends
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
     MaskInferenceConfig,
-    carried_to_border,
     predict_probabilities,
     read_crossing,
     refined_line,
     ring_cells,
     road_edge_band,
     road_side,
-    straightened_ends,
     traced_semantic,
     vectors_from_probabilities,
 )
@@ -308,6 +307,26 @@ def test_a_line_stopping_short_of_the_observed_edge_is_carried_on_to_it() -> Non
     np.testing.assert_array_equal(carried_to_border(line, mask, 2.0, 0.0, 0.0), line)  # 0: never
     with pytest.raises(ValueError, match="border_min_m"):
         MaskInferenceConfig(border_reach_m=0.3, border_min_m=0.4)
+
+
+def test_a_divider_is_carried_along_its_fitted_course_not_its_kinked_end() -> None:
+    observed = np.zeros((100, 200), bool)  # 0.1 m cells, origin (0, 10): x 0..20 m, y 0..10 m
+    observed[:, 20:140] = True  # seen from x = 2.0 to x = 13.9
+    mask = ObservedMask(observed, (0.0, 10.0), 0.1)
+    kinked = np.array([[3.0, 5.0], [5.0, 5.0], [7.0, 5.0], [9.0, 5.0], [9.5, 5.3]])  # last vertex pulled aside
+    along_kink = carried_to_border(kinked, mask, 2.0, 6.0, 0.4)
+    assert along_kink[-1, 1] > 7.5  # on along the kink's slope: metres off the line
+    fitted = carried_to_border(kinked, mask, 2.0, 6.0, 0.4, fit_m=4.0, tolerance_m=0.15)
+    assert len(fitted) == len(kinked) + 2  # the start's edge, 1 m behind it, is reached too
+    # the kink tilts the fitted course a little (0.23 m over 4.4 m), against 2.6 m along the kink itself
+    assert fitted[-1, 0] == pytest.approx(13.9, abs=0.051) and abs(fitted[-1, 1] - 5.0) < 0.25
+    assert abs(fitted[-2, 1] - 5.0) < 0.15  # the kinked end put on the course first
+    np.testing.assert_array_equal(fitted[1:-2], kinked[:-1])
+    assert fitted[0] == pytest.approx([2.0, 5.0], abs=0.051)
+    with pytest.raises(ValueError, match="divider_course_fit_m"):
+        MaskInferenceConfig(divider_course_fit_m=-1.0)
+    with pytest.raises(ValueError, match="divider_border_reach_m"):
+        MaskInferenceConfig(divider_border_reach_m=0.3)
 
 
 def test_correction_crops_centre_on_the_elements_and_the_road_between_them(drawn_site: Path) -> None:

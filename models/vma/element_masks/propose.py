@@ -24,6 +24,7 @@ from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.crossing_block import stripe_block
+from models.vma.element_masks.line_ends import carried_to_border, straightened_ends
 from models.vma.element_masks.net import STRIDE, ElementMaskNet
 from models.vma.infer import window_origins
 from models.vma.patches import site_grid
@@ -81,6 +82,16 @@ class MaskInferenceConfig:
     than this straight ahead, is carried on to it (`carried_to_border`; 0: never) ..."""
     border_min_m: float = 0.4
     """... when the edge is at least this far ahead."""
+    divider_border_reach_m: float = 6.0
+    """Dividers are carried on to the observed edge from this far (`border_reach_m` is the boundaries'), along the
+    course fitted to their last `divider_course_fit_m`, the end put on that course first where it strays from it by
+    more than `end_tolerance_m`. Why: a dashed divider's truth runs on from its last dash through the gap to the
+    next one, and where the observed map ends within that gap the raster shows plain road there, so the traced line
+    stops metres short and was rejected and drawn again; carried along the kinked end instead of the fitted course,
+    the carry lands a metre off the line. Chosen on the gate reconstructions 9113-9123 and 9201-9210 (README,
+    "Dividers carried through the dash gap")."""
+    divider_course_fit_m: float = 4.0
+    """... (0: the end's course, as for boundaries)."""
     crossing_fit: CrossingFit = "rectangle"
     """How a crossing's block is read off the stripes the rasters show (`read_crossing`): the smallest rectangle
     round them (`rule_based.crosswalk_vectors`); or its axis from the stripes' edges and its width where their
@@ -127,10 +138,14 @@ class MaskInferenceConfig:
             )
         if self.end_course_m < 0 or self.end_tolerance_m < 0:
             raise ValueError("MaskInferenceConfig: end_course_m and end_tolerance_m must be >= 0")
-        if not 0 <= self.border_min_m <= self.border_reach_m:
+        if not 0 <= self.border_min_m <= min(self.border_reach_m, self.divider_border_reach_m):
             raise ValueError(
-                "MaskInferenceConfig: need 0 <= border_min_m <= border_reach_m, got "
-                f"{self.border_min_m}, {self.border_reach_m}"
+                "MaskInferenceConfig: need 0 <= border_min_m <= border_reach_m and divider_border_reach_m, got "
+                f"{self.border_min_m}, {self.border_reach_m}, {self.divider_border_reach_m}"
+            )
+        if self.divider_course_fit_m < 0:
+            raise ValueError(
+                f"MaskInferenceConfig.divider_course_fit_m must be >= 0, got {self.divider_course_fit_m}"
             )
         if self.crossing_fit not in get_args(CrossingFit) or self.crossing_margin_m < 0:
             raise ValueError(
@@ -390,90 +405,23 @@ def road_edge_band(rasters: SiteRasters, rule: RuleConfig, *, across_gap: bool =
     return (band | inner).astype(np.float32)
 
 
-END_SKIP_M = 0.3
-"""The vertices this close to a line's end are not part of the course its end is checked against."""
-
-
-def _along(points: np.ndarray) -> np.ndarray:
-    """Distance of each vertex from the first, along the line."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-
-
-def _course(end: np.ndarray, distance: np.ndarray, course_m: float) -> np.ndarray:
-    """The vertices an end is judged against (`end` starts at the end vertex, `distance` from it): those between
-    `END_SKIP_M` and `END_SKIP_M + course_m` along the line."""
-    return end[(distance > END_SKIP_M) & (distance <= END_SKIP_M + course_m)]
-
-
-def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -> np.ndarray:
-    """`points` with each end vertex put back on the line's course where it strays from it sideways.
-
-    Where a boundary's band ends (the road's edge turning a corner, or stopping at the end of what the cameras
-    saw) the refinement's last station is pulled across the line, often by half a metre or more: a kink an
-    annotator has to drag back. The course is the straight line through the vertices between `END_SKIP_M` and
-    `END_SKIP_M + course_m` from the end (at least two of them); an end vertex farther than `tolerance_m` off it
-    moves onto it, keeping its distance along it. Lines shorter than three times `course_m` are left as they
-    are (their ends are most of them)."""
-    along = _along(points)
-    if course_m == 0 or along[-1] < 3 * course_m:
-        return points
-    out = np.array(points, dtype=np.float64)
-    for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
-        course = _course(end, distance, course_m)
-        if len(course) < 2:
-            continue
-        direction = course[0] - course[-1]
-        direction /= max(float(np.linalg.norm(direction)), 1e-9)
-        normal = np.array([-direction[1], direction[0]])
-        off = float((end[0] - course[0]) @ normal)
-        if abs(off) > tolerance_m:
-            end[0] = end[0] - off * normal
-    return out
-
-
-BORDER_STEP_M = 0.05
-"""Spacing of the probes that look for the edge of the observed cells ahead of a line's end."""
-
-
-def carried_to_border(
-    points: np.ndarray, observed: ObservedMask, course_m: float, reach_m: float, min_m: float
+def carry_to_border(
+    points: np.ndarray, cls: str, observed: ObservedMask, config: MaskInferenceConfig
 ) -> np.ndarray:
-    """`points` with a vertex added beyond each end that stops short of the edge of the observed cells, on the
-    edge, where the edge lies between `min_m` and `reach_m` straight ahead.
-
-    Lines that run off the observed map are cut at its edge in the truth an annotator draws (what the cameras saw,
-    `cama_pipeline.evaluate.observed`), but the network's masks fade out before that edge, so the traced line
-    stops short and the annotator drags each such end out to it: on the tuning reconstructions 9116-9127 these
-    were a third of the boundary fixes. Ahead is the direction from the end's course (its farthest vertex within
-    `END_SKIP_M + course_m`, else its neighbour) to the end. An edge farther ahead than `reach_m` means the line
-    ends inside the observed map, a real end, left alone; carries shorter than `min_m` gained nothing there and
-    tipped accepted lines into fixes."""
-    if reach_m == 0 or len(points) < 2:
-        return points
-    out = np.array(points, dtype=np.float64)
-    along = _along(out)
-    probes = np.arange(BORDER_STEP_M, reach_m + BORDER_STEP_M / 2, BORDER_STEP_M)
-    ends = []
-    for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
-        course = _course(end, distance, course_m)
-        behind = course[-1] if len(course) else end[1]
-        direction = end[0] - behind
-        length = float(np.linalg.norm(direction))
-        carried = None
-        if length > 1e-6:
-            ahead = end[0] + probes[:, None] * (direction / length)
-            seen = observed.contains(ahead)
-            first_unseen = int(np.argmax(~seen))
-            if not seen.all() and first_unseen > 0 and probes[first_unseen - 1] >= min_m:
-                carried = ahead[first_unseen - 1]
-        ends.append(carried)
-    start, finish = ends
-    parts = [out]
-    if start is not None:
-        parts.insert(0, start[None])
-    if finish is not None:
-        parts.append(finish[None])
-    return np.vstack(parts)
+    """A divider or boundary carried on to the observed edge (`carried_to_border`) with its class's settings."""
+    if cls == "divider":
+        return carried_to_border(
+            points,
+            observed,
+            config.end_course_m,
+            config.divider_border_reach_m,
+            config.border_min_m,
+            fit_m=config.divider_course_fit_m,
+            tolerance_m=config.end_tolerance_m,
+        )
+    return carried_to_border(
+        points, observed, config.end_course_m, config.border_reach_m, config.border_min_m
+    )
 
 
 def _bridged(stations: np.ndarray, seen: np.ndarray, gap_m: float) -> np.ndarray:
@@ -523,9 +471,7 @@ def vectors_from_probabilities(
                 points = straightened_ends(points, config.end_course_m, config.end_tolerance_m)
             score = mean_probability(rasters, probability, points, config.sample_step_m)
             # scored on the network's own stretch; the carry to the map's edge is no evidence of the class
-            points = carried_to_border(
-                points, observed, config.end_course_m, config.border_reach_m, config.border_min_m
-            )
+            points = carry_to_border(points, vector.cls, observed, config)
         out.append(Vector(vector.cls, points, float(np.clip(score, 0.0, 1.0))))
     return out
 
