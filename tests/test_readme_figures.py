@@ -141,6 +141,23 @@ def assert_seeds(recorded: dict[str, Any], seeds: Iterable[int]) -> None:
     assert [site.rsplit("-", 1)[-1] for site in recorded["sites"]] == [str(seed) for seed in seeds]
 
 
+HELD_OUT_SETS = {
+    "gate 9113-9123": "gate",
+    "fresh 9201-9210": "fresh",
+    "fresh 9211-9220": "fresh2",
+    "fresh 9221-9230": "fresh3",
+    "confirmation, six sites": "confirm",
+    "gate validation 9007, 9011": "9007_9011",
+}
+"""Row label's start -> results file suffix of the tables measured on the gate reconstructions and five held-out
+sets (the boundary offset, the editor's split, the divider carry)."""
+
+
+def set_files(stem: str) -> dict[str, str]:
+    """Row label's start -> results file of a bench run on the gate and held-out sets (`HELD_OUT_SETS`)."""
+    return {prefix: f"{stem}_{suffix}.json" for prefix, suffix in HELD_OUT_SETS.items()}
+
+
 def assert_shows_boundaries(cell: str, shown: dict[str, Any], where: str) -> None:
     """A cell showing a boundary setting's accepted share, vertices off, correction seconds and speed-up
     (`bench/boundary_evidence.py`'s `setting_figures`)."""
@@ -2240,14 +2257,7 @@ def test_boundary_offset_table() -> None:
     """The band alone and the product's boundaries moved off the road, on the gate and five held-out sets, as
     recorded; the product's offset is the gate's median, and the held-out totals the README quotes."""
     t = table("boundaries moved off the road, v0004 proposing", "bench/boundary_offset.py")
-    files = {
-        "gate 9113-9123": "boundary_offset_gate.json",
-        "fresh 9201-9210": "boundary_offset_fresh.json",
-        "fresh 9211-9220": "boundary_offset_fresh2.json",
-        "fresh 9221-9230": "boundary_offset_fresh3.json",
-        "confirmation, six sites": "boundary_offset_confirm.json",
-        "gate validation 9007, 9011": "boundary_offset_9007_9011.json",
-    }
+    files = set_files("boundary_offset")
     seeds = {
         "gate 9113-9123": range(9113, 9124),
         "fresh 9201-9210": range(9201, 9211),
@@ -2336,14 +2346,7 @@ def test_annotator_split_table() -> None:
     """The annotator without and with the editor's split on the same proposals, as recorded; its "without" column
     is the boundary-offset table's product, and the held-out totals are the ones the README quotes."""
     t = table("the editor's split, v0004 proposing", "bench/annotator_split.py")
-    files = {
-        "gate 9113-9123": "annotator_split_gate.json",
-        "fresh 9201-9210": "annotator_split_fresh.json",
-        "fresh 9211-9220": "annotator_split_fresh2.json",
-        "fresh 9221-9230": "annotator_split_fresh3.json",
-        "confirmation, six sites": "annotator_split_confirm.json",
-        "gate validation 9007, 9011": "annotator_split_9007_9011.json",
-    }
+    files = set_files("annotator_split")
     without = with_split = 0.0
     for prefix, label, cells, recorded in recorded_rows(t, files, "bench/annotator_split.py"):
         shown = recorded["settings"]
@@ -2368,14 +2371,7 @@ def test_divider_carry_table() -> None:
     """Dividers carried as before and as the product carries them through the dash gap, as recorded; the
     product's settings are the ones the bench measured, and the held-out totals the README quotes."""
     t = table("dividers carried through the dash gap, v0004 proposing", "bench/divider_carry.py")
-    files = {
-        "gate 9113-9123": "divider_carry_gate.json",
-        "fresh 9201-9210": "divider_carry_fresh.json",
-        "fresh 9211-9220": "divider_carry_fresh2.json",
-        "fresh 9221-9230": "divider_carry_fresh3.json",
-        "confirmation, six sites": "divider_carry_confirm.json",
-        "gate validation 9007, 9011": "divider_carry_9007_9011.json",
-    }
+    files = set_files("divider_carry")
     before = product = 0.0
     for prefix, label, cells, recorded in recorded_rows(t, files, "bench/divider_carry.py"):
         shown = recorded["settings"]

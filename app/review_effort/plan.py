@@ -247,30 +247,6 @@ def move_offsets(points: np.ndarray, truth: Polyline) -> list[np.ndarray]:
     return [offset_onto(points, truth), *_to_line(points, truth)]
 
 
-def _fix(
-    index: int,
-    truth: Polyline,
-    relabel: str | None,
-    merged: tuple[int, ...],
-    pieces: list[np.ndarray],
-    config: SimulationConfig,
-    *,
-    simplify_first: bool,
-    move_by: np.ndarray | None = None,
-) -> Decision:
-    """The fix that turns the pieces into the truth's clicked vertices, optionally after moving the proposal whole
-    by `move_by` (one drag, `move_offsets`) and after the editor's simplify on them (one key)."""
-    target = clicked_vertices(truth, config)
-    if move_by is not None:
-        pieces = [pieces[0] + move_by, *pieces[1:]]
-    if simplify_first:
-        pieces = [simplify(p, config.editor_simplify_m) for p in pieces]
-    moved, removed, gap_runs = _vertex_edits(pieces, target, truth.closed, config.vertex_tolerance_m)
-    return Decision(
-        "fix", index, target, relabel, moved, removed, merged, gap_runs, simplify_first, move_by is not None
-    )
-
-
 def cheapest_fix(
     index: int,
     truth: Polyline,
@@ -280,17 +256,34 @@ def cheapest_fix(
     config: SimulationConfig,
     costs: ActionCosts,
 ) -> Decision:
-    """The quickest fix of the pieces (the proposal's first) into true element `index`: with or without the
-    editor's simplify first, and for a proposal alone with or without moving it whole first."""
+    """The quickest fix that turns the pieces (the proposal's first) into true element `index`'s clicked vertices:
+    with or without the editor's simplify on them first (one key), and for a proposal alone with or without moving
+    it whole first (one drag, `move_offsets`)."""
+    target = clicked_vertices(truth, config)
+
+    def fix(simplify_first: bool, move_by: np.ndarray | None) -> Decision:
+        edited = pieces if move_by is None else [pieces[0] + move_by, *pieces[1:]]
+        if simplify_first:
+            edited = [simplify(p, config.editor_simplify_m) for p in edited]
+        moved, removed, gap_runs = _vertex_edits(edited, target, truth.closed, config.vertex_tolerance_m)
+        return Decision(
+            "fix",
+            index,
+            target,
+            relabel,
+            moved,
+            removed,
+            merged,
+            gap_runs,
+            simplify_first,
+            move_by is not None,
+        )
+
     simplify_options = (False,) if truth.closed else (False, True)  # the editor does not simplify rings
     # a proposal alone may be moved whole first; pieces to merge are edited where they lie
     move_options = [None, *([] if merged else move_offsets(pieces[0], truth))]
     return min(
-        (
-            _fix(index, truth, relabel, merged, pieces, config, simplify_first=s, move_by=m)
-            for m in move_options
-            for s in simplify_options
-        ),
+        (fix(s, m) for m in move_options for s in simplify_options),
         key=lambda d: d.seconds(costs),
     )
 
