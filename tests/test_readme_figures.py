@@ -2397,3 +2397,35 @@ def test_divider_carry_table() -> None:
     assert (config.divider_border_reach_m, config.divider_course_fit_m) == (6.0, 4.0)
     text = " ".join(readme_text().split())
     assert f"falls from {before:,.0f} s to {product:,.0f} s ({100 * (1 - product / before):.2f} %)" in text
+
+
+def test_more_reconstructions_table() -> None:
+    """v0004 and the candidate trained on 36 reconstructions, the product's tracing, as recorded; the held-out
+    totals and the confirmation mAPs the README quotes."""
+    t = table("more reconstructions, the product's tracing", "bench/divider_carry.py")
+    shipped = candidate = 0.0
+    for prefix, suffix in HELD_OUT_SETS.items():
+        label, cells = row_starting(t, prefix)
+        before = results(f"divider_carry_{suffix}.json")["settings"]["product"]
+        after = results(f"divider_carry_more_recon_{suffix}.json")
+        assert after["checkpoint"] == "data/vma/s4reg/v0001"  # the candidate, not in the repository
+        for column, figure in ((1, before), (2, after["settings"]["product"])):
+            assert_shows(cells[column], [figure["correction_s"], figure["speed_up"]], label)
+        if prefix != "gate 9113-9123":
+            shipped += before["correction_s"]
+            candidate += after["settings"]["product"]["correction_s"]
+    text = " ".join(readme_text().split())
+    assert (
+        f"falls from {shipped:,.0f} s to {candidate:,.0f} s ({100 * (1 - candidate / shipped):.1f} %)" in text
+    )
+    new, old = (
+        results(f)["results"]
+        for f in ("vma_masks_confirm_more_recon.json", "vma_masks_confirm_v0004_carry.json")
+    )
+    mine, theirs = new["reconstructed"]["element_masks"], old["reconstructed"]["element_masks"]
+    quoted = (
+        f"{mine['observed_truth']['mean_ap']:.3f} against {theirs['observed_truth']['mean_ap']:.3f}, on the clean BEV "
+        f"sites 5000-5004 {new['clean']['element_masks']['mean_ap']:.3f} against "
+        f"{old['clean']['element_masks']['mean_ap']:.3f}"
+    )
+    assert quoted in text
