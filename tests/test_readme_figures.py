@@ -2395,6 +2395,14 @@ def test_divider_carry_table() -> None:
             product += shown["product"]["correction_s"]
     config = MaskInferenceConfig()
     assert (config.divider_border_reach_m, config.divider_course_fit_m) == (6.0, 4.0)
+    end_to_end = results("end_to_end_carry_split_default.json")
+    before_e2e = results("end_to_end_outward_default.json")
+    for frame in ("annotator", "annotator_in_reconstruction_frame"):  # "neither moves a decision"
+        counts = dict(end_to_end[frame]["corrected"]["counts"])
+        assert counts.pop("splits") == 0 and counts == before_e2e[frame]["corrected"]["counts"]
+        assert end_to_end[frame]["corrected"]["total_s"] == pytest.approx(
+            before_e2e[frame]["corrected"]["total_s"]
+        )
     text = " ".join(readme_text().split())
     assert f"falls from {before:,.0f} s to {product:,.0f} s ({100 * (1 - product / before):.2f} %)" in text
 
