@@ -313,7 +313,9 @@ def test_a_divider_is_carried_along_its_fitted_course_not_its_kinked_end() -> No
     observed = np.zeros((100, 200), bool)  # 0.1 m cells, origin (0, 10): x 0..20 m, y 0..10 m
     observed[:, 20:140] = True  # seen from x = 2.0 to x = 13.9
     mask = ObservedMask(observed, (0.0, 10.0), 0.1)
-    kinked = np.array([[3.0, 5.0], [5.0, 5.0], [7.0, 5.0], [9.0, 5.0], [9.5, 5.3]])  # last vertex pulled aside
+    kinked = np.array(
+        [[3.0, 5.0], [5.0, 5.0], [7.0, 5.0], [9.0, 5.0], [9.5, 5.3]]
+    )  # last vertex pulled aside
     along_kink = carried_to_border(kinked, mask, 2.0, 6.0, 0.4)
     assert along_kink[-1, 1] > 7.5  # on along the kink's slope: metres off the line
     fitted = carried_to_border(kinked, mask, 2.0, 6.0, 0.4, fit_m=4.0, tolerance_m=0.15)
