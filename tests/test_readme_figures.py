@@ -2372,7 +2372,7 @@ def test_divider_carry_table() -> None:
     product's settings are the ones the bench measured, and the held-out totals the README quotes."""
     t = table("dividers carried through the dash gap, v0004 proposing", "bench/divider_carry.py")
     files = set_files("divider_carry")
-    before = product = 0.0
+    before = product = unseen_before = unseen_product = 0.0
     for prefix, label, cells, recorded in recorded_rows(t, files, "bench/divider_carry.py"):
         shown = recorded["settings"]
         assert (
@@ -2393,6 +2393,9 @@ def test_divider_carry_table() -> None:
         if prefix != "gate 9113-9123":
             before += shown["before"]["correction_s"]
             product += shown["product"]["correction_s"]
+        if prefix not in ("gate 9113-9123", "fresh 9201-9210"):  # not looked at while choosing
+            unseen_before += shown["before"]["correction_s"]
+            unseen_product += shown["product"]["correction_s"]
     config = MaskInferenceConfig()
     assert (config.divider_border_reach_m, config.divider_course_fit_m) == (6.0, 4.0)
     end_to_end = results("end_to_end_carry_split_default.json")
@@ -2405,6 +2408,9 @@ def test_divider_carry_table() -> None:
         )
     text = " ".join(readme_text().split())
     assert f"falls from {before:,.0f} s to {product:,.0f} s ({100 * (1 - product / before):.2f} %)" in text
+    assert (
+        f"the 28 not looked at while choosing from {unseen_before:,.0f} s to {unseen_product:,.0f} s" in text
+    )
 
 
 def test_more_reconstructions_table() -> None:
