@@ -16,8 +16,9 @@ from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig
 from models.vma.element_masks.replay import replay_candidates, replay_sites
 from models.vma.element_masks.retrain import MaskRetrainConfig
-from models.vma.element_masks.train import site_drawer
+from models.vma.element_masks.train import share_weights, site_drawer
 from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
+from models.vma.validation import ValidationSite
 
 
 @dataclass
@@ -69,6 +70,17 @@ def test_sites_are_drawn_by_their_weights_and_uniformly_as_before_without() -> N
     uniform, before = site_drawer(5, None), np.random.default_rng(7)
     after = np.random.default_rng(7)
     assert [uniform(after) for _ in range(50)] == [int(before.integers(5)) for _ in range(50)]
+
+
+def test_a_reconstruction_share_splits_the_crops_between_the_two_kinds_of_site() -> None:
+    bev = [Path(f"data/vma/train/seed-{seed}") for seed in (1000, 1001, 1002)]
+    rebuilt = [ValidationSite(Path("data/synthetic/random-9101"), Path("bev"), reconstructed=True)]
+    weights = share_weights([*bev, *rebuilt], 0.25)
+    assert weights == pytest.approx([0.25, 0.25, 0.25, 0.25])  # three BEV sites share 0.75, one rebuilt 0.25
+    assert share_weights([*rebuilt, *bev], 0.5) == pytest.approx([0.5, 0.5 / 3, 0.5 / 3, 0.5 / 3])
+    for sites, share in (([*bev, *rebuilt], 1.0), (bev, 0.5), ([*bev, *rebuilt], 0.0)):
+        with pytest.raises(ValueError, match="reconstruction_share"):
+            share_weights(sites, share)
 
 
 @pytest.mark.parametrize("weights", [[1.0], [1.0, -1.0], [0.0, 0.0]])

@@ -190,3 +190,13 @@ def test_train_masks_names_a_site_without_vectors(tmp_path: Path) -> None:
     )
     assert result.exit_code == 2 and "vector_map.json" in result.output
     assert not (tmp_path / "r").exists()  # nothing half-written
+
+
+def test_train_masks_refuses_a_reconstruction_share_without_reconstructions(tmp_path: Path) -> None:
+    semantic, _ = drawn_semantic()
+    site = write_raster_site(tmp_path / "bev", semantic, [])
+    args = ["--site", str(site), "--steps", "1", "--reconstruction-share", "0.5"]
+    result = runner.invoke(app, ["train-masks", "--registry", str(tmp_path / "r"), *args])
+    assert result.exit_code == 2 and "reconstruction_share" in result.output
+    assert "0 of 1 sites reconstructed" in " ".join(result.output.split())
+    assert not (tmp_path / "r").exists()  # nothing half-written

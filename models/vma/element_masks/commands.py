@@ -37,6 +37,12 @@ def train_masks_command(
     damaged_copies: Annotated[
         int, typer.Option(help="Damaged copies of every site beside the clean one.")
     ] = 3,
+    reconstruction_share: Annotated[
+        float | None,
+        typer.Option(
+            help="Share of the training crops drawn from the --reconstructed-site sites (default: every site alike)."
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     threads: Annotated[int, typer.Option(help="CPU threads torch trains with.")] = 2,
 ) -> None:
@@ -57,6 +63,7 @@ def train_masks_command(
             sites,
             registry,
             parent=parent,
+            reconstruction_share=reconstruction_share,
         )
     except (ValueError, FileNotFoundError, CheckpointError) as err:
         raise bad_input(err) from err

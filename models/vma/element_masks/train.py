@@ -276,6 +276,24 @@ def fit_masks(
     return optimise(model, batch_loss, config, label="element-mask training", show_progress=show_progress)
 
 
+def share_weights(sites: Sequence[ValidationEntry], reconstruction_share: float) -> list[float]:
+    """Relative site weights that draw `reconstruction_share` of the crops from the reconstructions among `sites`
+    and the rest from the others, each group's sites alike. Why: with every site alike, adding reconstructions
+    shrinks the share of generator rasters the network keeps seeing (ValueError unless the share is in (0, 1) and
+    both kinds are there)."""
+    reconstructed = [as_validation_site(s).reconstructed for s in sites]
+    count = sum(reconstructed)
+    if not 0.0 < reconstruction_share < 1.0 or count in (0, len(sites)):
+        raise ValueError(
+            f"element-mask training: reconstruction_share must lie in (0, 1) with reconstructions and other sites "
+            f"both given, got {reconstruction_share} with {count} of {len(sites)} sites reconstructed"
+        )
+    return [
+        reconstruction_share / count if r else (1.0 - reconstruction_share) / (len(sites) - count)
+        for r in reconstructed
+    ]
+
+
 def site_drawer(count: int, weights: Sequence[float] | None) -> Callable[[np.random.Generator], int]:
     """A function drawing a site index: uniformly, or by relative `weights` (ValueError when they are not
     `count` non-negative numbers with a positive sum)."""
@@ -298,18 +316,21 @@ def train_masks(
     *,
     parent: MaskCheckpoint | None = None,
     validation_sites: Sequence[ValidationEntry] = (),
+    reconstruction_share: float | None = None,
     promote_result: bool = True,
     show_progress: bool = True,
 ) -> Path:
     """Train (or, from `parent`, continue) the network on generated `sites` (their own rasters, or their
     reconstructions); save a new version of `registry` that records every site it and its parents saw (refusing
-    `validation_sites` among them)."""
+    `validation_sites` among them). `reconstruction_share`: the share of crops drawn from the reconstructions
+    (`share_weights`; None: every site alike)."""
     started = time.perf_counter()
+    weights = None if reconstruction_share is None else share_weights(sites, reconstruction_share)
     seen = seen_records([truth_folder(s) for s in sites], parent)
     refuse_seen_validation(seen, validation_sites, "the element-mask model being trained")
     training = [load_mask_training_site(s, model_config, train_config.damaged_copies) for s in sites]
     model = parent.model if parent is not None else ElementMaskNet(model_config)
-    losses = fit_masks(model, training, train_config, show_progress=show_progress)
+    losses = fit_masks(model, training, train_config, site_weights=weights, show_progress=show_progress)
     model.cpu()
     metrics: dict[str, Any] = {
         "final_loss": float(np.mean(losses[-100:])),
@@ -327,6 +348,7 @@ def train_masks(
             **seen,
             "damaged_copies": train_config.damaged_copies,
             "samples_seen": len(losses) * train_config.batch_size,
+            "reconstruction_share": reconstruction_share,
             "seed": train_config.seed,
         },
     }
