@@ -34,6 +34,7 @@ from models.vma.rasters import NUM_SEMANTIC, SiteRasters, load_site_rasters
 from models.vma.train import DAMAGE_SEED_BASE, optimise
 from models.vma.validation import (
     ValidationEntry,
+    ValidationSite,
     as_validation_site,
     reconstructions,
     true_vectors,
@@ -281,7 +282,9 @@ def share_weights(sites: Sequence[ValidationEntry], reconstruction_share: float)
     and the rest from the others, each group's sites alike. Why: with every site alike, adding reconstructions
     shrinks the share of generator rasters the network keeps seeing (ValueError unless the share is in (0, 1) and
     both kinds are there)."""
-    reconstructed = [as_validation_site(s).reconstructed for s in sites]
+    reconstructed = [
+        isinstance(s, ValidationSite) and s.reconstructed for s in sites
+    ]  # a path: its own rasters
     count = sum(reconstructed)
     if not 0.0 < reconstruction_share < 1.0 or count in (0, len(sites)):
         raise ValueError(
