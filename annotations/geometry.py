@@ -94,7 +94,7 @@ def _planar_length(array: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(array[:, :2], axis=0), axis=1).sum())
 
 
-def _arc_lengths(array: np.ndarray) -> np.ndarray:
+def arc_lengths(array: np.ndarray) -> np.ndarray:
     """Cumulative planar arc length at each vertex, starting at 0."""
     steps = np.linalg.norm(np.diff(array[:, :2], axis=0), axis=1)
     return np.concatenate([[0.0], np.cumsum(steps)])
@@ -102,7 +102,7 @@ def _arc_lengths(array: np.ndarray) -> np.ndarray:
 
 def _interpolate(array: np.ndarray, stations: np.ndarray) -> np.ndarray:
     """Points at the given arc-length stations, every coordinate interpolated linearly."""
-    arc = _arc_lengths(array)
+    arc = arc_lengths(array)
     keep = np.concatenate([[True], np.diff(arc) > 0])  # np.interp needs strictly increasing stations
     arc, array = arc[keep], array[keep]
     return np.stack([np.interp(stations, arc, array[:, k]) for k in range(array.shape[1])], axis=1)
@@ -115,7 +115,7 @@ def resample_fixed(points: ArrayLike, n: int) -> np.ndarray:
     if n < 2:
         raise ValueError(f"n: need at least 2 points, got {n}")
     array = _finite_points(points)
-    arc = _arc_lengths(array)
+    arc = arc_lengths(array)
     if arc[-1] <= 0.0:
         return np.repeat(array[:1], n, axis=0)
     out = _interpolate(array, np.linspace(0.0, arc[-1], n))

@@ -18,7 +18,7 @@ from dataclasses import replace
 import numpy as np
 from shapely.geometry import LineString, Point
 
-from annotations.geometry import resample_fixed
+from annotations.geometry import arc_lengths, resample_fixed
 from app.review_effort.costs import ActionCosts
 from app.review_effort.plan import (
     Decision,
@@ -64,7 +64,7 @@ def runs_along(
 def split_at(points: np.ndarray, station: float) -> list[tuple[np.ndarray, np.ndarray, bool]]:
     """The ways to split a polyline near `station` (metres along it): at its interior vertex nearest the station,
     and at a vertex inserted there; each (head, tail, inserted), the two parts sharing the split vertex."""
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    along = arc_lengths(points)
     options = []
     if len(points) > 2:
         k = 1 + int(np.argmin(np.abs(along[1:-1] - station)))

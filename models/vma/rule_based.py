@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from shapely.geometry import LineString
 
+from annotations.geometry import arc_lengths
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from models.vma.merge import join_polylines
 from models.vma.raster_rays import OFF_ROAD_IDS, cells_at, extend_to_unseen, road_left
@@ -229,7 +230,7 @@ def trim_hooks(points: np.ndarray, hook_m: float, angle_deg: float) -> np.ndarra
 
 
 def _trim_tail(points: np.ndarray, hook_m: float, cos_limit: float) -> np.ndarray:
-    along = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    along = arc_lengths(points)
     total = along[-1]
     if total < 3 * hook_m:
         return points

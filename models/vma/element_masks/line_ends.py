@@ -8,15 +8,11 @@ Pure functions over (N, 2) polylines in global metres.
 
 import numpy as np
 
+from annotations.geometry import arc_lengths
 from cama_pipeline.evaluate.observed import ObservedMask
 
 END_SKIP_M = 0.3
 """The vertices this close to a line's end are not part of the course its end is checked against."""
-
-
-def along_line(points: np.ndarray) -> np.ndarray:
-    """Distance of each vertex from the first, along the line."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
 
 
 def _course(end: np.ndarray, distance: np.ndarray, course_m: float) -> np.ndarray:
@@ -34,7 +30,7 @@ def straightened_ends(points: np.ndarray, course_m: float, tolerance_m: float) -
     `END_SKIP_M + course_m` from the end (at least two of them); an end vertex farther than `tolerance_m` off it
     moves onto it, keeping its distance along it. Lines shorter than three times `course_m` are left as they
     are (their ends are most of them)."""
-    along = along_line(points)
+    along = arc_lengths(points)
     if course_m == 0 or along[-1] < 3 * course_m:
         return points
     out = np.array(points, dtype=np.float64)
@@ -96,7 +92,7 @@ def carried_to_border(
     if reach_m == 0 or len(points) < 2:
         return points
     out = np.array(points, dtype=np.float64)
-    along = along_line(out)
+    along = arc_lengths(out)
     probes = np.arange(BORDER_STEP_M, reach_m + BORDER_STEP_M / 2, BORDER_STEP_M)
     ends = []
     for end, distance in ((out, along), (out[::-1], along[-1] - along[::-1])):
