@@ -2471,3 +2471,64 @@ def test_more_reconstructions_table() -> None:
         f"reconstructions {ours[0]:.3f} against v0004's {v0004[0]:.3f}, the clean BEV sites {ours[1]:.3f} against "
         f"{v0004[1]:.3f}, damaged {ours[2]:.3f} against {v0004[2]:.3f}"
     ) in text
+
+
+def test_share_candidate_gate_runs() -> None:
+    """The share-0.5 candidate on the gate's validation sites beside v0004, and the paired saving over the held-out
+    reconstructions, as the README quotes them; the pairs are the divider-carry files the table above shows."""
+    text = " ".join(readme_text().split())
+    for name in ("vma_masks_validation_share_share.json", "vma_masks_validation_share_v0004.json"):
+        assert f"bench/results/{name}" in text
+    ours, v0004 = (results(f"vma_masks_validation_share_{n}.json") for n in ("share", "v0004"))
+    assert "--checkpoint data/vma/s4reg2/v0001" in ours["command"]
+    assert ours["checkpoint"]["data"]["reconstruction_share"] == 0.5
+    assert v0004["checkpoint"]["version"] == "v0004"
+    mine, theirs = ours["results"], v0004["results"]
+
+    def masks(r: dict[str, Any], kind: str) -> dict[str, Any]:
+        return r[kind]["element_masks"]
+
+    assert (
+        f"clean {masks(mine, 'clean')['mean_ap']:.3f} against {masks(theirs, 'clean')['mean_ap']:.3f}, damaged "
+        f"{masks(mine, 'degraded')['mean_ap']:.3f} against {masks(theirs, 'degraded')['mean_ap']:.3f}, the "
+        f"reconstructions of 9007 and 9011 {masks(mine, 'reconstructed')['observed_truth']['mean_ap']:.3f} against "
+        f"{masks(theirs, 'reconstructed')['observed_truth']['mean_ap']:.3f}"
+    ) in text
+    clean = [masks(r, "clean")["annotator"] for r in (mine, theirs)]
+    both = [
+        masks(r, "clean")["annotator"]["correction_s"]
+        + masks(r, "reconstructed")["annotator"]["correction_s"]
+        for r in (mine, theirs)
+    ]
+    assert (
+        f"needs {clean[0]['correction_s']:.0f} s on the clean BEV sites against {clean[1]['correction_s']:.0f} s "
+        f"({clean[0]['speed_up']:.2f}x against {clean[1]['speed_up']:.2f}x), {both[0]:.0f} s over both kinds against "
+        f"{both[1]:.0f} s"
+    ) in text
+    assert both[0] > both[1]  # "the gate, which asks a lower total, keeps it out"
+
+    share, more = (results(f"paired_saving_{n}.json") for n in ("share", "more_recon"))
+    for paired, stem in ((share, "divider_carry_share"), (more, "divider_carry_more_recon")):
+        assert sorted(paired["sets"]) == sorted(s for s in HELD_OUT_SETS.values() if s != "gate")
+        for suffix, row in paired["sets"].items():
+            assert row["files"] == [
+                f"bench/results/divider_carry_{suffix}.json",
+                f"bench/results/{stem}_{suffix}.json",
+            ]
+        assert paired["pooled"]["sites"] == 38
+        assert paired["pooled"]["saving_confidence"] < 0.9  # neither is a confident saving
+    pooled = share["pooled"]
+    assert (
+        f"faster on {pooled['faster_sites']} sites and slower on {pooled['slower_sites']}, and a saving holds in "
+        f"{100 * pooled['saving_confidence']:.0f} % of the paired bootstrap resamples"
+    ) in text
+    others = [row["saving_confidence"] for name, row in share["sets"].items() if name != "fresh"]
+    assert (
+        f"({share['sets']['fresh']['saving_confidence']:.2f} there, {min(others):.2f}-{max(others):.2f} on each"
+        in text
+    )
+    first = more["pooled"]
+    assert (
+        f"holds in {100 * first['saving_confidence']:.1f} % (`bench/results/paired_saving_more_recon.json`, "
+        f"{first['faster_sites']} faster, {first['slower_sites']} slower)"
+    ) in text
