@@ -2532,3 +2532,41 @@ def test_share_candidate_gate_runs() -> None:
         f"holds in {100 * first['saving_confidence']:.1f} % (`bench/results/paired_saving_more_recon.json`, "
         f"{first['faster_sites']} faster, {first['slower_sites']} slower)"
     ) in text
+
+
+def image_resolution_rows(t: MarkdownTable, figures: dict[str, Any], labels: dict[str, str]) -> None:
+    """Each build's row of an image-resolution table: mAP (divider AP), correction and speed-up, and the road's
+    height error at 8-10, 10-12 and 12-15 m from the track (medians, then RMS, in cm)."""
+    for build, label in labels.items():
+        shown = figures[build]
+        bands = shown["height_error_by_distance"][4:7]
+        assert [b["band_m"] for b in bands] == [[8, 10], [10, 12], [12, 15]]
+        cells = row(t, label)
+        assert_shows(cells[1], [shown["observed_truth_map"], shown["class_ap"]["divider"]], label)
+        annotator = shown["annotator"]
+        assert_shows(cells[2], [annotator["correction_s"], annotator["speed_up"]], label)
+        heights = [100 * b["median_m"] for b in bands] + [100 * b["rms_m"] for b in bands]
+        assert_shows(cells[3], heights, label)
+
+
+def test_image_resolution_table() -> None:
+    """The held-out layouts at 256x144 and at 512x288, v0004 proposing: the table and the sentence after it; the
+    256x144 builds are the reconstructions of the divider-carry table's fresh 9211-9230 sets, site for site."""
+    t = table("image size, 20 held-out layouts 9211-9230", "bench/image_resolution.py")
+    assert_names_source(t, "image_resolution_512.json", "bench/image_resolution.py")
+    figures = results("image_resolution_512.json")
+    assert figures["checkpoint"].endswith("models/vma/element_masks/checkpoints/v0004")
+    assert [pair["image_sizes"] for pair in figures["pairs"]] == [[[256, 144], [512, 288]]] * 20
+    image_resolution_rows(t, figures, {"low": "256x144 (the tiny preset)", "high": "512x288"})
+    same = [
+        t
+        for suffix in ("fresh2", "fresh3")
+        for t in results(f"divider_carry_{suffix}.json")["settings"]["product"]["per_site_correction_s"]
+    ]
+    assert figures["low"]["annotator"]["per_site_correction_s"] == pytest.approx(same)
+    gain = figures["high_against_low"]
+    text = " ".join(readme_text().split())
+    assert (
+        f"in {100 * (1 - gain['correction_ratio']):.0f} % less time (faster on {gain['faster_pairs']} of the 20, a "
+        f"saving in {100 * gain['saving_confidence']:.0f} % of the paired resamples)"
+    ) in text
