@@ -2570,3 +2570,30 @@ def test_image_resolution_table() -> None:
         f"in {100 * (1 - gain['correction_ratio']):.0f} % less time (faster on {gain['faster_pairs']} of the 20, a "
         f"saving in {100 * gain['saving_confidence']:.0f} % of the paired resamples)"
     ) in text
+
+
+def test_image_resolution_1024_table() -> None:
+    """Six layouts at 256x144, 512x288 and 1024x576 from the two runs that pair 1024x576 with each smaller size:
+    the 1024x576 builds score the same in both, and the 512x288 builds as in the twenty-layout run."""
+    t = table("image size, 6 held-out layouts 9221-9226", "bench/image_resolution.py")
+    for name in ("image_resolution_256_1024.json", "image_resolution_1024.json"):
+        assert_names_source(t, name, "bench/image_resolution.py")
+    from_256, from_512 = results("image_resolution_256_1024.json"), results("image_resolution_1024.json")
+    assert [p["image_sizes"] for p in from_256["pairs"]] == [[[256, 144], [1024, 576]]] * 6
+    assert [p["image_sizes"] for p in from_512["pairs"]] == [[[512, 288], [1024, 576]]] * 6
+    assert (
+        from_256["high"]["annotator"]["per_site_correction_s"]
+        == from_512["high"]["annotator"]["per_site_correction_s"]
+    )
+    twenty = results("image_resolution_512.json")["high"]["annotator"]["per_site_correction_s"]
+    assert from_512["low"]["annotator"]["per_site_correction_s"] == pytest.approx(twenty[10:16])  # 9221-9226
+    image_resolution_rows(t, from_256, {"low": "256x144 (the tiny preset)", "high": "1024x576"})
+    image_resolution_rows(t, from_512, {"low": "512x288"})
+    gain = from_512["high_against_low"]
+    text = " ".join(readme_text().split())
+    assert (
+        f"saves {100 * (1 - gain['correction_ratio']):.0f} % (faster on {gain['faster_pairs']} of the 6, a saving in "
+        f"{100 * gain['saving_confidence']:.1f} % of the paired resamples)"
+    ) in text
+    against_256 = from_256["high_against_low"]["correction_ratio"]
+    assert f"the correction of these six is {100 * (1 - against_256):.0f} % shorter than at 256x144" in text
