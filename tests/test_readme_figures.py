@@ -2597,3 +2597,8 @@ def test_image_resolution_1024_table() -> None:
     ) in text
     against_256 = from_256["high_against_low"]["correction_ratio"]
     assert f"the correction of these six is {100 * (1 - against_256):.0f} % shorter than at 256x144" in text
+    twenty = results("image_resolution_512.json")["high_against_low"]["correction_ratio"]
+    assert (  # the pointer under VMA proposals
+        f"are corrected {100 * (1 - twenty):.0f} % faster at 512x288 and {100 * (1 - against_256):.0f} % faster at "
+        f"1024x576, where the shipped v0004 reaches {from_256['high']['annotator']['speed_up']:.2f}x"
+    ) in text
