@@ -2605,3 +2605,37 @@ def test_image_resolution_1024_table() -> None:
         f"are corrected {100 * (1 - twenty):.0f} % faster at 512x288 and {100 * (1 - against_256):.0f} % faster at "
         f"1024x576, where the shipped v0004 reaches {from_256['high']['annotator']['speed_up']:.2f}x"
     ) in text
+
+
+def test_training_on_larger_images_sentence() -> None:
+    """v0004 and its two 600-step continuations (on 256x144 and on 512x288 reconstructions of 9101-9112), scored on
+    the twenty held-out layouts at 512x288, as the README quotes them; v0004's figure repeats the image-resolution
+    table's 512x288 row."""
+    text = " ".join(readme_text().split())
+    runs = {k: results(f"divider_carry_512_{k}.json") for k in ("v0004", "recon256", "recon512")}
+    assert runs["v0004"]["checkpoint"].endswith("checkpoints/v0004")
+    assert all(
+        run["sites"] == [f"data/synthetic/random512-{s}" for s in range(9211, 9231)] for run in runs.values()
+    )
+    shown = {k: run["settings"]["product"] for k, run in runs.items()}
+    assert shown["v0004"]["per_site_correction_s"] == pytest.approx(
+        results("image_resolution_512.json")["high"]["annotator"]["per_site_correction_s"]
+    )
+
+    def said(figures: dict[str, Any]) -> str:
+        return f"{figures['correction_s']:,.0f} s ({figures['speed_up']:.2f}x)"
+
+    assert (
+        f"v0004 corrects in {said(shown['v0004'])}, trained on the 256x144 reconstructions in "
+        f"{said(shown['recon256'])}, on the 512x288 ones in {said(shown['recon512'])}"
+    ) in text
+    paired = results("paired_saving_512_recon512.json")
+    assert paired["sets"]["recon256_vs_recon512"]["files"] == [
+        "bench/results/divider_carry_512_recon256.json",
+        "bench/results/divider_carry_512_recon512.json",
+    ]
+    pooled = paired["pooled"]
+    assert (
+        f"faster than the one before on {pooled['faster_sites']} of the 20 (a saving in "
+        f"{100 * pooled['saving_confidence']:.0f} % of the resamples)"
+    ) in text
