@@ -34,20 +34,14 @@ from cama_pipeline.bev import read_bev
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.site_identity import SeenSiteError, site_identity
 from models.vma.element_masks.net import ElementMaskNet
-from models.vma.element_masks.propose import (
-    MaskInferenceConfig,
-    predict_probabilities,
-    vectors_from_probabilities,
-)
-from models.vma.gate import saving_confidence
-from models.vma.rasters import SiteRasters
+from models.vma.element_masks.propose import product_proposer
 from models.vma.validation import ValidationSite, reconstruction_of
-from models.vma.vectors import Vector
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.paired_saving import saving_figures  # noqa: E402
 from bench.surface_range import band_figures, camera_track, reconstruction_errors  # noqa: E402
-from bench.vma_measures import Proposer, reconstructed_figures, unseen_mask_checkpoint  # noqa: E402
+from bench.vma_measures import reconstructed_figures, unseen_mask_checkpoint  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 BUILDS = ("low", "high")
@@ -73,16 +67,6 @@ def checked_pair(low: Path, high: Path) -> dict[str, Any]:
     if sizes[0][0] * sizes[0][1] >= sizes[1][0] * sizes[1][1]:
         raise PairError(f"{low} ({sizes[0]}) is not rendered smaller than {high} ({sizes[1]})")
     return {"layout_digest": layouts[0], "sites": [str(low), str(high)], "image_sizes": sizes}
-
-
-def product_proposer(model: ElementMaskNet) -> Proposer:
-    """The promoted network proposing with the product's settings (`MaskInferenceConfig()`)."""
-    config = MaskInferenceConfig()
-
-    def propose(rasters: SiteRasters) -> list[Vector]:
-        return vectors_from_probabilities(rasters, predict_probabilities(model, rasters, config), config)
-
-    return propose
 
 
 def height_errors(sites: list[ValidationSite]) -> list[dict[str, Any]]:
@@ -119,12 +103,13 @@ def measure(pairs: list[tuple[Path, Path]], model: ElementMaskNet) -> dict[str, 
             flush=True,
         )
     low, high = (figures[b]["annotator"]["per_site_correction_s"] for b in BUILDS)
+    saving = saving_figures(low, high)
     figures["high_against_low"] = {
         "correction_ratio": sum(high) / sum(low),
         "speed_up_gain": figures["high"]["annotator"]["speed_up"] - figures["low"]["annotator"]["speed_up"],
-        "saving_confidence": saving_confidence(low, high),
-        "faster_pairs": sum(h < lo for lo, h in zip(low, high, strict=True)),
-        "slower_pairs": sum(h > lo for lo, h in zip(low, high, strict=True)),
+        "saving_confidence": saving["saving_confidence"],
+        "faster_pairs": saving["faster_sites"],
+        "slower_pairs": saving["slower_sites"],
     }
     return figures
 
