@@ -45,7 +45,8 @@ class FeaturesConfig:
     the merged reconstruction by centimetres)."""
     num_threads: int = 2
     """Extraction processes and matching threads (pycolmap's SIFT holds the GIL, so extraction needs processes:
-    2 processes extract the default site's 912 images in about half the time of one)."""
+    2 processes extract the default site's 912 images in about half the time of one). The "colmap" matcher runs on
+    one thread whatever this says, so that its reruns agree (`sift.ColmapMatcher`)."""
 
     def __post_init__(self) -> None:
         if self.max_num_features < 1:
