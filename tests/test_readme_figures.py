@@ -2622,29 +2622,22 @@ def test_image_resolution_1024_table() -> None:
     ) in text
 
 
-RESOLUTION_RULE_FILES = {
-    "256x144": "vma_masks_resolution_256.json",
-    "512x288": "vma_masks_resolution_512.json",
-    "1024x576": "vma_masks_resolution_1024.json",
-}
-
-
 def test_rules_at_larger_images_table() -> None:
     """The rule-based proposer and v0004 on the twenty held-out layouts' reconstructions at each image size, from
     `bench/vma_masks.py`: each row's figures and margin; v0004's figures are the image-resolution runs' own."""
     t = table("reconstructions of 20 held-out layouts 9211-9230", "bench/vma_masks.py")
-    tags = {"256x144": "random", "512x288": "random512", "1024x576": "random1024"}
-    same_as = {
-        "256x144": results("image_resolution_512.json")["low"],
-        "512x288": results("image_resolution_512.json")["high"],
-        "1024x576": results("image_resolution_1024.json")["high"],
+    at_512, at_1024 = results("image_resolution_512.json"), results("image_resolution_1024.json")
+    sizes = {  # row label -> results file, the builds' site prefix, the same builds in the image-resolution runs
+        "256x144": ("vma_masks_resolution_256.json", "random", at_512["low"]),
+        "512x288": ("vma_masks_resolution_512.json", "random512", at_512["high"]),
+        "1024x576": ("vma_masks_resolution_1024.json", "random1024", at_1024["high"]),
     }
     margins = {}
-    for size, name in RESOLUTION_RULE_FILES.items():
+    for size, (name, tag, same_as) in sizes.items():
         assert_names_source(t, name, "bench/vma_masks.py")
         run = results(name)
         assert run["checkpoint"]["version"] == "v0004"
-        assert f"--recon-site data/synthetic/{tags[size]}-9211 " in run["command"]
+        assert f"--recon-site data/synthetic/{tag}-9211 " in run["command"]
         assert run["command"].count("--recon-site") == 20
         scored = run["results"]["reconstructed"]
         rules, network = scored["rule_based"], scored["element_masks"]
@@ -2656,16 +2649,12 @@ def test_rules_at_larger_images_table() -> None:
             )
         margin = run["map_margin_over_rule_based"]["reconstructed"]
         assert_shows(cells[3], [margin], size)
-        assert network["observed_truth"]["mean_ap"] == pytest.approx(same_as[size]["observed_truth_map"])
-        assert network["annotator"]["correction_s"] == pytest.approx(
-            same_as[size]["annotator"]["correction_s"]
-        )
+        assert network["observed_truth"]["mean_ap"] == pytest.approx(same_as["observed_truth_map"])
+        assert network["annotator"]["correction_s"] == pytest.approx(same_as["annotator"]["correction_s"])
         margins[size] = margin
     assert min(margins.values()) >= 0.05  # "at least 0.05 above them at every size"
     text = " ".join(readme_text().split())
-    low, high = (
-        results(RESOLUTION_RULE_FILES[size])["results"]["reconstructed"] for size in ("256x144", "1024x576")
-    )
+    low, high = (results(sizes[size][0])["results"]["reconstructed"] for size in ("256x144", "1024x576"))
 
     def gain(proposer: str) -> float:
         return float(high[proposer]["observed_truth"]["mean_ap"] - low[proposer]["observed_truth"]["mean_ap"])
