@@ -2696,3 +2696,37 @@ def test_training_on_larger_images_sentence() -> None:
         f"faster than the one before on {pooled['faster_sites']} of the 20 (a saving in "
         f"{100 * pooled['saving_confidence']:.0f} % of the resamples)"
     ) in text
+
+
+JOINT_SITES = {"default": "surface_joint_default.json", "9211": "surface_joint_9211.json"}
+JOINT_POSES = {"true": "ground_truth", "SfM": "sfm"}
+
+
+def test_joint_optimisation_table() -> None:
+    """The joint optimisation by differentiable rendering against the vote, from `bench/surface_joint.py`: every row
+    (site, poses, variant) shows its run's figures and time ratio; the text's verdict that no variant improves
+    on the vote in every class is what the files say."""
+    t = table("site, poses: surface", "bench/surface_joint.py")
+    for name in JOINT_SITES.values():
+        assert_names_source(t, name, "bench/surface_joint.py")
+    shown = 0
+    for label, cells in t.rows.items():
+        site, poses, variant = (part.strip() for part in label.split(","))
+        (run,) = [r for r in results(JOINT_SITES[site])["runs"] if r["poses"] == JOINT_POSES[poses]]
+        figures_of = run["vote"] if variant == "vote" else run["variants"][variant]["figures"]
+        iou = figures_of["iou"]
+        assert_shows(cells[1], [figures_of["elevation_rmse_m"] * 100], label)
+        assert_shows(cells[2], [iou["road"], iou["curb"], iou["lane_marking"], iou["crosswalk"]], label)
+        assert_shows(cells[3], [figures_of["psnr_db"]], label)
+        ratio = 1.0 if variant == "vote" else run["variants"][variant]["minus_vote"]["seconds_ratio"]
+        assert_shows(cells[4], [figures_of["seconds"]["total"], ratio], label)
+        shown += 1
+    recorded = [
+        change["minus_vote"]
+        for name in JOINT_SITES.values()
+        for run in results(name)["runs"]
+        for change in run["variants"].values()
+    ]
+    assert shown == len(recorded) + sum(len(results(name)["runs"]) for name in JOINT_SITES.values())
+    # "no variant raises every class's IoU without costing PSNR": each loses somewhere
+    assert all(min(change["iou"].values()) < 0 or change["psnr_db"] < 0 for change in recorded)

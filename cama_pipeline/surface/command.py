@@ -7,7 +7,7 @@ from rich.table import Table
 
 from cama_pipeline.cli_options import DatasetArg, MasksOpt, OverwriteOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
-from cama_pipeline.surface.config import SurfaceConfig
+from cama_pipeline.surface.config import JointConfig, SurfaceConfig
 from cama_pipeline.surface.stage import run
 
 
@@ -24,6 +24,12 @@ def surface_command(
     epochs: Annotated[
         int, typer.Option(help="Mesh optimisation passes over the keyframe images.")
     ] = SurfaceConfig.epochs,
+    joint_epochs: Annotated[
+        int,
+        typer.Option(
+            help="Passes of the joint optimisation by differentiable rendering (0: the vote alone)."
+        ),
+    ] = 0,
     refine_elevation: Annotated[
         bool, typer.Option(help="Refine the elevation MLP through the image losses.")
     ] = True,
@@ -37,6 +43,7 @@ def surface_command(
         config = SurfaceConfig(
             resolution_m=resolution_m,
             epochs=epochs,
+            joint=JointConfig(epochs=joint_epochs),
             refine_elevation=refine_elevation,
             torch_threads=threads,
             device=device,  # type: ignore[arg-type]  # validated by SurfaceConfig

@@ -1,13 +1,23 @@
 """Every parameter of road surface reconstruction in one frozen, validated config."""
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 from cama_pipeline.surface.coverage import CoverageConfig
 from cama_pipeline.surface.steps import KerbStepConfig
 
 PoseSource = Literal["ground_truth", "wigo", "sfm"]
 POSE_SOURCES: tuple[str, ...] = ("ground_truth", "wigo", "sfm")
+
+
+def require(config: object, names: Iterable[str], valid: Callable[[Any], bool], requirement: str) -> None:
+    """A ValueError naming the first field of `names` whose value is not `valid` ("Config.field must be
+    <requirement>, got <value>")."""
+    for name in names:
+        value = getattr(config, name)
+        if not valid(value):
+            raise ValueError(f"{type(config).__name__}.{name} must be {requirement}, got {value}")
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,50 @@ class RefineConfig:
                 raise ValueError(f"RefineConfig.{name} must be >= 0, got {getattr(self, name)}")
         if not self.ridge_weight > 0:
             raise ValueError(f"RefineConfig.ridge_weight must be > 0, got {self.ridge_weight}")
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    """Parameters of the joint optimisation of the mesh by differentiable rendering (`surface.joint` in a run
+    configuration; see `cama_pipeline.surface.joint`)."""
+
+    epochs: int = 0
+    """Passes over all keyframe images; 0 (the default) leaves the observation vote as it is: on the default site
+    two passes moved no IoU by more than 0.009 and cost 0.2-0.3 dB PSNR (`bench/surface_joint.py`)."""
+    images_per_batch: int = 8
+    rays_per_image: int = 4096
+    """Ground pixels rendered per image and step."""
+    colour_lr: float = 0.002
+    semantic_lr: float = 0.01
+    height_lr: float = 0.001
+    """Adam step (metres) on the lift of the smooth surface on its control grid."""
+    vertex_height_lr: float = 0.0005
+    """Adam step (metres) on the per-vertex height residual."""
+    semantic_weight: float = 0.1
+    smoothness_weight: float = 10.0
+    """Weight of the mean squared height difference (m^2) of neighbouring vertices."""
+    edge_weight: float = 0.02
+    """Share of the smoothness kept between a road-class vertex and an off-road one (a kerb's edge)."""
+    ridge_weight: float = 1.0
+    """Weight of the mean squared residual (m^2)."""
+    search_m: tuple[float, float] = (0.1, 0.3)
+    """(below, above) the smooth surface: the heights a ray's first hit is searched over."""
+    samples: int = 48
+    """Points along each ray in that search."""
+    vote_after: bool = False
+    """After the passes, vote every cell's colour and class again on the optimised surface (kerbs included) in
+    place of the optimised attributes (the vote on the true surface is what `bench/surface_split.py` measures as
+    the ceiling of any geometry)."""
+
+    def __post_init__(self) -> None:
+        require(self, ("epochs",), lambda value: value >= 0, ">= 0")
+        require(self, ("images_per_batch", "rays_per_image"), lambda value: value >= 1, ">= 1")
+        require(self, ("samples",), lambda value: value >= 2, ">= 2")
+        rates = ("colour_lr", "semantic_lr", "height_lr", "vertex_height_lr")
+        weights = ("semantic_weight", "smoothness_weight", "edge_weight", "ridge_weight")
+        require(self, (*rates, *weights), lambda value: value >= 0, ">= 0")
+        if len(self.search_m) != 2 or min(self.search_m) < 0 or sum(self.search_m) <= 0:
+            raise ValueError(f"JointConfig.search_m must be (below, above) >= 0, got {self.search_m}")
 
 
 @dataclass(frozen=True)
@@ -130,6 +184,8 @@ class SurfaceConfig:
     """What the report calls weakly observed (`surface.coverage`)."""
     refine: RefineConfig = field(default_factory=RefineConfig)
     """The photometric refinement of the road elevation before the observation pass (`surface.refine`)."""
+    joint: JointConfig = field(default_factory=JointConfig)
+    """The joint optimisation of colour, semantics and heights by differentiable rendering (`surface.joint`)."""
     kerb_step: KerbStepConfig = field(default_factory=KerbStepConfig)
     """Which off-road cells stand `curb_height_m` above the road (`surface.kerb_step`; needs
     `curb_height_m` > 0)."""
@@ -150,9 +206,7 @@ class SurfaceConfig:
             "min_depth_m",
             "refine_lr",
         )
-        for name in positive:
-            if not getattr(self, name) > 0:
-                raise ValueError(f"SurfaceConfig.{name} must be > 0, got {getattr(self, name)}")
+        require(self, positive, lambda value: value > 0, "> 0")
         at_least_one = (
             "pe_frequencies",
             "mlp_width",
@@ -160,22 +214,10 @@ class SurfaceConfig:
             "vertices_per_image",
             "torch_threads",
         )
-        for name in at_least_one:
-            if getattr(self, name) < 1:
-                raise ValueError(f"SurfaceConfig.{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("elevation_iterations", "refit_iterations", "epochs"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
-        for name in (
-            "depth_tolerance",
-            "smoothness_weight",
-            "anchor_weight",
-            "semantic_weight",
-            "colour_lr",
-            "semantic_lr",
-        ):
-            if getattr(self, name) < 0:
-                raise ValueError(f"SurfaceConfig.{name} must be >= 0, got {getattr(self, name)}")
+        require(self, at_least_one, lambda value: value >= 1, ">= 1")
+        counts = ("elevation_iterations", "refit_iterations", "epochs")
+        weights = ("depth_tolerance", "smoothness_weight", "anchor_weight", "semantic_weight")
+        require(self, (*counts, *weights, "colour_lr", "semantic_lr"), lambda value: value >= 0, ">= 0")
         if not self.strip_x_range_m[0] < self.strip_x_range_m[1]:
             raise ValueError(
                 f"SurfaceConfig.strip_x_range_m must be (rear, front), got {self.strip_x_range_m}"

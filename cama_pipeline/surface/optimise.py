@@ -64,9 +64,13 @@ class Mesh:
     offset: torch.Tensor
     """(rows, cols) metres added to the MLP on its control grid: the photometric refinement's residual
     (`refine`), zeros until it runs."""
+    residual: torch.Tensor
+    """(V,) metres each vertex's surface stands above the smooth surface after the joint optimisation (`joint`: its
+    kerb steps and height residual together), zeros until it runs; every projection of a vertex includes it."""
 
     def heights(self, control_z: torch.Tensor, ids: torch.Tensor) -> torch.Tensor:
-        return self.control.at_vertices(control_z, ids)
+        """Heights of the given vertices: the smooth surface `control_z` plus their residual."""
+        return self.control.at_vertices(control_z, ids) + self.residual[ids]
 
     def control_heights(self) -> torch.Tensor:
         """(rows, cols) the surface on the control grid: the elevation MLP plus the refinement's residual."""
@@ -79,7 +83,8 @@ def new_mesh(grid: SurfaceGrid, mlp: ElevationMLP, config: SurfaceConfig, device
     vertex_xy = torch.as_tensor(grid.vertex_xy(), device=device)
     control = ControlGrid(grid, config.control_spacing_m, device)
     offset = torch.zeros((control.rows, control.cols), device=device)
-    return Mesh(grid, control, mlp, vertex_xy, empty, empty, empty, empty, offset)
+    residual = torch.zeros(len(vertex_xy), device=device)
+    return Mesh(grid, control, mlp, vertex_xy, empty, empty, empty, empty, offset, residual)
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,7 +157,7 @@ def observe(
     with torch.no_grad():
         control_z = mesh.control_heights()
         normals = mesh.control.normals(control_z)
-        heights = mesh.control.at_vertices(control_z)
+        heights = mesh.control.at_vertices(control_z) + mesh.residual
         for indices in batches(views, config.images_per_batch):
             cameras = [Camera.of(views[i], device) for i in indices]
             id_lists = [visible_ids(mesh, heights, camera, config) for camera in cameras]

@@ -15,6 +15,7 @@ module is the only one that writes or reads them.
     {"schema", "site_id", "fingerprint", "poses", "config": {...}, "images",
      "points": {"strip", "sfm", "sfm_kept" (SfM points past the gate, see `fit`)}, "vertices",
      "cells_observed", "seconds": {phase: s}, "losses": {"elevation": [huber + prior every 50 steps],
+     "joint": [{"colour_l1", "semantic_ce", "loss", "rays_hitting"} per pass of `joint`],
      "epochs": [{"colour_l1", "semantic_ce", "anchor_huber"}]}, "kerb_step": {"height_m", "cells_raised",
      "off_road_share_raised"}, "weak_observation": {...} (`coverage`)}
 """

@@ -2,8 +2,9 @@
 
 Phases per site: surface points (trajectory strip + SfM road points), elevation MLP fit (`fit`), the road
 elevation's multi-view refinement against the images (`refine`), observation
-(visibility, mean colour and class, ray counts, kerb steps), mesh optimisation, export (see `outputs` for the
-files).
+(visibility, mean colour and class, ray counts, kerb steps), the joint optimisation by differentiable rendering
+(`joint`, off by default) and the vote again on its surface when asked, mesh optimisation, export (see `outputs` for
+the files).
 """
 
 import logging
@@ -28,6 +29,7 @@ from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
 from cama_pipeline.surface.coverage import weak_observation
 from cama_pipeline.surface.fit import fit_steps, fit_surface
+from cama_pipeline.surface.joint import render_optimise, road_and_step, vote_config
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
 from cama_pipeline.surface.outputs import (
     grid_mesh,
@@ -140,12 +142,20 @@ def reconstruct_site(
         refined = refine_elevation(mesh, dataset, views, config, advance)
     with phases.phase("observe", len(views)) as advance:
         visible = observe(mesh, dataset, views, config, advance)
+    with phases.phase("joint", len(views) * config.joint.epochs) as advance:
+        joint_losses = render_optimise(mesh, dataset, views, config, advance)
+    if config.joint.epochs and config.joint.vote_after:
+        with phases.phase("vote_after_joint", len(views)) as advance:
+            observe(mesh, dataset, views, vote_config(config), advance)
     with phases.phase("optimise", len(views) * config.epochs) as advance:
         epoch_losses = optimise(mesh, dataset, views, visible, point_tensor, config, advance)
     with phases.phase("export", 1) as advance, torch.no_grad():
-        heights = mesh.control.at_vertices(mesh.control_heights()).cpu().numpy()
+        base = mesh.control.at_vertices(mesh.control_heights()).cpu().numpy()
         labels = mesh.logits.argmax(dim=1).cpu().numpy().astype("uint8")
-        count, step = mesh.count.cpu().numpy(), mesh.step.cpu().numpy()
+        count = mesh.count.cpu().numpy()
+        heights, step = road_and_step(
+            base, mesh.step.cpu().numpy(), mesh.residual.cpu().numpy(), labels, config.curb_height_m
+        )
         rasters = rasters_from_vertices(grid, heights, mesh.colour.cpu().numpy(), labels, count)
         kerb_step = kerb_step_raster(grid, step, count)
         write_bev(workspace.surface_bev(site_id), rasters)
@@ -169,7 +179,12 @@ def reconstruct_site(
             config.coverage,
         ),
         "seconds": dict(phases.seconds),
-        "losses": {"elevation": fitted.losses, "refine": refined, "epochs": epoch_losses},
+        "losses": {
+            "elevation": fitted.losses,
+            "refine": refined,
+            "joint": joint_losses,
+            "epochs": epoch_losses,
+        },
     }
 
 

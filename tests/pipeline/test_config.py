@@ -67,6 +67,10 @@ def test_a_file_sets_only_what_it_names_and_numbers_keep_their_fingerprint(tmp_p
     )
     config = load_config(path)
     assert config.workers == 4 and config.propose.inference.merge.join_gap_m == 2.0
+    joint = load_config(
+        _write(tmp_path, "[surface.joint]\nepochs = 2\nsearch_m = [0.1, 0.2]\n", "joint.toml")
+    )
+    assert joint.surface.joint.epochs == 2 and joint.surface.joint.search_m == (0.1, 0.2)
     assert config.wigo == PipelineConfig().wigo and isinstance(config.wigo.node_rate_hz, float)
     assert dataclasses.replace(config, workers=2, propose=ProposeConfig()) == PipelineConfig()
 
@@ -82,6 +86,7 @@ def test_a_file_sets_only_what_it_names_and_numbers_keep_their_fingerprint(tmp_p
         ("[surface]\ndevice = 'tpu'\n", ["surface.device", "'cuda'"]),
         ("[surface.refine]\nsweeps = [[0.02, 0.05]]\n", ["[surface.refine]", "RefineConfig.sweeps"]),
         ("[surface.refine]\nsweeps = [[0.02]]\n", ["surface.refine.sweeps"]),
+        ("[surface.joint]\nepochs = -1\n", ["[surface.joint]", "JointConfig.epochs must be >= 0"]),
         ("[sfm]\nmax_iterations = 0\n", ["[sfm]", "SfmConfig.max_iterations must be >= 1"]),
         ("executor = 'cloud'\n", ["executor", "'ray'"]),
         ("masks = ''\n", ["masks must be auto, dataset, predicted, imported or a folder"]),

@@ -81,7 +81,8 @@ def test_mesh_and_report(surface: ItemResult) -> None:
     assert len(mesh.vertices) == report["cells_observed"] and len(mesh.faces) > 0
     assert mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
     assert np.all(mesh.face_normals[:, 2] > 0.5)  # upward, the road seen from above
-    assert set(report["seconds"]) == {"elevation", "refine", "observe", "optimise", "export"}
+    assert set(report["seconds"]) == {"elevation", "refine", "observe", "joint", "optimise", "export"}
+    assert report["losses"]["joint"] == []  # off by default
     sweeps = report["losses"]["refine"]
     assert [sweep["step_m"] for sweep in sweeps] == [step for _, step in report["config"]["refine"]["sweeps"]]
     assert all(sweep["control_points_constrained"] > 0 for sweep in sweeps)
@@ -176,3 +177,18 @@ def test_cli_runs_and_reports_bad_input(dataset_root: Path, workspace: Path) -> 
     assert "site" in result.output and "cells" in result.output
     bad = runner.invoke(app, [*args, "--poses", "lidar"])
     assert bad.exit_code == 2 and "poses must be one of" in bad.output
+
+
+def test_cli_runs_the_joint_optimisation_when_asked_and_names_bad_passes(
+    dataset_root: Path, tmp_path: Path
+) -> None:
+    workspace = build_site_workspace(dataset_root, tmp_path / "joint-ws")
+    runner = CliRunner()
+    args = ["surface", str(dataset_root), "--workspace", str(workspace), "--resolution-m", "0.5"]
+    result = runner.invoke(app, [*args, "--epochs", "0", "--poses", "ground_truth", "--joint-epochs", "1"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(next((workspace / "surface").glob("*/report.json")).read_text())
+    (joint,) = report["losses"]["joint"]
+    assert joint["rays_hitting"] > 0.5 and report["seconds"]["joint"] > 0
+    bad = runner.invoke(app, [*args, "--joint-epochs", "-1"])
+    assert bad.exit_code == 2 and "JointConfig.epochs" in bad.output
