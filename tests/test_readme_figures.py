@@ -568,8 +568,13 @@ def test_native_resolution_table_from_both_runs() -> None:
             run["poses"]["sfm"]["position_cm"],
             run["elevation"]["rmse_cm"],
             run["proposals_ap"]["all_truth"]["mean_ap"],
+            run["proposals_ap"]["observed_truth"]["mean_ap"],
+            run["annotator"]["speed_up"],
             run["sre"]["c1_proposals"]["sre_ref_px"],
         ]
+
+    for run in (low, high):  # today's product: predicted masks, the element-mask network
+        assert "--masks predicted --proposer masks" in run["command"] and run["proposer"] == "masks"
 
     measured = {
         **{
@@ -593,6 +598,8 @@ def test_native_resolution_table_from_both_runs() -> None:
         "SfM position error (cm)",
         "elevation RMSE (cm)",
         "proposal mAP",
+        "proposal mAP, observed truth",
+        "scripted annotator, speed-up over drawing",
         "SRE 960x540 of the proposals (px)",
     ]
     for label, small, large in zip(labels, quality(low), quality(high), strict=True):
