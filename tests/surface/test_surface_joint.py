@@ -12,7 +12,7 @@ from cama_pipeline.semantics import Semantic
 from cama_pipeline.surface.config import JointConfig
 from cama_pipeline.surface.joint import render_optimise
 from cama_pipeline.surface.optimise import observe
-from tests.surface.test_surface_refine import CONFIG, mesh_at, paint, scene
+from tests.surface.painted_plane import CONFIG, mesh_at, paint, scene
 
 JOINT = JointConfig(epochs=12, images_per_batch=4, rays_per_image=2048)
 
