@@ -146,6 +146,7 @@ class ControlGrid:
         gx = vc / (step * (self.cols - 1)) * 2 - 1
         gy = vr / (step * (self.rows - 1)) * 2 - 1
         self.vertex_grid = torch.as_tensor(np.stack([gx, gy], axis=1), dtype=torch.float32, device=device)
+        self._cells = (grid.rows, grid.cols, step)
 
     def heights(self, mlp: ElevationMLP) -> torch.Tensor:
         """(rows, cols) MLP heights at the control points."""
@@ -156,6 +157,22 @@ class ControlGrid:
         where = self.vertex_grid if vertex_ids is None else self.vertex_grid[vertex_ids]
         sampled = F.grid_sample(control_z[None, None], where[None, None], mode="bilinear", align_corners=True)
         return sampled[0, 0, 0]
+
+    def at_cells(self, control_z: torch.Tensor) -> torch.Tensor:
+        """(rows, cols) heights of every cell of the grid (the road region's and the others), bilinear in the
+        control grid as `at_vertices`."""
+        rows, cols, step = self._cells
+        gx = (
+            torch.arange(cols, dtype=torch.float64, device=control_z.device) / (step * (self.cols - 1)) * 2
+            - 1
+        )
+        gy = (
+            torch.arange(rows, dtype=torch.float64, device=control_z.device) / (step * (self.rows - 1)) * 2
+            - 1
+        )
+        where = torch.stack(torch.meshgrid(gx, gy, indexing="xy"), dim=-1).float()
+        sampled = F.grid_sample(control_z[None, None], where[None], mode="bilinear", align_corners=True)
+        return sampled[0, 0]
 
     def normals(self, control_z: torch.Tensor) -> torch.Tensor:
         """(V, 3) unit upward surface normals at the vertices (world frame; rows grow with -y)."""

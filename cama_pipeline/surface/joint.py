@@ -36,13 +36,7 @@ from cama_pipeline.semantics import ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.observe import GROUND, Camera, image_channels
 from cama_pipeline.surface.optimise import Mesh, batches
-from cama_pipeline.surface.render import (
-    HeightField,
-    cast_rays,
-    dense_heights,
-    smooth_raster,
-    vertex_cells_flat,
-)
+from cama_pipeline.surface.render import HeightField, cast_rays, dense_heights, vertex_cells_flat
 
 Advance = Callable[[int, float], None]
 
@@ -128,8 +122,7 @@ def render_optimise(
     )
     pair_a, pair_b, pair_weight = neighbour_pairs(mesh, joint.edge_weight)
     vertex_id = torch.as_tensor(mesh.grid.vertex_id, device=device)
-    step_cells = max(1, int(round(mesh.control.spacing_m / mesh.grid.resolution_m)))
-    smooth = smooth_raster(mesh.grid, control, step_cells).to(device)
+    smooth = mesh.control.at_cells(control)
     cells = vertex_cells_flat(mesh.grid).to(device)
     history: list[dict[str, float]] = []
     for _ in range(joint.epochs):
@@ -141,14 +134,9 @@ def render_optimise(
             rays = sample_rays(images, cameras, joint.rays_per_image, generator)
             optimiser.zero_grad()
             height = mesh.control.at_vertices(control + lift) + mesh.step + residual
+            attributes = torch.cat([colour, logits], dim=1)
             field = HeightField(
-                mesh.grid,
-                vertex_id,
-                control,
-                step_cells,
-                height,
-                torch.cat([colour, logits], dim=1),
-                dense_heights(smooth, cells, height),
+                mesh.grid, vertex_id, height, attributes, smooth, dense_heights(smooth, cells, height)
             )
             hits = cast_rays(
                 field, rays.origin, rays.direction, config.max_range_m, joint.search_m, joint.samples

@@ -13,9 +13,10 @@ pixel is finding where its ray first meets the field, then reading the mesh's at
    in the wrong place pulls the heights that put it there;
 4. the vertices' colour and semantic logits interpolated bilinearly at the hit.
 
-Everything is torch and vectorised over rays, and works on the vertices directly (no dense raster of the grid), so
-its cost grows with the rays, not with the site. A ray whose hit has a cell outside the road region among its four
-neighbours is dropped, as are rays that leave the camera's range or never come down to the road.
+Everything is torch and vectorised over rays. The search reads two detached height rasters of the grid (the smooth
+surface, and the full surface on the region's cells); the Newton step and the attributes read the vertices, so the
+gradients reach only the vertices around each hit. A ray whose hit has a cell outside the road region among its
+four neighbours is dropped, as are rays that leave the camera's range or never come down to the road.
 """
 
 from dataclasses import dataclass
@@ -31,36 +32,34 @@ SLOPE_FLOOR = 1e-3
 
 @dataclass(frozen=True, eq=False)
 class HeightField:
-    """The mesh as its grid, the smooth surface on the control grid and per-vertex heights and attributes."""
+    """The mesh as its grid, per-vertex heights and attributes, and two detached height rasters of the grid."""
 
     grid: SurfaceGrid
     vertex_id: torch.Tensor
     """(rows, cols) long: each cell's vertex, -1 outside the road region."""
-    control: torch.Tensor
-    """(control rows, control cols) the elevation MLP's surface on the control grid, detached."""
-    control_step: int
-    """Cells per control-grid spacing."""
     height: torch.Tensor
     """(V,) full heights: smooth + kerb step + residual (differentiable in the residual)."""
     attributes: torch.Tensor
     """(V, C) per-vertex attributes (colour, then logits)."""
+    smooth: torch.Tensor
+    """(rows, cols) float32 the elevation MLP's surface on every cell (no steps, no residual): the first hit."""
     dense: torch.Tensor
-    """(rows, cols) float32 the full heights on every cell (the smooth surface outside the region), detached:
-    what the search along the rays reads."""
+    """(rows, cols) float32 `height` on the region's cells, `smooth` elsewhere: what the search reads."""
 
     def cell_coordinates(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N,) fractional column and row of global x, y (cell centres at integers)."""
         x0, y0 = self.grid.origin_xy
         return (xy[:, 0] - x0) / self.grid.resolution_m, (y0 - xy[:, 1]) / self.grid.resolution_m
 
-    def smooth_at(self, xy: torch.Tensor) -> torch.Tensor:
-        """(N,) float64 bilinear height of the smooth surface (clamped to the control grid's edge)."""
+    def raster_at(self, raster: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+        """(N,) float64 bilinear samples of a (rows, cols) raster of the grid (clamped to its edge) at x, y."""
         col, row = self.cell_coordinates(xy)
-        return bilinear(self.control, row / self.control_step, col / self.control_step)
+        return bilinear(raster, row, col)
 
-    def corners(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def corners(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The four cells around each x, y: their (N, 4) vertex ids (-1 outside the region or the grid), their
-        (N, 4) bilinear weights (differentiable in x, y), rows and columns."""
+        (N, 4) bilinear weights (differentiable in x, y) and their (N, 4) row-major cell indices (clamped to the
+        grid)."""
         col, row = self.cell_coordinates(xy)
         c0, r0 = col.detach().floor(), row.detach().floor()
         fc, fr = col - c0, row - r0
@@ -70,37 +69,22 @@ class HeightField:
         on_grid = (rows >= 0) & (rows < self.grid.rows) & (cols >= 0) & (cols < self.grid.cols)
         flat = rows.clamp(0, self.grid.rows - 1) * self.grid.cols + cols.clamp(0, self.grid.cols - 1)
         ids = torch.where(on_grid, self.vertex_id.reshape(-1)[flat], -1)
-        return ids, weights, rows, cols
+        return ids, weights, flat
 
     def height_at(self, xy: torch.Tensor) -> torch.Tensor:
-        """(N,) float64 full height: the vertices' heights, the smooth surface at corners outside the region."""
-        ids, weights, rows, cols = self.corners(xy)
-        x0, y0 = self.grid.origin_xy
-        res = self.grid.resolution_m
-        corner_z = self.height[ids.clamp(min=0)].double()
-        outside = ids < 0
-        if outside.any():
-            corner_xy = torch.stack([x0 + cols[outside] * res, y0 - rows[outside] * res], dim=-1).to(xy.dtype)
-            corner_z = corner_z.masked_scatter(outside, self.smooth_at(corner_xy))
+        """(N,) float64 full height, differentiable in the vertices' heights: the smooth surface at corners
+        outside the region."""
+        ids, weights, flat = self.corners(xy)
+        outside = self.dense.reshape(-1)[flat].double()
+        corner_z = torch.where(ids >= 0, self.height[ids.clamp(min=0)].double(), outside)
         return (weights.double() * corner_z).sum(dim=1)
 
     def attributes_at(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, C) bilinear attributes and (N,) whether all four corners are region vertices."""
-        ids, weights, _, _ = self.corners(xy)
+        ids, weights, _ = self.corners(xy)
         inside = (ids >= 0).all(dim=1)
         values = (weights.float()[..., None] * self.attributes[ids.clamp(min=0)]).sum(dim=1)
         return values, inside
-
-
-def smooth_raster(grid: SurfaceGrid, control: torch.Tensor, control_step: int) -> torch.Tensor:
-    """(rows, cols) float32 the smooth surface on every cell of the grid (bilinear in the control grid)."""
-    rows, cols = torch.meshgrid(
-        torch.arange(grid.rows, dtype=torch.float32),
-        torch.arange(grid.cols, dtype=torch.float32),
-        indexing="ij",
-    )
-    values = bilinear(control.float(), rows.reshape(-1) / control_step, cols.reshape(-1) / control_step)
-    return values.reshape(grid.rows, grid.cols)
 
 
 def vertex_cells_flat(grid: SurfaceGrid) -> torch.Tensor:
@@ -111,7 +95,7 @@ def vertex_cells_flat(grid: SurfaceGrid) -> torch.Tensor:
 
 def dense_heights(smooth: torch.Tensor, vertex_cells: torch.Tensor, height: torch.Tensor) -> torch.Tensor:
     """(rows, cols) float32: the (V,) `height` on the vertices' cells, the `smooth` raster elsewhere (detached)."""
-    dense = smooth.clone()
+    dense = smooth.detach().float().clone()
     dense.view(-1)[vertex_cells] = height.detach().float()
     return dense
 
@@ -155,7 +139,7 @@ def first_crossings(
     with torch.no_grad():
         length = torch.zeros_like(dz)
         for _ in range(FIXED_POINT_ITERATIONS):
-            ground = field.smooth_at((origin + length[:, None] * direction)[:, :2])
+            ground = field.raster_at(field.smooth, (origin + length[:, None] * direction)[:, :2])
             length = ((ground - origin[:, 2]) / dz).clamp(min=0)
         below, above = search_m
         near = ((ground + above - origin[:, 2]) / dz).clamp(min=0)
@@ -194,7 +178,7 @@ def cast_rays(
         offsets = torch.tensor(
             [[res, 0.0], [-res, 0.0], [0.0, res], [0.0, -res]], dtype=xy.dtype, device=xy.device
         )
-        around = field.height_at((xy[:, None, :] + offsets).reshape(-1, 2)).reshape(-1, 4)
+        around = field.raster_at(field.dense, (xy[:, None, :] + offsets).reshape(-1, 2)).reshape(-1, 4)
         slope_x = (around[:, 0] - around[:, 1]) / (2 * res)
         slope_y = (around[:, 2] - around[:, 3]) / (2 * res)
         rate = direction[:, 2] - slope_x * direction[:, 0] - slope_y * direction[:, 1]

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from cama_pipeline.surface.config import SurfaceConfig
-from cama_pipeline.surface.elevation import fit_elevation, new_elevation_mlp
+from cama_pipeline.surface.elevation import ControlGrid, fit_elevation, new_elevation_mlp
 from cama_pipeline.surface.grid import road_grid
 
 OUTLIER_XY = (120.0, 220.0)
@@ -99,3 +99,16 @@ def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -
     assert fitted.sfm_kept == len(on_road)
     assert len(fitted.points) == len(strip) + len(on_road)
     assert not fitted.grid.in_region(far[:, :2]).any() and fitted.grid.in_region(on_road[:, :2]).all()
+
+
+def test_every_cell_of_the_grid_is_interpolated_as_its_vertex_is() -> None:
+    xy = np.column_stack([np.linspace(0.0, 23.0, 60), 4.0 * np.sin(np.linspace(0.0, 3.0, 60))])
+    grid = road_grid(xy, 0.1, 3.0)
+    control = ControlGrid(grid, 1.0, torch.device("cpu"))
+    control_z = torch.randn((control.rows, control.cols), generator=torch.Generator().manual_seed(0))
+    cells = control.at_cells(control_z)
+    rows, cols = grid.vertex_cells()
+    assert cells.shape == (grid.rows, grid.cols)
+    np.testing.assert_allclose(cells[rows, cols].numpy(), control.at_vertices(control_z).numpy(), atol=1e-6)
+    assert (grid.vertex_id < 0).any()  # cells outside the road region are interpolated too
+    assert cells[0, 0].item() == pytest.approx(control_z[0, 0].item(), abs=1e-6)

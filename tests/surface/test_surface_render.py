@@ -8,13 +8,7 @@ import torch
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.surface.grid import SurfaceGrid
 from cama_pipeline.surface.joint import road_and_step
-from cama_pipeline.surface.render import (
-    HeightField,
-    cast_rays,
-    dense_heights,
-    smooth_raster,
-    vertex_cells_flat,
-)
+from cama_pipeline.surface.render import HeightField, cast_rays, dense_heights, vertex_cells_flat
 
 RESOLUTION_M = 0.1
 CAMERA_Z_M = 1.5
@@ -30,11 +24,11 @@ def field_of(
     vertex_id = np.full(heights.shape, -1, np.int64)
     vertex_id[region] = np.arange(int(region.sum()))
     grid = SurfaceGrid((0.0, 0.0), RESOLUTION_M, rows, cols, vertex_id)
-    control = torch.zeros((rows // 10 + 2, cols // 10 + 2))
+    smooth = torch.zeros(heights.shape)
     height = torch.tensor(heights[region], dtype=torch.float32, requires_grad=requires_grad)
     attributes = torch.stack([torch.as_tensor(grid.vertex_xy()[:, 0], dtype=torch.float32)], dim=1)
-    dense = dense_heights(smooth_raster(grid, control, 10), vertex_cells_flat(grid), height)
-    return HeightField(grid, torch.as_tensor(vertex_id), control, 10, height, attributes, dense)
+    dense = dense_heights(smooth, vertex_cells_flat(grid), height)
+    return HeightField(grid, torch.as_tensor(vertex_id), height, attributes, smooth, dense)
 
 
 def rays_towards(
