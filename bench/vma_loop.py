@@ -26,7 +26,7 @@ it once. A checkpoint is refused on a held-out or validation site it saw (`ensur
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
        [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE]
        [--recon-site SITE] [--replay-sites 4] [--replay-reconstructions 0] [--replay-share 0] [--threads 2]
-       [--time-confidence 0.9] [--out bench/results/vma_loop.json]
+       [--time-confidence 0.9] [--map-tolerance 0] [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -204,10 +204,11 @@ def retrain_round(
     steps: int,
     replay: tuple[int, int, float],
     time_confidence: float,
+    map_tolerance: float,
 ) -> RetrainResult:
     """One retraining of the registry's network on corrections, behind both gates (the time saving at
-    `time_confidence`); the element-mask network rehearses `replay` = (generator sites, reconstructions, share) of
-    its own training sites."""
+    `time_confidence`, the candidate's mAP at least the current one's less `map_tolerance`); the element-mask
+    network rehearses `replay` = (generator sites, reconstructions, share) of its own training sites."""
     if checkpoint_kind(registry) == MASK_KIND:
         config = MaskRetrainConfig(
             train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2),
@@ -215,10 +216,13 @@ def retrain_round(
             replay_reconstructions=replay[1],
             replay_share=replay[2],
             time_confidence=time_confidence,
+            tolerance=map_tolerance,
         )
         return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
     retrain = RetrainConfig(
-        train=TrainConfig(steps=steps, learning_rate=2e-4), time_confidence=time_confidence
+        train=TrainConfig(steps=steps, learning_rate=2e-4),
+        time_confidence=time_confidence,
+        tolerance=map_tolerance,
     )
     return retrain_from_corrections(registry, corrections, validation, retrain, review=review_time)
 
@@ -337,6 +341,12 @@ def main() -> None:
         help="the gate's confidence in a time saving over its sites (0: the totals alone decide)",
     )
     parser.add_argument(
+        "--map-tolerance",
+        type=float,
+        default=MaskRetrainConfig.tolerance,
+        help="the mAP gate: a candidate passes with at least the current model's validation mAP less this",
+    )
+    parser.add_argument(
         "--propose-on",
         choices=("clean", "damaged"),
         default="damaged",
@@ -422,6 +432,7 @@ def main() -> None:
                 args.steps,
                 (args.replay_sites, args.replay_reconstructions, args.replay_share),
                 args.time_confidence,
+                args.map_tolerance,
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -474,6 +485,7 @@ def main() -> None:
         + (f"--replay-reconstructions {args.replay_reconstructions} " if args.replay_reconstructions else "")
         + f"--replay-share {args.replay_share} "
         + (f"--time-confidence {args.time_confidence} " if args.time_confidence != TIME_CONFIDENCE else "")
+        + (f"--map-tolerance {args.map_tolerance} " if args.map_tolerance else "")
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,
         "rule_based": rule,

@@ -97,7 +97,7 @@ def main() -> None:
         "command": f"python bench/vma_masks.py --checkpoint {args.checkpoint} --seeds {args.seeds} "
         f"--site-root {args.site_root} "
         + " ".join(f"--recon-site {s}" for s in recon)
-        + f" --threads {args.threads}",
+        + f" --threads {args.threads} --out {args.out}",
         "held_out_seeds": seed_range(args.seeds),
         "checkpoint": {
             "version": checkpoint.path.name,
