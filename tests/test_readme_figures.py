@@ -2811,3 +2811,42 @@ def test_loop_at_1024_tables() -> None:
         closed.append(f"{100 * (before - after) / (before - v0004):.0f} %")
         assert f"{v0004:.0f} s" in text and f"{after:.0f} s" in text and f"{before:.0f} s" in text
     assert f"closes {closed[0]} and {closed[1]} of that gap" in text
+
+
+def test_refused_round_two_candidate_at_1024() -> None:
+    """The tuning run's refused round-2 candidate, scored on that run's held-out sites: its corrections are rounds 1
+    and 2's, its figures and the promoted model's are as recorded, and README's reading of the gate holds."""
+    refused = results("vma_masks_1024_loop_refused_v0005.json")
+    loop = results("vma_loop_masks_1024_v0003_tol02.json")
+    assert refused["checkpoint"]["version"] == loop["rounds"][2]["candidate"] == "v0005"
+    corrected = [c["site_id"] for c in refused["checkpoint"]["data"]["corrections"]]
+    assert corrected == ["random1024-9211", "random1024-9212"]
+    assert _sites_of(refused["command"], "recon-site") == _sites_of(loop["command"], "recon-site")
+    ours = refused["results"]["reconstructed"]["element_masks"]
+    promoted = loop["rounds"][1]["heldout"]
+    assert refused["results"]["reconstructed"]["rule_based"]["annotator"]["correction_s"] == pytest.approx(
+        loop["rule_based"]["reconstructed"]["annotator"]["correction_s"]
+    )
+    gate = loop["rounds"][2]["gate"]
+    saved_on_gate = gate["current"]["review"]["correction_s"] - gate["candidate"]["review"]["correction_s"]
+    saved_held_out = (
+        promoted["reconstructed"]["annotator"]["correction_s"] - ours["annotator"]["correction_s"]
+    )
+    text = " ".join(readme_text().split())
+    assert (
+        f"scores {ours['observed_truth']['mean_ap']:.3f} mAP and {ours['annotator']['speed_up']:.2f}x "
+        f"({ours['annotator']['correction_s']:.0f} s of correction) against the promoted round-1 model's "
+        f"{promoted['reconstructed']['observed_truth']['mean_ap']:.3f} and "
+        f"{promoted['reconstructed']['annotator']['speed_up']:.2f}x "
+        f"({promoted['reconstructed']['annotator']['correction_s']:.0f} s)"
+    ) in text
+    clean = refused["results"]["clean"]["element_masks"]["annotator"]["speed_up"]
+    assert f"{clean:.2f}x against {promoted['annotator']['speed_up']:.2f}x on the clean BEV sites" in text
+    assert (
+        f"saved {saved_on_gate:.0f} s of {gate['current']['review']['correction_s']:.0f} "
+        f"in {100 * gate['saving_confidence']:.0f} % of the resamples" in text
+    )
+    assert f"on the twelve held-out ones it saves {saved_held_out:.0f} s" in text
+    share = 100 * saved_held_out / promoted["reconstructed"]["annotator"]["correction_s"]
+    assert f"this refusal cost the annotator {share:.0f} %" in text
+    assert f"{refused['seconds']:.0f} s)" in text
