@@ -2761,7 +2761,8 @@ def _held_out_correction_s(recorded: dict[str, Any], proposer: str, sites: set[s
 def test_loop_at_1024_tables() -> None:
     """The rounds at 1024x576 from v0003: the tuning split with the mAP gate's tolerance at 0 and at 0.02 (the same
     command otherwise), the confirmation split with 0.02 (the same command but its sites, none of them in two
-    roles), each round as both gates decided it, and README's scale against the shipped v0004 on the same sites."""
+    roles), and the tuning split from the shipped v0004; each round as both gates decided it, and README's scale
+    against the shipped v0004 on the same sites."""
     runs = {
         "round, 1024x576 from v0003, mAP tolerance 0": ("vma_loop_masks_1024_v0003.json", 0.0),
         "round, 1024x576 from v0003, mAP tolerance 0.02": ("vma_loop_masks_1024_v0003_tol02.json", 0.02),
@@ -2769,6 +2770,7 @@ def test_loop_at_1024_tables() -> None:
             "vma_loop_masks_1024_v0003_tol02_confirm.json",
             0.02,
         ),
+        "round, 1024x576 from the shipped v0004": ("vma_loop_masks_1024_v0004.json", 0.0),
     }
     recorded = {}
     for header, (name, tolerance) in runs.items():
@@ -2776,7 +2778,16 @@ def test_loop_at_1024_tables() -> None:
         recorded[name] = results(name)
         assert_names_source(t, name, "bench/vma_loop.py")
         _check_confident_rounds(t, recorded[name], tolerance)
-    tuning, tolerant, confirm = (recorded[name] for name, _ in runs.values())
+    tuning, tolerant, confirm, shipped_start = (recorded[name] for name, _ in runs.values())
+    assert shipped_start["command"] == tuning["command"].replace(
+        "--checkpoint models/vma/element_masks/checkpoints/v0003 ",
+        "--checkpoint models/vma/element_masks/checkpoints ",
+    )
+    for entry in shipped_start["rounds"][
+        1:
+    ]:  # every candidate slower on the gate: no tolerance would promote it
+        gate = entry["gate"]
+        assert gate["candidate"]["review"]["correction_s"] > gate["current"]["review"]["correction_s"]
     assert tuning["command"] + " " == tolerant["command"].replace("--map-tolerance 0.02 ", "") + " "
     assert "--map-tolerance" not in tuning["command"] and "--map-tolerance 0.02 " in tolerant["command"]
     assert "--checkpoint models/vma/element_masks/checkpoints/v0003 " in confirm["command"]
