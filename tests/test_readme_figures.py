@@ -2761,8 +2761,8 @@ def _held_out_correction_s(recorded: dict[str, Any], proposer: str, sites: set[s
 def test_loop_at_1024_tables() -> None:
     """The rounds at 1024x576 from v0003: the tuning split with the mAP gate's tolerance at 0 and at 0.02 (the same
     command otherwise), the confirmation split with 0.02 (the same command but its sites, none of them in two
-    roles), and the tuning split from the shipped v0004; each round as both gates decided it, and README's scale
-    against the shipped v0004 on the same sites."""
+    roles), and the tuning split from the shipped v0004 without and with rehearsal; each round as both gates
+    decided it, and README's scale against the shipped v0004 on the same sites."""
     runs = {
         "round, 1024x576 from v0003, mAP tolerance 0": ("vma_loop_masks_1024_v0003.json", 0.0),
         "round, 1024x576 from v0003, mAP tolerance 0.02": ("vma_loop_masks_1024_v0003_tol02.json", 0.02),
@@ -2771,6 +2771,10 @@ def test_loop_at_1024_tables() -> None:
             0.02,
         ),
         "round, 1024x576 from the shipped v0004": ("vma_loop_masks_1024_v0004.json", 0.0),
+        "round, 1024x576 from the shipped v0004, rehearsing": (
+            "vma_loop_masks_1024_v0004_rehearse.json",
+            0.0,
+        ),
     }
     recorded = {}
     for header, (name, tolerance) in runs.items():
@@ -2778,14 +2782,17 @@ def test_loop_at_1024_tables() -> None:
         recorded[name] = results(name)
         assert_names_source(t, name, "bench/vma_loop.py")
         _check_confident_rounds(t, recorded[name], tolerance)
-    tuning, tolerant, confirm, shipped_start = (recorded[name] for name, _ in runs.values())
+    tuning, tolerant, confirm, shipped_start, rehearsing = (recorded[name] for name, _ in runs.values())
     assert shipped_start["command"] == tuning["command"].replace(
         "--checkpoint models/vma/element_masks/checkpoints/v0003 ",
         "--checkpoint models/vma/element_masks/checkpoints ",
     )
-    for entry in shipped_start["rounds"][
-        1:
-    ]:  # every candidate slower on the gate: no tolerance would promote it
+    assert rehearsing["command"] == shipped_start["command"].replace(
+        "--replay-sites 4 --replay-share 0.0 ",
+        "--replay-sites 4 --replay-reconstructions 6 --replay-share 0.5 ",
+    )
+    # every candidate from v0004 is slower on the gate: no mAP tolerance would promote it
+    for entry in [*shipped_start["rounds"][1:], *rehearsing["rounds"][1:]]:
         gate = entry["gate"]
         assert gate["candidate"]["review"]["correction_s"] > gate["current"]["review"]["correction_s"]
     assert tuning["command"] + " " == tolerant["command"].replace("--map-tolerance 0.02 ", "") + " "
