@@ -2759,9 +2759,9 @@ def _held_out_correction_s(recorded: dict[str, Any], proposer: str, sites: set[s
 
 
 def test_loop_at_1024_tables() -> None:
-    """The rounds at 1024x576 from v0003: the tuning split with the mAP gate's tolerance at 0 and at 0.02 (the same
-    command otherwise), the confirmation split with 0.02 (the same command but its sites, none of them in two
-    roles), and the tuning split from the shipped v0004 without and with rehearsal; each round as both gates
+    """The rounds at 1024x576: from v0003 on the tuning split with the mAP gate's tolerance at 0 and at 0.02 (the
+    same command otherwise), on the confirmation split and with nine gate sites (the same command but the sites,
+    none of them in two roles), and from the shipped v0004 without and with rehearsal; each round as both gates
     decided it, and README's scale against the shipped v0004 on the same sites."""
     runs = {
         "round, 1024x576 from v0003, mAP tolerance 0": ("vma_loop_masks_1024_v0003.json", 0.0),
@@ -2770,6 +2770,7 @@ def test_loop_at_1024_tables() -> None:
             "vma_loop_masks_1024_v0003_tol02_confirm.json",
             0.02,
         ),
+        "round, 1024x576 from v0003, nine gate sites": ("vma_loop_masks_1024_v0003_gate9.json", 0.02),
         "round, 1024x576 from the shipped v0004": ("vma_loop_masks_1024_v0004.json", 0.0),
         "round, 1024x576 from the shipped v0004, rehearsing": (
             "vma_loop_masks_1024_v0004_rehearse.json",
@@ -2782,7 +2783,9 @@ def test_loop_at_1024_tables() -> None:
         recorded[name] = results(name)
         assert_names_source(t, name, "bench/vma_loop.py")
         _check_confident_rounds(t, recorded[name], tolerance)
-    tuning, tolerant, confirm, shipped_start, rehearsing = (recorded[name] for name, _ in runs.values())
+    tuning, tolerant, confirm, gate9, shipped_start, rehearsing = (
+        recorded[name] for name, _ in runs.values()
+    )
     assert shipped_start["command"] == tuning["command"].replace(
         "--checkpoint models/vma/element_masks/checkpoints/v0003 ",
         "--checkpoint models/vma/element_masks/checkpoints ",
@@ -2803,11 +2806,12 @@ def test_loop_at_1024_tables() -> None:
         return re.sub(r"--(new-recon-site|gate-recon-site|recon-site) \S+ ?", "", command)
 
     assert without_sites(confirm["command"]) == without_sites(tolerant["command"])
-    for run in (tolerant, confirm):
+    assert without_sites(gate9["command"]) == without_sites(tolerant["command"])
+    for run, counts in ((tolerant, [3, 5, 12]), (confirm, [3, 5, 12]), (gate9, [3, 9, 8])):
         roles = [
             _sites_of(run["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")
         ]
-        assert [len(r) for r in roles] == [3, 5, 12]
+        assert [len(r) for r in roles] == counts
         assert all("random1024-" in site for r in roles for site in r)
         assert len(set().union(*roles)) == 20  # no site in two roles
     same_model = [run["rounds"][1]["gate"]["candidate"] for run in (tuning, tolerant)]
@@ -2829,6 +2833,9 @@ def test_loop_at_1024_tables() -> None:
         closed.append(f"{100 * (before - after) / (before - v0004):.0f} %")
         assert f"{v0004:.0f} s" in text and f"{after:.0f} s" in text and f"{before:.0f} s" in text
     assert f"closes {closed[0]} and {closed[1]} of that gap" in text
+    rising = [entry["heldout"]["reconstructed"]["annotator"] for entry in gate9["rounds"][:3]]
+    assert " -> ".join(f"{a['speed_up']:.2f}x" for a in rising) in text
+    assert " -> ".join(f"{a['correction_s']:.0f}" for a in rising) + " s" in text
 
 
 def test_refused_round_two_candidate_at_1024() -> None:
