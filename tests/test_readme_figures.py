@@ -2771,6 +2771,10 @@ def test_loop_at_1024_tables() -> None:
             0.02,
         ),
         "round, 1024x576 from v0003, nine gate sites": ("vma_loop_masks_1024_v0003_gate9.json", 0.02),
+        "round, 1024x576 from v0003, nine gate sites, confirmation split": (
+            "vma_loop_masks_1024_v0003_gate9_confirm.json",
+            0.02,
+        ),
         "round, 1024x576 from the shipped v0004": ("vma_loop_masks_1024_v0004.json", 0.0),
         "round, 1024x576 from the shipped v0004, rehearsing": (
             "vma_loop_masks_1024_v0004_rehearse.json",
@@ -2783,7 +2787,7 @@ def test_loop_at_1024_tables() -> None:
         recorded[name] = results(name)
         assert_names_source(t, name, "bench/vma_loop.py")
         _check_confident_rounds(t, recorded[name], tolerance)
-    tuning, tolerant, confirm, gate9, shipped_start, rehearsing = (
+    tuning, tolerant, confirm, gate9, gate9_confirm, shipped_start, rehearsing = (
         recorded[name] for name, _ in runs.values()
     )
     assert shipped_start["command"] == tuning["command"].replace(
@@ -2806,8 +2810,10 @@ def test_loop_at_1024_tables() -> None:
         return re.sub(r"--(new-recon-site|gate-recon-site|recon-site) \S+ ?", "", command)
 
     assert without_sites(confirm["command"]) == without_sites(tolerant["command"])
-    assert without_sites(gate9["command"]) == without_sites(tolerant["command"])
-    for run, counts in ((tolerant, [3, 5, 12]), (confirm, [3, 5, 12]), (gate9, [3, 9, 8])):
+    for run in (gate9, gate9_confirm):
+        assert without_sites(run["command"]) == without_sites(tolerant["command"])
+    splits = ((tolerant, [3, 5, 12]), (confirm, [3, 5, 12]), (gate9, [3, 9, 8]), (gate9_confirm, [3, 9, 8]))
+    for run, counts in splits:
         roles = [
             _sites_of(run["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")
         ]
@@ -2833,6 +2839,15 @@ def test_loop_at_1024_tables() -> None:
         closed.append(f"{100 * (before - after) / (before - v0004):.0f} %")
         assert f"{v0004:.0f} s" in text and f"{after:.0f} s" in text and f"{before:.0f} s" in text
     assert f"closes {closed[0]} and {closed[1]} of that gap" in text
+    for entry in gate9_confirm["rounds"][2:]:  # slower on the gate in total: no tolerance would promote them
+        gate = entry["gate"]
+        assert gate["candidate"]["review"]["correction_s"] > gate["current"]["review"]["correction_s"]
+    speed_ups = [
+        [entry["heldout"]["reconstructed"]["annotator"]["speed_up"] for entry in run["rounds"][:2]]
+        for run in (tolerant, confirm, gate9, gate9_confirm)
+    ]
+    lifts, reached = [after - before for before, after in speed_ups], [after for _, after in speed_ups]
+    assert f"by {min(lifts):.2f}-{max(lifts):.2f}x (to {min(reached):.2f}-{max(reached):.2f}x)" in text
     rising = [entry["heldout"]["reconstructed"]["annotator"] for entry in gate9["rounds"][:3]]
     assert " -> ".join(f"{a['speed_up']:.2f}x" for a in rising) in text
     assert " -> ".join(f"{a['correction_s']:.0f}" for a in rising) + " s" in text
