@@ -239,8 +239,8 @@ def recon_map(figures: dict[str, Any]) -> float | None:
 
 
 def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None:
-    """mAP (clean, damaged, reconstructed) and the annotator's speed-up per round, the rule-based proposer
-    dashed."""
+    """mAP (clean, damaged, reconstructed) and the annotator's speed-up (BEV, reconstructed) per round, the
+    rule-based proposer dashed."""
     ks = [r["round"] for r in rounds]
     own = [r["heldout"].get("own_points") for r in rounds]
     fig, (ax_map, ax_speed) = plt.subplots(1, 2, figsize=(10, 4))
@@ -256,13 +256,20 @@ def plot(rounds: list[dict[str, Any]], rule: dict[str, Any], path: Path) -> None
         ax_map.axhline(rule_recon, color="tab:green", linestyle="--", label="rule-based reconstructed")
     ax_map.set(xlabel="round", ylabel="held-out Chamfer mAP", title="proposal quality")
     ax_map.legend(fontsize=7)
-    ax_speed.plot(ks, [r["heldout"]["annotator"]["speed_up"] for r in rounds], "o-", label="model")
+    ax_speed.plot(ks, [r["heldout"]["annotator"]["speed_up"] for r in rounds], "o-", label="model BEV")
     if all(own):
-        ax_speed.plot(ks, [o["annotator"]["speed_up"] for o in own], "s:", label="own points")
-    ax_speed.axhline(rule["annotator"]["speed_up"], linestyle="--", label="rule-based")
-    ax_speed.set(
-        xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out BEV sites"
-    )
+        ax_speed.plot(ks, [o["annotator"]["speed_up"] for o in own], "s:", label="own points BEV")
+    ax_speed.axhline(rule["annotator"]["speed_up"], linestyle="--", label="rule-based BEV")
+    if "reconstructed" in rule and all("reconstructed" in r["heldout"] for r in rounds):
+        recon_speed = [r["heldout"]["reconstructed"]["annotator"]["speed_up"] for r in rounds]
+        ax_speed.plot(ks, recon_speed, "o-", color="tab:green", label="model reconstructed")
+        ax_speed.axhline(
+            rule["reconstructed"]["annotator"]["speed_up"],
+            color="tab:green",
+            linestyle="--",
+            label="rule-based reconstructed",
+        )
+    ax_speed.set(xlabel="round", ylabel="speed-up over drawing", title="simulated annotator, held-out sites")
     ax_speed.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
