@@ -7,6 +7,7 @@ which is exact enough for so smooth a function and keeps every optimisation step
 
 import math
 from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 import torch
@@ -19,6 +20,8 @@ from cama_pipeline.surface.grid import SurfaceGrid
 BATCH_POINTS = 4096
 SMOOTHNESS_SAMPLES = 256
 """Road-region places per step where the curvature prior is evaluated."""
+Index = TypeVar("Index", np.ndarray, torch.Tensor)
+"""Cell columns or rows, as numpy (built once) or torch (built per call on the heights' device)."""
 _STENCIL = torch.tensor(
     [[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=torch.float64
 )
@@ -142,11 +145,19 @@ class ControlGrid:
         self.cols = (grid.cols - 1) // step + 2
         r, c = np.meshgrid(np.arange(self.rows) * step, np.arange(self.cols) * step, indexing="ij")
         self.xy = torch.as_tensor(grid.xy_of_cells(r.ravel(), c.ravel()), device=device)
+        self._step = step
+        self._cells = (grid.rows, grid.cols)
         vr, vc = grid.vertex_cells()
-        gx = vc / (step * (self.cols - 1)) * 2 - 1
-        gy = vr / (step * (self.rows - 1)) * 2 - 1
+        gx, gy = self._sample_coordinates(vc, vr)
         self.vertex_grid = torch.as_tensor(np.stack([gx, gy], axis=1), dtype=torch.float32, device=device)
-        self._cells = (grid.rows, grid.cols, step)
+
+    def _sample_coordinates(self, col: Index, row: Index) -> tuple[Index, Index]:
+        """`grid_sample` coordinates (x, y in [-1, 1] over the control grid) of cells at grid columns and rows
+        (numpy or torch)."""
+        return (
+            col / (self._step * (self.cols - 1)) * 2 - 1,
+            row / (self._step * (self.rows - 1)) * 2 - 1,
+        )
 
     def heights(self, mlp: ElevationMLP) -> torch.Tensor:
         """(rows, cols) MLP heights at the control points."""
@@ -161,14 +172,10 @@ class ControlGrid:
     def at_cells(self, control_z: torch.Tensor) -> torch.Tensor:
         """(rows, cols) heights of every cell of the grid (the road region's and the others), bilinear in the
         control grid as `at_vertices`."""
-        rows, cols, step = self._cells
-        gx = (
-            torch.arange(cols, dtype=torch.float64, device=control_z.device) / (step * (self.cols - 1)) * 2
-            - 1
-        )
-        gy = (
-            torch.arange(rows, dtype=torch.float64, device=control_z.device) / (step * (self.rows - 1)) * 2
-            - 1
+        rows, cols = self._cells
+        gx, gy = self._sample_coordinates(
+            torch.arange(cols, dtype=torch.float64, device=control_z.device),
+            torch.arange(rows, dtype=torch.float64, device=control_z.device),
         )
         where = torch.stack(torch.meshgrid(gx, gy, indexing="xy"), dim=-1).float()
         sampled = F.grid_sample(control_z[None, None], where[None], mode="bilinear", align_corners=True)
