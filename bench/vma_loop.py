@@ -16,7 +16,9 @@ both gates (validation mAP and the annotator's correction time on the validation
 and the reconstructions of `--gate-recon-site`, as a server's CAMA_VMA_VALIDATION_RECONSTRUCTED gates; a saving
 counts when it holds in `--time-confidence` of bootstrap resamples of those sites, `models.vma.gate`); the
 element-mask network rehearses `--replay-sites` of its own generator training sites and `--replay-reconstructions`
-of the reconstructions it trained on in `--replay-share` of its crops. After
+of the reconstructions it trained on in `--replay-share` of its crops; `--retrain-from first` trains round 0's
+element-mask network on every correction so far for `--steps` per corrected site instead of fine-tuning the promoted
+one (so one round's drift does not carry into the next). After
 every round the promoted model is measured on held-out sites never proposed on, corrected or validated on: BEV
 sites `--heldout-seeds` (Chamfer mAP clean and damaged, `models.vma.degrade`; the annotator's speed-up over
 drawing on clean rasters) and, for the element-mask network, the surface stage's reconstructed rasters of full
@@ -26,7 +28,8 @@ it once. A checkpoint is refused on a held-out or validation site it saw (`ensur
 Usage: .venv/bin/python bench/vma_loop.py [--checkpoint REGISTRY | --bootstrap-seeds A-B] [--rounds 3]
        [--steps 300] [--new-seeds A-B | --new-recon-site SITE ...] [--val-seeds A-B] [--gate-recon-site SITE]
        [--recon-site SITE] [--replay-sites 4] [--replay-reconstructions 0] [--replay-share 0] [--threads 2]
-       [--time-confidence 0.9] [--map-tolerance 0] [--out bench/results/vma_loop.json]
+       [--time-confidence 0.9] [--map-tolerance 0] [--retrain-from promoted|first]
+       [--out bench/results/vma_loop.json]
        [--plot-only] [--keep-registry DIR]
 Writes bench/results/vma_loop.json and the plot bench/results/vma_loop/rounds.png (`--out X.json`: X/rounds.png;
 `--plot-only`: the plot from the JSON); `--keep-registry DIR` keeps the loop's checkpoints (for shipping one).
@@ -205,10 +208,12 @@ def retrain_round(
     replay: tuple[int, int, float],
     time_confidence: float,
     map_tolerance: float,
+    start_version: str | None,
 ) -> RetrainResult:
     """One retraining of the registry's network on corrections, behind both gates (the time saving at
     `time_confidence`, the candidate's mAP at least the current one's less `map_tolerance`); the element-mask
-    network rehearses `replay` = (generator sites, reconstructions, share) of its own training sites."""
+    network rehearses `replay` = (generator sites, reconstructions, share) of its own training sites and is
+    trained from `start_version` (None: the promoted version)."""
     if checkpoint_kind(registry) == MASK_KIND:
         config = MaskRetrainConfig(
             train=MaskTrainConfig(steps=steps, learning_rate=3e-4, damaged_copies=2),
@@ -217,6 +222,7 @@ def retrain_round(
             replay_share=replay[2],
             time_confidence=time_confidence,
             tolerance=map_tolerance,
+            start_version=start_version,
         )
         return retrain_masks_from_corrections(registry, corrections, validation, config, review=review_time)
     retrain = RetrainConfig(
@@ -360,6 +366,13 @@ def main() -> None:
         help="the new BEV sites' rasters as they are or damaged (reconstructions are proposed on as they are)",
     )
     parser.add_argument("--corrections", choices=("all", "latest"), default="all")
+    parser.add_argument(
+        "--retrain-from",
+        choices=("promoted", "first"),
+        default="promoted",
+        help="element-mask retraining: fine-tune the promoted model (the job's default), or retrain round 0's model "
+        + "on every correction so far for --steps per corrected site (with --corrections all)",
+    )
     parser.add_argument("--site-root", type=Path, default=Path("data/vma/loop"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", type=Path, default=RESULTS / "vma_loop.json")
@@ -391,6 +404,8 @@ def main() -> None:
         raise SystemExit("--gate-recon-site: a site the loop measures (--recon-site) cannot also validate it")
     if set(map(Path.resolve, args.new_recon_site)) & set(map(Path.resolve, [*recon, *args.gate_recon_site])):
         raise SystemExit("--new-recon-site: a site the loop corrects cannot also measure or validate it")
+    if args.retrain_from == "first" and args.corrections != "all":
+        raise SystemExit("--retrain-from first retrains round 0's model, so it needs --corrections all")
     gate_recon = [reconstruction_of(site) for site in args.gate_recon_site]
     if not validation and not gate_recon:
         raise SystemExit("the gate needs validation sites: --val-seeds or --gate-recon-site")
@@ -416,6 +431,11 @@ def main() -> None:
         start = str(shipped)
     if checkpoint_kind(registry) != MASK_KIND:
         recon = []  # the reconstructed condition is measured for the element-mask network only
+        if args.retrain_from == "first":
+            raise SystemExit(
+                "--retrain-from first: only the element-mask network can be retrained from round 0"
+            )
+    first_version = current_version(registry).name
     # only new BEV sites are damaged: a reconstruction is proposed on as it is
     damage = args.propose_on == "damaged" and not args.new_recon_site
     propose_on = on_damaged if damage else (lambda propose: propose)
@@ -432,14 +452,16 @@ def main() -> None:
             round_started = time.perf_counter()
             corrections, review_counts = corrections_of(site, propose_on(promoted_proposer(registry)))
             corrected = [*corrected, corrections] if args.corrections == "all" else [corrections]
+            from_first = args.retrain_from == "first"
             result = retrain_round(
                 registry,
                 corrected,
                 [*validation, *gate_recon],
-                args.steps,
+                args.steps * len(corrected) if from_first else args.steps,
                 (args.replay_sites, args.replay_reconstructions, args.replay_share),
                 args.time_confidence,
                 args.map_tolerance,
+                first_version if from_first else None,
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -449,6 +471,7 @@ def main() -> None:
                     "trained_on": [str(c.site) for c in corrected],
                     "review_counts": review_counts,
                     "candidate": result.candidate.name,
+                    "trained_from": first_version if from_first else "promoted",
                     "promoted": result.promoted,
                     "gate": {
                         "current": result.current_metrics,
@@ -493,6 +516,7 @@ def main() -> None:
         + f"--replay-share {args.replay_share} "
         + (f"--time-confidence {args.time_confidence} " if args.time_confidence != TIME_CONFIDENCE else "")
         + (f"--map-tolerance {args.map_tolerance} " if args.map_tolerance else "")
+        + (f"--retrain-from {args.retrain_from} " if args.retrain_from != "promoted" else "")
         + f"--propose-on {args.propose_on} --corrections {args.corrections} --threads {args.threads}",
         "start": start,
         "rule_based": rule,

@@ -1,20 +1,26 @@
 """Corrections change what the element-mask network draws: a retrain on one site's corrected geometry moves its
 proposals the same way on another site, and the gate keeps a model that got worse out."""
 
+import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from shapely.geometry import LineString, MultiLineString
 
 from annotations import AnnotationSet, Georeference
 from cama_pipeline.semantics import ROAD_SURFACE_IDS
-from models.vma.checkpoint import current_version
+from models.vma.checkpoint import CheckpointError, current_version
 from models.vma.element_masks.checkpoint import load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.propose import predict_site_masks
-from models.vma.element_masks.retrain import MaskRetrainConfig, retrain_masks_from_corrections
+from models.vma.element_masks.retrain import (
+    MaskRetrainConfig,
+    evaluate_mask_model,
+    retrain_masks_from_corrections,
+)
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
 from models.vma.retrain import Corrections
 from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
@@ -128,3 +134,52 @@ def test_the_gate_keeps_a_worse_candidate_out(bev_sites: dict[str, Path], regist
     assert result.candidate_metrics["mean_ap"] < result.current_metrics["mean_ap"]
     assert not result.promoted and current_version(registry) == promoted_before
     assert (result.candidate / "checkpoint.json").is_file()  # kept, with its figures, but not promoted
+
+
+def weight_distance(model: torch.nn.Module, other: torch.nn.Module) -> float:
+    """The L2 distance between two networks' parameters."""
+    return float(
+        sum(((a - b) ** 2).sum() for a, b in zip(model.parameters(), other.parameters(), strict=True)) ** 0.5
+    )
+
+
+@pytest.mark.slow
+def test_a_retrain_from_an_earlier_version_starts_there_and_is_gated_against_the_promoted_one(
+    bev_sites: dict[str, Path], registry: Path
+) -> None:
+    promoted = current_version(registry)
+    earlier = sorted(p.name for p in registry.glob("v*") if p != promoted)[-1]
+    config = MaskRetrainConfig(
+        train=MaskTrainConfig(steps=3, batch_size=2, crop_px=64, learning_rate=1e-5, damaged_copies=0),
+        replay_sites=0,
+        start_version=earlier,
+    )
+    truth = read_vectors(vector_map_of(bev_sites["train"]))
+    result = retrain_masks_from_corrections(
+        registry,
+        [Corrections(bev_sites["train"], corrected(bev_sites["train"], truth))],
+        [bev_sites["val"]],
+        config,
+    )
+    candidate = load_mask_checkpoint(result.candidate)
+    start, current = load_mask_checkpoint(registry / earlier), load_mask_checkpoint(promoted)
+    # a few steps at a tiny rate: the candidate lies next to the version it was trained from, far from the promoted
+    assert weight_distance(candidate.model, start.model) < 0.1 * weight_distance(
+        candidate.model, current.model
+    )
+    assert candidate.meta["parent"] == earlier and candidate.meta["gated_against"] == promoted.name
+    rescored = evaluate_mask_model(current.model, [bev_sites["val"]])
+    assert (result.current_metrics["ap"], result.current_metrics["mean_ap"]) == (
+        rescored["ap"],
+        rescored["mean_ap"],
+    )
+
+
+@pytest.mark.parametrize("version", ["v0099", "../v0003"])
+def test_a_retrain_from_a_version_the_registry_lacks_names_it(registry: Path, version: str) -> None:
+    promoted_before = current_version(registry)
+    versions_before = sorted(p.name for p in registry.iterdir())
+    with pytest.raises(CheckpointError, match=f"no version '{re.escape(version)}' to retrain from"):
+        retrain_masks_from_corrections(registry, [], [], MaskRetrainConfig(start_version=version))
+    assert current_version(registry) == promoted_before
+    assert sorted(p.name for p in registry.iterdir()) == versions_before

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from models.vma.checkpoint import refuse_seen_validation, seen_records
+from models.vma.checkpoint import META, CheckpointError, refuse_seen_validation, seen_records
 from models.vma.config import config_dict
-from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
+from models.vma.element_masks.checkpoint import KIND, MaskCheckpoint, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import product_proposer
@@ -73,6 +73,10 @@ class MaskRetrainConfig:
     time_confidence: float = TIME_CONFIDENCE
     """With a `review` gate and each site's time: promoted only when it saves time in at least this share of
     bootstrap resamples of the validation sites (`models.vma.gate.saving_confidence`; 0: totals alone)."""
+    start_version: str | None = None
+    """The registry version the candidate is trained from (`vNNNN`); None, the default: the promoted one. Training
+    an earlier version (the first, say) on every correction so far keeps one round's fine-tuning drift from
+    compounding into the next; the candidate is gated against the promoted version either way."""
 
     def __post_init__(self) -> None:
         if self.tolerance < 0 or self.time_tolerance < 0 or self.min_labels < 1 or self.context_m < 0:
@@ -85,6 +89,17 @@ class MaskRetrainConfig:
         if not 0.0 <= self.replay_share < 1.0:
             raise ValueError(f"MaskRetrainConfig.replay_share must be in [0, 1), got {self.replay_share}")
         check_time_confidence(self.time_confidence, "MaskRetrainConfig")
+
+
+def start_checkpoint(registry: Path, version: str | None) -> MaskCheckpoint | None:
+    """The element-mask version `version` of `registry` (None when no version is named); a CheckpointError
+    naming the registry and the version when it holds no such version or it is another kind of checkpoint."""
+    if version is None:
+        return None
+    folder = registry / version
+    if Path(version).name != version or not (folder / META).is_file():
+        raise CheckpointError(f"{registry}: no version {version!r} to retrain from (no {folder / META})")
+    return load_mask_checkpoint(folder)
 
 
 def evaluate_mask_model(
@@ -109,12 +124,20 @@ def retrain_masks_from_corrections(
 ) -> RetrainResult:
     """Fine-tune the promoted element-mask version of `registry` on corrections (with `config.replay_share` > 0
     rehearsing some of its own training sites, made again under `<registry>/replay-sites`); save the
-    candidate; promote it if the gates pass."""
+    candidate; promote it if the gates pass. With `config.start_version` the candidate is that version trained
+    on the corrections (it rehearses that version's sites, records it as its parent and what it saw), and it is
+    still gated against the promoted version."""
     config = config or MaskRetrainConfig()
     started = time.perf_counter()
     current = load_mask_checkpoint(Path(registry))
-    seen = seen_records([c.site for c in corrections], current)
-    refuse_seen_validation(seen, validation_sites, f"{current.path} with these corrections")
+    start = start_checkpoint(Path(registry), config.start_version) or current
+    seen = seen_records([c.site for c in corrections], start)
+    for scored in {current.path: current, start.path: start}.values():  # neither may be scored on what it saw
+        refuse_seen_validation(
+            seen_records([c.site for c in corrections], scored),
+            validation_sites,
+            f"{scored.path} with these corrections",
+        )
     prepared, num_labels, num_negatives = [], 0, 0
     for k, item in enumerate(corrections):
         labels = vectors_from_annotations(item.annotations, LABEL_STATES)
@@ -143,7 +166,7 @@ def retrain_masks_from_corrections(
     rehearsed = (
         [
             *replay_sites(
-                current,
+                start,
                 Path(registry) / REPLAY_FOLDER,
                 config.replay_sites,
                 current.model.config,
@@ -151,7 +174,7 @@ def retrain_masks_from_corrections(
                 config.train.seed,
             ),
             *rehearsed_reconstructions(
-                current, config.replay_reconstructions, current.model.config, config.train.seed
+                start, config.replay_reconstructions, start.model.config, config.train.seed
             ),
         ]
         if config.replay_share > 0
@@ -163,7 +186,7 @@ def retrain_masks_from_corrections(
         if rehearsed
         else None
     )
-    candidate = load_mask_checkpoint(current.path).model  # a fresh copy to fine-tune
+    candidate = load_mask_checkpoint(start.path).model  # a fresh copy to fine-tune
     fit_masks(
         candidate,
         [*prepared, *rehearsed],
@@ -178,7 +201,7 @@ def retrain_masks_from_corrections(
         Path(registry),
         candidate,
         CandidateRecord(
-            current.path.name,
+            start.path.name,
             config_dict(config.train),
             corrections,
             validation_sites,
@@ -189,5 +212,9 @@ def retrain_masks_from_corrections(
         current_metrics,
         candidate_metrics,
         promoted,
-        {"kind": KIND, "replay": {"sites": [site.name for site in rehearsed], "share": config.replay_share}},
+        {
+            "kind": KIND,
+            "replay": {"sites": [site.name for site in rehearsed], "share": config.replay_share},
+            "gated_against": current.path.name,
+        },
     )
