@@ -62,6 +62,19 @@ class Checkpoint:
     path: Path
 
 
+def stored_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """The model's state as a version folder stores it: floating-point tensors in float16 (half the size)."""
+    return {k: v.half() if v.is_floating_point() else v for k, v in model.state_dict().items()}
+
+
+def round_to_stored(model: ModuleT) -> ModuleT:
+    """`model` with its weights rounded in place to the precision a version folder stores them in: a retrained
+    candidate is gated as the network that will be saved and loaded, not as its float32 self (the two propose
+    differently enough to move the simulated annotator's time by seconds)."""
+    model.load_state_dict(stored_state(model))  # copied into the float32 tensors, so rounded and cast back
+    return model
+
+
 def save_version(registry: Path, model: torch.nn.Module, meta: dict[str, Any]) -> Path:
     """Write the model (a VMA network with its frozen `config`) as the next version of `registry`; returns its
     folder (not promoted yet)."""
@@ -72,8 +85,7 @@ def save_version(registry: Path, model: torch.nn.Module, meta: dict[str, Any]) -
     staging = registry / f".{version}.partial"
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir()
-    state = {k: v.half() if v.is_floating_point() else v for k, v in model.state_dict().items()}
-    torch.save(state, staging / WEIGHTS)
+    torch.save(stored_state(model), staging / WEIGHTS)
     full_meta = {
         **meta,
         "version": version,

@@ -32,6 +32,7 @@ from models.vma.checkpoint import (
     load_checkpoint,
     promote,
     refuse_seen_validation,
+    round_to_stored,
     save_version,
     seen_records,
 )
@@ -201,7 +202,7 @@ def retrain_from_corrections(
         config.train,
         show_progress=show_progress,
     )
-    candidate.cpu()
+    round_to_stored(candidate.cpu())
     candidate_metrics = evaluate_model(candidate, validation_sites, config.inference, review)
     promoted = gate_passes(current_metrics, candidate_metrics, config)
     return save_candidate(

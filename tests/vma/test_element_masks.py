@@ -13,7 +13,13 @@ from shapely.geometry import LineString
 from cama_pipeline.evaluate.observed import ObservedMask
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site_identity import SeenSiteError
-from models.vma.checkpoint import CheckpointError, ensure_unseen, load_checkpoint
+from models.vma.checkpoint import (
+    CheckpointError,
+    ensure_unseen,
+    load_checkpoint,
+    round_to_stored,
+    save_version,
+)
 from models.vma.element_masks.checkpoint import KIND, load_mask_checkpoint
 from models.vma.element_masks.config import MaskModelConfig, MaskTrainConfig
 from models.vma.element_masks.line_ends import carried_to_border, straightened_ends
@@ -400,3 +406,13 @@ def test_boundaries_move_off_the_road_on_a_reconstruction_only(drawn_site: Path)
     assert boundary_y(replace(rasters, reconstructed=True)) == pytest.approx(20.0 + outward, abs=0.02)
     with pytest.raises(ValueError, match="boundary_outward_m"):
         MaskInferenceConfig(boundary_outward_m=-0.1)
+
+
+def test_a_network_rounded_to_the_stored_precision_proposes_as_its_saved_version(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    net = ElementMaskNet(MaskModelConfig(base_channels=4)).eval()
+    image = torch.rand(1, net.config.in_channels, 32, 48)
+    saved = load_mask_checkpoint(save_version(tmp_path / "registry", net, {"kind": KIND})).model
+    with torch.no_grad():
+        assert not torch.equal(net(image), saved(image))  # float32 weights: not the network that was saved
+        assert torch.equal(round_to_stored(net)(image), saved(image))

@@ -168,6 +168,12 @@ def test_a_retrain_from_an_earlier_version_starts_there_and_is_gated_against_the
         candidate.model, current.model
     )
     assert candidate.meta["parent"] == earlier and candidate.meta["gated_against"] == promoted.name
+    # both are scored as they are stored: the gate's figures are those of the saved candidate and the promoted one
+    saved = evaluate_mask_model(candidate.model, [bev_sites["val"]])
+    assert (result.candidate_metrics["ap"], result.candidate_metrics["mean_ap"]) == (
+        saved["ap"],
+        saved["mean_ap"],
+    )
     rescored = evaluate_mask_model(current.model, [bev_sites["val"]])
     assert (result.current_metrics["ap"], result.current_metrics["mean_ap"]) == (
         rescored["ap"],

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from models.vma.checkpoint import META, CheckpointError, refuse_seen_validation, seen_records
+from models.vma.checkpoint import META, CheckpointError, refuse_seen_validation, round_to_stored, seen_records
 from models.vma.config import config_dict
 from models.vma.element_masks.checkpoint import KIND, MaskCheckpoint, load_mask_checkpoint
 from models.vma.element_masks.config import MaskTrainConfig
@@ -194,7 +194,7 @@ def retrain_masks_from_corrections(
         site_weights=weights,
         show_progress=show_progress,
     )
-    candidate.cpu()
+    round_to_stored(candidate.cpu())
     candidate_metrics = evaluate_mask_model(candidate, validation_sites, review)
     promoted = gate_passes(current_metrics, candidate_metrics, config)
     return save_candidate(
