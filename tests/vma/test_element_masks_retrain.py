@@ -22,7 +22,7 @@ from models.vma.element_masks.retrain import (
     retrain_masks_from_corrections,
 )
 from models.vma.rasters import SiteRasters, load_site_rasters, vector_map_of
-from models.vma.retrain import Corrections
+from models.vma.retrain import Corrections, RetrainResult
 from models.vma.shipped import SHIPPED_MASK_REGISTRY, shipped_registry
 from models.vma.vectors import Vector, proposals_as_annotations, read_vectors
 
@@ -117,6 +117,17 @@ def test_a_retrain_moves_boundaries_to_the_corrected_convention_on_another_site(
     assert load_mask_checkpoint(result.candidate).meta["replay"] == {"sites": [], "share": 0.0}
 
 
+def retrain_on_truth(registry: Path, bev_sites: dict[str, Path], config: MaskRetrainConfig) -> RetrainResult:
+    """Retrain `registry` on the train site's true vectors (every element fixed), gated on the val site."""
+    truth = read_vectors(vector_map_of(bev_sites["train"]))
+    return retrain_masks_from_corrections(
+        registry,
+        [Corrections(bev_sites["train"], corrected(bev_sites["train"], truth))],
+        [bev_sites["val"]],
+        config,
+    )
+
+
 @pytest.mark.slow
 def test_the_gate_keeps_a_worse_candidate_out(bev_sites: dict[str, Path], registry: Path) -> None:
     promoted_before = current_version(registry)
@@ -124,13 +135,7 @@ def test_the_gate_keeps_a_worse_candidate_out(bev_sites: dict[str, Path], regist
         train=MaskTrainConfig(steps=20, batch_size=2, crop_px=64, learning_rate=5.0, damaged_copies=0),
         replay_sites=0,
     )
-    truth = read_vectors(vector_map_of(bev_sites["train"]))
-    result = retrain_masks_from_corrections(
-        registry,
-        [Corrections(bev_sites["train"], corrected(bev_sites["train"], truth))],
-        [bev_sites["val"]],
-        config,
-    )
+    result = retrain_on_truth(registry, bev_sites, config)
     assert result.candidate_metrics["mean_ap"] < result.current_metrics["mean_ap"]
     assert not result.promoted and current_version(registry) == promoted_before
     assert (result.candidate / "checkpoint.json").is_file()  # kept, with its figures, but not promoted
@@ -154,13 +159,7 @@ def test_a_retrain_from_an_earlier_version_starts_there_and_is_gated_against_the
         replay_sites=0,
         start_version=earlier,
     )
-    truth = read_vectors(vector_map_of(bev_sites["train"]))
-    result = retrain_masks_from_corrections(
-        registry,
-        [Corrections(bev_sites["train"], corrected(bev_sites["train"], truth))],
-        [bev_sites["val"]],
-        config,
-    )
+    result = retrain_on_truth(registry, bev_sites, config)
     candidate = load_mask_checkpoint(result.candidate)
     start, current = load_mask_checkpoint(registry / earlier), load_mask_checkpoint(promoted)
     # a few steps at a tiny rate: the candidate lies next to the version it was trained from, far from the promoted
