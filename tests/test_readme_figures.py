@@ -2890,3 +2890,43 @@ def test_refused_round_two_candidate_at_1024() -> None:
     share = 100 * saved_held_out / promoted["reconstructed"]["annotator"]["correction_s"]
     assert f"this refusal cost the annotator {share:.0f} %" in text
     assert f"{refused['seconds']:.0f} s)" in text
+
+
+def test_loop_retrained_from_round_zero_tables() -> None:
+    """The rounds at 256x144 from v0003, fine-tuning the promoted model and retraining v0003 on every correction so
+    far: the same command but `--retrain-from first`, the sites in the tuning split's roles, each round as both gates
+    decided it, round 1 the same model in both, and the longer trainings' slower candidates README names."""
+    runs = {
+        "round, 256x144 from v0003, fine-tuning the promoted model": "vma_loop_masks_tiny_v0003_promoted.json",
+        "round, 256x144 from v0003, retrained from v0003": "vma_loop_masks_tiny_v0003_first.json",
+    }
+    for header, name in runs.items():
+        t = table(header, "bench/vma_loop.py")
+        assert_names_source(t, name, "bench/vma_loop.py")
+        _check_confident_rounds(t, results(name), 0.02)
+    fine_tuned, first = (results(name) for name in runs.values())
+    assert first["command"] == fine_tuned["command"].replace(
+        "--map-tolerance 0.02 ", "--map-tolerance 0.02 --retrain-from first "
+    )
+    roles = [
+        _sites_of(fine_tuned["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")
+    ]
+    assert [len(r) for r in roles] == [3, 5, 8]
+    assert all("/random-92" in site for r in roles for site in r) and len(set().union(*roles)) == 16
+    assert {r["trained_from"] for r in first["rounds"][1:]} == {"v0003"}
+    assert {r["trained_from"] for r in fine_tuned["rounds"][1:]} == {"promoted"}
+    same_model = [run["rounds"][1]["gate"]["candidate"] for run in (fine_tuned, first)]
+    for key in ("mean_ap", "class_ap", "review"):
+        assert same_model[0][key] == same_model[1][key], key
+    assert not any(
+        r["promoted"] for r in fine_tuned["rounds"][1:3]
+    )  # so rounds 2 and 3 differ in steps alone
+    text = " ".join(readme_text().split())
+    for k in (2, 3):
+        longer, fixed = (
+            run["rounds"][k]["gate"]["candidate"]["review"]["correction_s"] for run in (first, fine_tuned)
+        )
+        assert longer > fixed and f"{longer:.0f} s against {fixed:.0f} s" in text
+    for run in runs.values():
+        assert f"{results(run)['seconds']:.0f} s)" in text
+    assert all(r["retrain_seconds"] <= 20 * 60 for run in (fine_tuned, first) for r in run["rounds"][1:])
