@@ -2758,6 +2758,20 @@ def _held_out_correction_s(recorded: dict[str, Any], proposer: str, sites: set[s
     return sum(chosen)
 
 
+def _check_split(run: dict[str, Any], counts: list[int], site_name: str) -> None:
+    """A loop run's sites: `counts` corrected, gating and held out, every one named with `site_name`, none in two
+    roles."""
+    roles = [_sites_of(run["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")]
+    assert [len(r) for r in roles] == counts
+    assert all(site_name in site for r in roles for site in r)
+    assert len(set().union(*roles)) == sum(counts)
+
+
+def _without_sites(command: str) -> str:
+    """A loop command without its site flags: what two splits of one experiment must share."""
+    return re.sub(r"--(new-recon-site|gate-recon-site|recon-site) \S+ ?", "", command)
+
+
 def test_loop_at_1024_tables() -> None:
     """The rounds at 1024x576: from v0003 on the tuning split with the mAP gate's tolerance at 0 and at 0.02 (the
     same command otherwise), on the confirmation split and with nine gate sites (the same command but the sites,
@@ -2806,20 +2820,12 @@ def test_loop_at_1024_tables() -> None:
     assert "--map-tolerance" not in tuning["command"] and "--map-tolerance 0.02 " in tolerant["command"]
     assert "--checkpoint models/vma/element_masks/checkpoints/v0003 " in confirm["command"]
 
-    def without_sites(command: str) -> str:
-        return re.sub(r"--(new-recon-site|gate-recon-site|recon-site) \S+ ?", "", command)
-
-    assert without_sites(confirm["command"]) == without_sites(tolerant["command"])
+    assert _without_sites(confirm["command"]) == _without_sites(tolerant["command"])
     for run in (gate9, gate9_confirm):
-        assert without_sites(run["command"]) == without_sites(tolerant["command"])
+        assert _without_sites(run["command"]) == _without_sites(tolerant["command"])
     splits = ((tolerant, [3, 5, 12]), (confirm, [3, 5, 12]), (gate9, [3, 9, 8]), (gate9_confirm, [3, 9, 8]))
     for run, counts in splits:
-        roles = [
-            _sites_of(run["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")
-        ]
-        assert [len(r) for r in roles] == counts
-        assert all("random1024-" in site for r in roles for site in r)
-        assert len(set().union(*roles)) == 20  # no site in two roles
+        _check_split(run, counts, "random1024-")
     same_model = [run["rounds"][1]["gate"]["candidate"] for run in (tuning, tolerant)]
     for key in ("mean_ap", "class_ap", "review"):  # not its timing
         assert same_model[0][key] == same_model[1][key], key
@@ -2908,19 +2914,14 @@ def test_loop_retrained_from_round_zero_tables() -> None:
     assert first["command"] == fine_tuned["command"].replace(
         "--map-tolerance 0.02 ", "--map-tolerance 0.02 --retrain-from first "
     )
-    roles = [
-        _sites_of(fine_tuned["command"], flag) for flag in ("new-recon-site", "gate-recon-site", "recon-site")
-    ]
-    assert [len(r) for r in roles] == [3, 5, 8]
-    assert all("/random-92" in site for r in roles for site in r) and len(set().union(*roles)) == 16
+    _check_split(fine_tuned, [3, 5, 8], "/random-92")
     assert {r["trained_from"] for r in first["rounds"][1:]} == {"v0003"}
     assert {r["trained_from"] for r in fine_tuned["rounds"][1:]} == {"promoted"}
     same_model = [run["rounds"][1]["gate"]["candidate"] for run in (fine_tuned, first)]
     for key in ("mean_ap", "class_ap", "review"):
         assert same_model[0][key] == same_model[1][key], key
-    assert not any(
-        r["promoted"] for r in fine_tuned["rounds"][1:3]
-    )  # so rounds 2 and 3 differ in steps alone
+    # nothing promoted before round 3, so rounds 2 and 3 differ in their steps alone
+    assert not any(r["promoted"] for r in fine_tuned["rounds"][1:3])
     text = " ".join(readme_text().split())
     for k in (2, 3):
         longer, fixed = (
@@ -2930,3 +2931,27 @@ def test_loop_retrained_from_round_zero_tables() -> None:
     for run in runs.values():
         assert f"{results(run)['seconds']:.0f} s)" in text
     assert all(r["retrain_seconds"] <= 20 * 60 for run in (fine_tuned, first) for r in run["rounds"][1:])
+
+
+def test_loop_from_round_zero_confirmation_table() -> None:
+    """The fine-tuning rounds at 256x144 on the confirmation split's roles: the tuning run's command but the sites,
+    each round as both gates decided it, and the rise from round 0 to round 3 README reports."""
+    name = "vma_loop_masks_tiny_v0003_promoted_confirm.json"
+    t = table(
+        "round, 256x144 from v0003, fine-tuning the promoted model, confirmation split", "bench/vma_loop.py"
+    )
+    assert_names_source(t, name, "bench/vma_loop.py")
+    confirm = results(name)
+    _check_confident_rounds(t, confirm, 0.02)
+    _check_split(confirm, [3, 5, 12], "/random-92")
+    assert _without_sites(confirm["command"]) == _without_sites(
+        results("vma_loop_masks_tiny_v0003_promoted.json")["command"]
+    )
+    text = " ".join(readme_text().split())
+    assert f"{confirm['seconds']:.0f} s;" in text
+    recon = [r["heldout"]["reconstructed"] for r in confirm["rounds"]]
+    for part, key in (("observed_truth", "mean_ap"), ("annotator", "speed_up")):
+        curve = [r[part][key] for r in recon]
+        assert curve == sorted(curve) and curve[-1] > curve[0], key  # never falls, ends above round 0
+    rules = confirm["rule_based"]["reconstructed"]["observed_truth"]["mean_ap"]
+    assert f"{recon[-1]['observed_truth']['mean_ap'] - rules:.3f} mAP above the rules" in text
