@@ -2955,3 +2955,21 @@ def test_loop_from_round_zero_confirmation_table() -> None:
         assert curve == sorted(curve) and curve[-1] > curve[0], key  # never falls, ends above round 0
     rules = confirm["rule_based"]["reconstructed"]["observed_truth"]["mean_ap"]
     assert f"{recon[-1]['observed_truth']['mean_ap'] - rules:.3f} mAP above the rules" in text
+    # the same split retrained from v0003: the same command with --retrain-from first; its round-3 candidate
+    # slower than the fine-tuned one, which was promoted
+    name = "vma_loop_masks_tiny_v0003_first_confirm.json"
+    t = table("round, 256x144 from v0003, retrained from v0003, confirmation split", "bench/vma_loop.py")
+    assert_names_source(t, name, "bench/vma_loop.py")
+    first = results(name)
+    _check_confident_rounds(t, first, 0.02)
+    assert first["command"] == confirm["command"].replace(
+        "--map-tolerance 0.02 ", "--map-tolerance 0.02 --retrain-from first "
+    )
+    assert f"{first['seconds']:.0f} s;" in text
+    gate = first["rounds"][3]["gate"]
+    assert not first["rounds"][3]["promoted"] and confirm["rounds"][3]["promoted"]
+    assert (
+        gate["candidate"]["review"]["correction_s"]
+        >= confirm["rounds"][3]["gate"]["candidate"]["review"]["correction_s"]
+    )
+    assert f"{gate['current']['mean_ap'] - gate['candidate']['mean_ap']:.3f} lower in mAP" in text
