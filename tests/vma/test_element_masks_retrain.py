@@ -143,9 +143,8 @@ def test_the_gate_keeps_a_worse_candidate_out(bev_sites: dict[str, Path], regist
 
 def weight_distance(model: torch.nn.Module, other: torch.nn.Module) -> float:
     """The L2 distance between two networks' parameters."""
-    return float(
-        sum(((a - b) ** 2).sum() for a, b in zip(model.parameters(), other.parameters(), strict=True)) ** 0.5
-    )
+    pairs = zip(model.parameters(), other.parameters(), strict=True)
+    return float(sum(((a.detach() - b.detach()) ** 2).sum() for a, b in pairs) ** 0.5)
 
 
 @pytest.mark.slow
