@@ -2953,6 +2953,14 @@ def test_loop_from_round_zero_confirmation_table() -> None:
     for part, key in (("observed_truth", "mean_ap"), ("annotator", "speed_up")):
         curve = [r[part][key] for r in recon]
         assert curve == sorted(curve) and curve[-1] > curve[0], key  # never falls, ends above round 0
+    # the promoted candidate is gated as it is stored: round 2 scores it as the current model exactly as round 1 did
+    assert confirm["rounds"][1]["promoted"]
+    promoted_as_candidate, as_current = (
+        confirm["rounds"][1]["gate"]["candidate"],
+        confirm["rounds"][2]["gate"]["current"],
+    )
+    for key in ("mean_ap", "class_ap", "review"):
+        assert promoted_as_candidate[key] == as_current[key], key
     rules = confirm["rule_based"]["reconstructed"]["observed_truth"]["mean_ap"]
     assert f"{recon[-1]['observed_truth']['mean_ap'] - rules:.3f} mAP above the rules" in text
     # the same split retrained from v0003: the same command with --retrain-from first; its round-3 candidate
