@@ -435,7 +435,7 @@ def main() -> None:
             raise SystemExit(
                 "--retrain-from first: only the element-mask network can be retrained from round 0"
             )
-    first_version = current_version(registry).name
+    start_version = current_version(registry).name if args.retrain_from == "first" else None
     # only new BEV sites are damaged: a reconstruction is proposed on as it is
     damage = args.propose_on == "damaged" and not args.new_recon_site
     propose_on = on_damaged if damage else (lambda propose: propose)
@@ -452,16 +452,15 @@ def main() -> None:
             round_started = time.perf_counter()
             corrections, review_counts = corrections_of(site, propose_on(promoted_proposer(registry)))
             corrected = [*corrected, corrections] if args.corrections == "all" else [corrections]
-            from_first = args.retrain_from == "first"
             result = retrain_round(
                 registry,
                 corrected,
                 [*validation, *gate_recon],
-                args.steps * len(corrected) if from_first else args.steps,
+                args.steps * len(corrected) if start_version else args.steps,
                 (args.replay_sites, args.replay_reconstructions, args.replay_share),
                 args.time_confidence,
                 args.map_tolerance,
-                first_version if from_first else None,
+                start_version,
             )
             retrain_s = time.perf_counter() - round_started
             rounds.append(
@@ -471,7 +470,7 @@ def main() -> None:
                     "trained_on": [str(c.site) for c in corrected],
                     "review_counts": review_counts,
                     "candidate": result.candidate.name,
-                    "trained_from": first_version if from_first else "promoted",
+                    "trained_from": start_version or "promoted",
                     "promoted": result.promoted,
                     "gate": {
                         "current": result.current_metrics,

@@ -131,12 +131,12 @@ def retrain_masks_from_corrections(
     started = time.perf_counter()
     current = load_mask_checkpoint(Path(registry))
     start = start_checkpoint(Path(registry), config.start_version) or current
-    seen = seen_records([c.site for c in corrections], start)
-    for scored in {current.path: current, start.path: start}.values():  # neither may be scored on what it saw
+    corrected_sites = [c.site for c in corrections]
+    seen = seen_records(corrected_sites, start)
+    refuse_seen_validation(seen, validation_sites, f"{start.path} with these corrections")
+    if start is not current:  # the promoted version is scored on them too
         refuse_seen_validation(
-            seen_records([c.site for c in corrections], scored),
-            validation_sites,
-            f"{scored.path} with these corrections",
+            seen_records(corrected_sites, current), validation_sites, f"{current.path} with these corrections"
         )
     prepared, num_labels, num_negatives = [], 0, 0
     for k, item in enumerate(corrections):
@@ -169,7 +169,7 @@ def retrain_masks_from_corrections(
                 start,
                 Path(registry) / REPLAY_FOLDER,
                 config.replay_sites,
-                current.model.config,
+                start.model.config,
                 config.train.damaged_copies,
                 config.train.seed,
             ),
