@@ -20,7 +20,8 @@ are compared with the site's `ground_truth/bev/` at each reconstructed cell's ce
 Baseline in the same run, ground-truth poses: the surface without the curvature prior, the SfM gate and the
 curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`); and the last pose source again
 without the kerb step (`kerb_step.enabled false`), its ablation, and with the kerb's foot raised and relabelled
-(`kerb_step.kerb_band_m`, `--kerb-band`, off by default: one width along each kerb); and the first and the last pose source without the
+(`kerb_step.kerb_band_m`, `--kerb-band`, off by default: one width along each kerb), and with the kerb line of the
+two class votes toggled (`kerb_step.kerb_line`, `variant_kerb_line_toggled`); and the first and the last pose source without the
 multi-view refinement of the road elevation (`refine.enabled false`): the observation vote on the fitted
 elevation alone, as the stage was before the refinement. Adam on the per-vertex colours
 and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
@@ -59,6 +60,8 @@ from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
 BANDS_M = ((0, 2), (2, 4), (4, 6), (6, 8), (8, 10), (10, 14), (14, 100))
+NEAR_TRAJECTORY_M = 4.0
+"""Road cells this near a keyframe position give the surface's height offset (that of its pose frame)."""
 IOU_CLASSES = {"road": Semantic.ROAD, "curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING}
 IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
 logger = logging.getLogger("bench.surface")
@@ -98,15 +101,17 @@ def affine_fit(ours: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return fitted
 
 
-def rmse_by_distance(
-    ours: BevRasters, road: np.ndarray, error: np.ndarray, trajectory_xy: np.ndarray
-) -> dict[str, float | None]:
-    """Elevation RMSE of the road cells in bands of distance (m) from the nearest keyframe position."""
+def distance_from_trajectory(ours: BevRasters, trajectory_xy: np.ndarray) -> np.ndarray:
+    """(rows, cols) distance (m) of every cell from the nearest keyframe position."""
     geo = ours.georeference
     colrow = np.round(geo.pixel_from_global(trajectory_xy)).astype(int)
-    free = np.ones(road.shape, bool)
+    free = np.ones(geo.shape, bool)
     free[colrow[:, 1], colrow[:, 0]] = False
-    distance = ndimage.distance_transform_edt(free, sampling=geo.resolution)
+    return ndimage.distance_transform_edt(free, sampling=geo.resolution)
+
+
+def rmse_by_distance(road: np.ndarray, error: np.ndarray, distance: np.ndarray) -> dict[str, float | None]:
+    """Elevation RMSE of the road cells in bands of `distance` (m) from the nearest keyframe position."""
     bands = {}
     for lo, hi in BANDS_M:
         band = road & (distance >= lo) & (distance < hi)
@@ -174,6 +179,8 @@ def compare(
     road = observed & np.isin(true_sem, ROAD_SURFACE_IDS)
     signed = ours.require("elevation") - truth.require("elevation")[tr, tc]
     error = np.abs(signed[road])
+    distance = distance_from_trajectory(ours, trajectory_xy)
+    near = road & (distance < NEAR_TRAJECTORY_M)
     ious = {}
     for name, cls in IOU_CLASSES.items():
         a, b = semantic[both] == int(cls), true_sem[both] == int(cls)
@@ -186,8 +193,9 @@ def compare(
         "elevation_mae_m": float(np.mean(error)),
         "elevation_p95_m": float(np.percentile(error, 95)),
         "elevation_median_signed_m": float(np.median(signed[road])),
+        "elevation_median_signed_m_near_trajectory": float(np.median(signed[near])) if near.any() else None,
         "road_cells_evaluated": int(road.sum()),
-        "elevation_rmse_m_by_distance_from_trajectory_m": rmse_by_distance(ours, road, signed, trajectory_xy),
+        "elevation_rmse_m_by_distance_from_trajectory_m": rmse_by_distance(road, signed, distance),
         "iou": ious,
         "curb_confusion": curb_confusion(semantic, true_sem, both),
         "psnr_db": psnr(rgb, true_rgb),
@@ -225,6 +233,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
         "refine": config.refine.enabled,
         "kerb_step": config.kerb_step.enabled,
         "kerb_band_m": config.kerb_step.kerb_band_m,
+        "kerb_line": config.kerb_step.kerb_line,
         "epochs": config.epochs,
         "refine_elevation": config.refine_elevation,
         "colour_lr": config.colour_lr,
@@ -242,7 +251,9 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
 def _variant(row: dict[str, Any]) -> str:
     if not row["refine"]:
         return " vote"
-    return " flat" if not row["kerb_step"] else (" foot" if row["kerb_band_m"] > 0 else "")
+    if not row["kerb_step"]:
+        return " flat"
+    return (" foot" if row["kerb_band_m"] > 0 else "") + (" line" if row["kerb_line"] else "")
 
 
 def print_side_by_side(runs: list[dict[str, Any]]) -> None:
@@ -306,12 +317,14 @@ def main() -> None:
         no_step = run_source(args.site, sources[-1], flat, scratch)
         foot = replace(config, kerb_step=replace(config.kerb_step, kerb_band_m=args.kerb_band))
         with_foot = run_source(args.site, sources[-1], foot, scratch)
+        line = replace(config, kerb_step=replace(config.kerb_step, kerb_line=not config.kerb_step.kerb_line))
+        with_line = run_source(args.site, sources[-1], line, scratch)
         vote = replace(config, refine=replace(config.refine, enabled=False))
         vote_sources = list(dict.fromkeys([sources[0], sources[-1]]))
         votes = [run_source(args.site, source, vote, scratch) for source in vote_sources]
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    for row in [baseline, *runs, no_step, with_foot, *votes]:
+    for row in [baseline, *runs, no_step, with_foot, with_line, *votes]:
         print(
             f"{row['poses']:>12} epochs {row['epochs']}: elevation RMSE {row['elevation_rmse_m'] * 100:.2f} cm "
             f"(p95 {row['elevation_p95_m'] * 100:.1f} cm), IoU "
@@ -323,7 +336,7 @@ def main() -> None:
             "    RMSE by distance from the trajectory (m):",
             row["elevation_rmse_m_by_distance_from_trajectory_m"],
         )
-    print_side_by_side([*runs, no_step, with_foot, *votes])
+    print_side_by_side([*runs, no_step, with_foot, with_line, *votes])
     reference = runs[0]
     stepped = runs[-1]
     results = {
@@ -339,6 +352,7 @@ def main() -> None:
         "runs": runs,
         "ablation_no_kerb_step": no_step,
         "variant_kerb_foot": with_foot,
+        "variant_kerb_line_toggled": with_line,
         "vote_runs": votes,
         "refine_vs_vote": [
             refine_vs_vote(next(r for r in runs if r["poses"] == v["poses"]), v) for v in votes

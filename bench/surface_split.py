@@ -10,12 +10,16 @@ stage runs four times on one site, each comparing the same images through anothe
                   no kerb step): the ceiling of any geometry at all.
 The gap between "vote" and "true road" is what the road's height costs; between "true road" and "true surface"
 what the kerbs cost; what "true surface" still misses comes from the vote itself (cells, masks, resolution).
+With `--poses sfm` the same four runs use the site workspace's SfM poses, and the true heights are raised by the
+SfM frame's height offset (the refined run's median road height error within `NEAR_TRAJECTORY_M` of the track,
+which no surface fitted to those cameras can remove): "true surface" is then the true shape as those cameras
+would see it in place, so what it misses against its true-pose run is what the poses cost.
 The true heights are put in by wrapping `ControlGrid.at_vertices` (the one place the stage reads vertex
 heights): the true height replaces the fitted one, and a shift of the surface (the curb-height vote) stays a
 shift. An oracle for measurement only: the true elevation is never an input of the product.
 
-Usage: .venv/bin/python bench/surface_split.py [--site data/synthetic/default] [--threads 1]
-       [--out bench/results/surface_split.json]
+Usage: .venv/bin/python bench/surface_split.py [--site data/synthetic/default] [--poses ground_truth|sfm]
+       [--threads 1] [--out bench/results/surface_split.json]
 """
 
 import argparse
@@ -45,9 +49,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.surface import RESULTS, nearest_true_cells, run_source  # noqa: E402
 
 
-def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool) -> torch.Tensor:
-    """(V,) the true elevation at each vertex (nearest true cell; the fitted one where the truth has none, and
-    off the true road when `road_only`)."""
+def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool, offset_m: float = 0.0) -> torch.Tensor:
+    """(V,) the true elevation plus `offset_m` at each vertex (nearest true cell; the fitted one where the truth
+    has none, and off the true road when `road_only`)."""
     with torch.no_grad():
         fitted = mesh.control.at_vertices(mesh.control_heights()).cpu().numpy()
     inside, rows, cols = nearest_true_cells(mesh.vertex_xy.cpu().numpy(), truth)
@@ -55,12 +59,15 @@ def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool) -> torch.Tensor
     use = inside & np.isfinite(height)
     if road_only:
         use &= np.isin(truth.require("semantic")[rows, cols], ROAD_SURFACE_IDS)
-    return torch.as_tensor(np.where(use, height, fitted), dtype=torch.float32, device=mesh.vertex_xy.device)
+    return torch.as_tensor(
+        np.where(use, height + offset_m, fitted), dtype=torch.float32, device=mesh.vertex_xy.device
+    )
 
 
 @contextmanager
-def oracle_heights(truth: BevRasters, road_only: bool) -> Iterator[None]:
-    """While open, the stage's vertices stand at the true heights (see the module docstring)."""
+def oracle_heights(truth: BevRasters, road_only: bool, offset_m: float = 0.0) -> Iterator[None]:
+    """While open, the stage's vertices stand at the true heights raised by `offset_m` (see the module
+    docstring)."""
     original_at_vertices = ControlGrid.at_vertices
     original_refine = surface_stage.refine_elevation
     state: dict[str, torch.Tensor] = {}
@@ -74,7 +81,7 @@ def oracle_heights(truth: BevRasters, road_only: bool) -> Iterator[None]:
 
     def refine(mesh: Mesh, *args: Any, **kwargs: Any) -> list[dict[str, float]]:
         state.clear()
-        state["true"] = true_heights(mesh, truth, road_only)
+        state["true"] = true_heights(mesh, truth, road_only, offset_m)
         state["control_z"] = mesh.control_heights().detach()
         return []
 
@@ -92,7 +99,10 @@ def figures(row: dict[str, Any]) -> dict[str, Any]:
         "elevation_rmse_m": row["elevation_rmse_m"],
         "iou": row["iou"],
         "psnr_db": row["psnr_db"],
+        "psnr_affine_db": row["psnr_affine_db"],
+        "curb_confusion": row["curb_confusion"],
         "curb_cells_rmse_m": row["kerb"]["elevation_rmse_m_curb_cells"],
+        "elevation_median_signed_m_near_trajectory": row["elevation_median_signed_m_near_trajectory"],
         "seconds": row["seconds"],
     }
 
@@ -100,6 +110,7 @@ def figures(row: dict[str, Any]) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--site", type=Path, default=Path("data/synthetic/default"))
+    parser.add_argument("--poses", choices=("ground_truth", "sfm"), default="ground_truth")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path, default=RESULTS / "surface_split.json")
     args = parser.parse_args()
@@ -110,12 +121,13 @@ def main() -> None:
     scratch = Path(tempfile.mkdtemp(prefix="bench-surface-split-"))
     runs: dict[str, dict[str, Any]] = {}
     try:
-        runs["vote"] = figures(run_source(args.site, "ground_truth", vote, scratch))
-        runs["refined"] = figures(run_source(args.site, "ground_truth", config, scratch))
-        with oracle_heights(truth, road_only=True):
-            runs["true_road"] = figures(run_source(args.site, "ground_truth", vote, scratch))
-        with oracle_heights(truth, road_only=False):
-            runs["true_surface"] = figures(run_source(args.site, "ground_truth", level, scratch))
+        runs["vote"] = figures(run_source(args.site, args.poses, vote, scratch))
+        runs["refined"] = figures(run_source(args.site, args.poses, config, scratch))
+        offset = runs["refined"]["elevation_median_signed_m_near_trajectory"] if args.poses == "sfm" else 0.0
+        with oracle_heights(truth, road_only=True, offset_m=offset):
+            runs["true_road"] = figures(run_source(args.site, args.poses, vote, scratch))
+        with oracle_heights(truth, road_only=False, offset_m=offset):
+            runs["true_surface"] = figures(run_source(args.site, args.poses, level, scratch))
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     print(f"{'':>14}" + "".join(f"{name:>14}" for name in runs))
@@ -128,7 +140,8 @@ def main() -> None:
         {
             "command": " ".join([sys.executable.split("/")[-1], *sys.argv]),
             "site": str(args.site),
-            "poses": "ground_truth",
+            "poses": args.poses,
+            "true_heights_offset_m": offset,
             "machine": {"platform": platform.platform(), "torch": torch.__version__},
             "runs": runs,
         },

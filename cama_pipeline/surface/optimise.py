@@ -26,7 +26,7 @@ from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS
 from cama_pipeline.surface.config import SurfaceConfig
 from cama_pipeline.surface.elevation import ControlGrid, ElevationMLP, surface_loss
 from cama_pipeline.surface.grid import SurfaceGrid
-from cama_pipeline.surface.labels import PAINT, curb_logits, fused_logits
+from cama_pipeline.surface.labels import PAINT, curb_height_logits, curb_logits, fused_logits, shares
 from cama_pipeline.surface.observe import (
     GROUND,
     Camera,
@@ -36,7 +36,7 @@ from cama_pipeline.surface.observe import (
     sample_images,
     visible_vertices,
 )
-from cama_pipeline.surface.steps import ColourMoments, raised_vertices
+from cama_pipeline.surface.steps import ColourMoments, beyond_kerb_line, raised_vertices
 
 Advance = Callable[[int, float], None]
 """Progress callback: units done in this call (images; Adam steps in the elevation fit), current loss (NaN in a
@@ -180,12 +180,38 @@ def observe(
         classes = mesh.logits.argmax(dim=1)
         off_road = (seen & ~torch.isin(classes, torch.tensor(ROAD_SURFACE_IDS, device=device))).cpu().numpy()
         painted = torch.isin(classes, torch.tensor([int(c) for c in PAINT], device=device)).cpu().numpy()
+        line = _beyond_kerb_line(mesh, class_sums, raised_sums, seen, ~off_road & ~painted, config)
+        mesh.logits[line] = curb_height_logits(raised_sums[line])
         raised, foot = raised_vertices(mesh.grid, road_level, curb_level, off_road, painted, config.kerb_step)
+        raised |= line.cpu().numpy()
         on_step, kerb = torch.as_tensor(raised, device=device), torch.as_tensor(foot, device=device)
         mesh.step[on_step] = config.curb_height_m
         mesh.colour[on_step] = curb_level.mean()[on_step]
         mesh.logits[kerb] = curb_logits(int(kerb.sum()), device)
     return visible
+
+
+def _beyond_kerb_line(
+    mesh: Mesh,
+    class_sums: torch.Tensor,
+    raised_sums: torch.Tensor,
+    seen: torch.Tensor,
+    candidates: np.ndarray,
+    config: SurfaceConfig,
+) -> torch.Tensor:
+    """(V,) bool: the road-labelled, unpainted `candidates` beyond the kerb line of the two class votes (`steps`);
+    none when `kerb_step.kerb_line` is off."""
+    if not config.kerb_step.kerb_line:
+        return torch.zeros(len(candidates), dtype=torch.bool, device=class_sums.device)
+    line = beyond_kerb_line(
+        mesh.grid,
+        shares(class_sums).cpu().numpy(),
+        shares(raised_sums).cpu().numpy(),
+        seen.cpu().numpy(),
+        candidates,
+        config.kerb_step,
+    )
+    return torch.as_tensor(line, device=class_sums.device)
 
 
 def add_votes(

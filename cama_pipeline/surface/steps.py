@@ -15,8 +15,19 @@ decided cell by cell (that leaves patches and a ragged road edge): along the ker
 0.1, 0.2, ... `kerb_band_m` whose cells, summed over `foot_smoothing_m` of the kerb's length, agree best at curb
 height; the cells within that width of the raised region are the foot, so the road's edge moves as a whole.
 
+The kerb line option (`kerb_line`) finds the kerb's road-labelled cells from the two class votes instead. Seen
+from a camera on the road at a distance L from the kerb (across it) and a height h, a cell on the kerb top read at
+road level is seen on the kerb's face or the road in front of it up to L c / (h - c) beyond the kerb line (c the
+kerb's height), so the road-level vote calls the kerb road out to there; a road cell read at curb height is seen on
+the kerb's face from L c / h before the line, so the curb-height vote calls the road off-road from there. The two
+smears are nearly equal and opposite, so where the road classes take half of the two votes together (their
+road-level share plus their curb-height share is 1) is the kerb line, whatever the views' distances. Road-labelled
+cells on the far side of it (the sum under 1, averaged over `kerb_line_smoothing_m`) stand on the step and take the
+classes seen at curb height, as the other raised cells do; painted cells never. On the default site with SfM poses
+about half the true curb cells are labelled road at road level (`bench/kerb_profile.py`).
+
 Otherwise road classes (road, lane marking, crosswalk) are never raised: the road is what the MLP fits, and only
-the foot option (off by default) raises road-labelled cells, which it relabels curb. The BEV `elevation` layer
+the foot and kerb line options raise road-labelled cells. The BEV `elevation` layer
 stays that road surface (the vectors are lifted onto it, as CAMA's road elevation map); the step goes to its own
 raster (`outputs.write_kerb_step`), to the mesh, and decides which height a cell's colour and classes are taken
 from.
@@ -28,7 +39,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.surface.grid import SurfaceGrid
 
 VARIANCE_FLOOR = 1e-4
@@ -53,9 +64,19 @@ class KerbStepConfig:
     road-level vote labels the lower part of a kerb road. 0: no foot."""
     foot_smoothing_m: float = 1.0
     """Gaussian sigma (along the kerb) of the sums that choose the foot's width."""
+    kerb_line: bool = False
+    """Raise the road-labelled cells beyond the kerb line that the two class votes place (module docstring)."""
+    kerb_line_smoothing_m: float = 0.1
+    """Gaussian sigma of the averaging of the road classes' two-vote share over neighbouring cells."""
 
     def __post_init__(self) -> None:
-        for name in ("smoothing_m", "min_area_m2", "kerb_band_m", "foot_smoothing_m"):
+        for name in (
+            "smoothing_m",
+            "min_area_m2",
+            "kerb_band_m",
+            "foot_smoothing_m",
+            "kerb_line_smoothing_m",
+        ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"KerbStepConfig.{name} must be >= 0, got {getattr(self, name)}")
 
@@ -137,6 +158,24 @@ def raised_vertices(
         return raised, np.zeros_like(raised)
     foot = _kerb_foot(grid, score, both & ~off_road & ~painted, raised, config)
     return raised | foot, foot
+
+
+def beyond_kerb_line(
+    grid: SurfaceGrid,
+    road_level: np.ndarray,
+    curb_height: np.ndarray,
+    seen: np.ndarray,
+    candidates: np.ndarray,
+    config: KerbStepConfig,
+) -> np.ndarray:
+    """(V,) the `candidates` (road-labelled, unpainted vertices) beyond the kerb line: where the road classes'
+    road-level plus curb-height shares ((V, 5) class shares each, 0 unseen), averaged over the `seen` vertices
+    within `kerb_line_smoothing_m`, fall under 1 (see the module docstring)."""
+    road_columns = [BEV_CLASSES.index(c) for c in ROAD_SURFACE_IDS]
+    both_votes = road_level[:, road_columns].sum(axis=1) + curb_height[:, road_columns].sum(axis=1)
+    rows, cols = grid.vertex_cells()
+    mean = _local_mean(grid, both_votes, seen, config.kerb_line_smoothing_m)[rows, cols]
+    return candidates & seen & (mean < 1.0)
 
 
 def _kerb_foot(

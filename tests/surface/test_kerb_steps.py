@@ -7,7 +7,13 @@ import torch
 from cama_pipeline.semantics import BEV_CLASSES, Semantic
 from cama_pipeline.surface.grid import SurfaceGrid
 from cama_pipeline.surface.labels import curb_logits
-from cama_pipeline.surface.steps import ColourMoments, KerbStepConfig, raised_vertices, step_summary
+from cama_pipeline.surface.steps import (
+    ColourMoments,
+    KerbStepConfig,
+    beyond_kerb_line,
+    raised_vertices,
+    step_summary,
+)
 
 ROWS, COLS = 20, 30
 GRID = SurfaceGrid((0.0, 0.0), 0.1, ROWS, COLS, np.arange(ROWS * COLS).reshape(ROWS, COLS))
@@ -153,3 +159,35 @@ def test_bad_config_names_the_field() -> None:
         KerbStepConfig(kerb_band_m=-1)
     with pytest.raises(ValueError, match="foot_smoothing_m"):
         KerbStepConfig(foot_smoothing_m=-0.5)
+
+
+def smeared_votes(kerb_col: float, smear_cols: float) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 5) class shares of a kerb whose line lies at column `kerb_col` (kerb beyond) as the two votes read it: the road-level vote calls the kerb top road for `smear_cols` columns beyond the line (fading out), the
+    curb-height vote calls the road off-road for as many columns before it (fading in), as views from the road do."""
+    beyond = np.tile(np.arange(COLS), ROWS) - kerb_col  # > 0: on the kerb, < 0: on the road
+    road_level_road = np.clip(1 - beyond / smear_cols, 0, 1)
+    curb_height_road = np.clip(-beyond / smear_cols, 0, 1)
+    road, curb = BEV_CLASSES.index(Semantic.ROAD), BEV_CLASSES.index(Semantic.CURB)
+    road_level, curb_height = np.zeros((len(beyond), 5)), np.zeros((len(beyond), 5))
+    road_level[:, road], road_level[:, curb] = road_level_road, 1 - road_level_road
+    curb_height[:, road], curb_height[:, curb] = curb_height_road, 1 - curb_height_road
+    return road_level, curb_height
+
+
+def test_the_kerb_line_lies_between_the_two_votes_smeared_edges() -> None:
+    # the kerb line at column 14.5: each vote alone puts the road's edge 3 columns off, in opposite directions
+    road_level, curb_height = smeared_votes(14.5, 6.0)
+    road_labelled = road_level.argmax(axis=1) == BEV_CLASSES.index(Semantic.ROAD)
+    cols = np.tile(np.arange(COLS), ROWS)
+    assert cols[road_labelled].max() == 17  # the road-level vote labels three kerb columns road
+    seen = np.ones(len(cols), bool)
+    line = beyond_kerb_line(
+        GRID, road_level, curb_height, seen, road_labelled, KerbStepConfig(kerb_line=True)
+    )
+    assert set(cols[line]) == {15, 16, 17}  # exactly the kerb columns the road-level vote took for road
+    assert not line[~road_labelled].any()  # only candidates are ever beyond
+    config = KerbStepConfig(kerb_line=True)
+    unseen = seen & (cols != 16)
+    assert not beyond_kerb_line(GRID, road_level, curb_height, unseen, road_labelled, config)[
+        cols == 16
+    ].any()

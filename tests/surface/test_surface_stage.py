@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from cama_pipeline.bev import read_layer
 from cama_pipeline.data import load_dataset
 from cama_pipeline.results import ItemResult
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.outputs import read_kerb_step
@@ -192,3 +192,38 @@ def test_cli_runs_the_joint_optimisation_when_asked_and_names_bad_passes(
     assert joint["rays_hitting"] > 0.5 and report["seconds"]["joint"] > 0
     bad = runner.invoke(app, [*args, "--joint-epochs", "-1"])
     assert bad.exit_code == 2 and "JointConfig.epochs" in bad.output
+
+
+def test_the_kerb_line_raises_road_labelled_kerb_cells_and_reads_them_at_curb_height(
+    stepped: ItemResult,
+    dataset_root: Path,
+    tmp_path_factory: pytest.TempPathFactory,
+    tiny_site,  # type: ignore[no-untyped-def]
+) -> None:
+    workspace = build_site_workspace(dataset_root, tmp_path_factory.mktemp("kerb-line-ws"))
+    config = replace(FAST, resolution_m=0.1, epochs=0)
+    config = replace(config, kerb_step=replace(config.kerb_step, kerb_line=True))
+    lined = run(config, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
+    before, after = read_layer(stepped.path / "bev", "semantic"), read_layer(lined.path / "bev", "semantic")
+    step = read_kerb_step(lined.path / "kerb_step.npy", after.shape)
+    road = np.isin(before, ROAD_SURFACE_IDS)
+    moved = road & np.isin(after, [int(Semantic.CURB), int(Semantic.BACKGROUND)])
+    assert moved.sum() > 100
+    assert (step[moved] > 0).all()  # every cell taken off the road stands on the step
+    assert not (~road & np.isin(after, ROAD_SURFACE_IDS) & (before != after)).any()  # nothing joins the road
+    truth = load_site_rasters(tiny_site.result.ground_truth_dir / "bev")
+    ours = load_site_rasters(lined.path / "bev")
+
+    def truly_off_road(cells: np.ndarray) -> np.ndarray:
+        rows, cols = np.nonzero(cells)
+        xy = ours.global_from_pixel(np.column_stack([cols, rows]))
+        true_col, true_row = np.round(truth.pixel_from_global(xy)).astype(int).T
+        return ~np.isin(truth.semantic[true_row, true_col], ROAD_SURFACE_IDS)
+
+    # measured 0.40 of the 675 cells taken off the road truly off it, against 0.01 of all road-labelled cells: at
+    # 256x144 the masks' blur lowers the road share of the road-level vote just before the kerb too, so the line
+    # also takes a road row there (bench/kerb_profile.py measures the default site's 512x288 images)
+    assert (
+        truly_off_road(moved).mean() > 0.25
+        and truly_off_road(moved).mean() > 10 * truly_off_road(road).mean()
+    )
