@@ -2981,3 +2981,126 @@ def test_loop_from_round_zero_confirmation_table() -> None:
         >= confirm["rounds"][3]["gate"]["candidate"]["review"]["correction_s"]
     )
     assert f"{gate['current']['mean_ap'] - gate['candidate']['mean_ap']:.3f} lower in mAP" in text
+
+
+KERB_BINS = (-0.2, -0.1, 0.1, 0.2, 0.3, 0.4)
+"""The bins of the kerb profile table, by their lower end (m from the true road edge)."""
+
+
+def _profile_row(run: dict[str, Any], pick: Any) -> list[Expected]:
+    by_start = {b["from_m"]: b for b in run["bins"]}
+    return [pick(by_start[start]) for start in KERB_BINS]
+
+
+def test_kerb_profile_table() -> None:
+    t = table("across the kerb, default site, SfM poses", "bench/kerb_profile.py")
+    assert t.header[1:7] == [f"{start:+.1f} m".replace("+-", "-") for start in KERB_BINS]
+    off, foot, line = (
+        results(f"kerb_profile{suffix}.json")["runs"]["sfm"] for suffix in ("", "_foot", "_line")
+    )
+    for name in ("kerb_profile.json", "kerb_profile_foot.json", "kerb_profile_line.json"):
+        assert_names_source(t, name, "bench/kerb_profile.py")
+    assert (off["kerb_line"], off["kerb_band_m"]) == (False, 0.0)
+    assert (foot["kerb_line"], foot["kerb_band_m"]) == (False, 0.3)
+    assert (line["kerb_line"], line["kerb_band_m"]) == (True, 0.0)
+    rows: dict[str, list[Expected]] = {
+        "true curb share": _profile_row(off, lambda b: b["true_curb_share"]),
+        "road-level vote: road share": _profile_row(off, lambda b: b["road_level_shares"]["road"]),
+        "curb-height vote: road share": _profile_row(off, lambda b: b["curb_height_shares"]["road"]),
+        "labelled right: without the kerb line": [
+            *_profile_row(off, lambda b: b["right"]),
+            off["iou"]["curb"],
+        ],
+        "labelled right: kerb foot (0.3 m), without the kerb line": [
+            *_profile_row(foot, lambda b: b["right"]),
+            foot["iou"]["curb"],
+        ],
+        "labelled right: the kerb line": [*_profile_row(line, lambda b: b["right"]), line["iou"]["curb"]],
+        "labelled right: each cell read at its true height": [
+            *_profile_row(off, lambda b: b["right_at_true_height"]),
+            off["band_iou"]["at_true_height"]["curb"],
+        ],
+    }
+    for label, expected in rows.items():
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"kerb profile row {label!r}")
+    # the votes are the same in the three runs: only the decision of heights differs
+    assert _profile_row(foot, lambda b: b["road_level_shares"]["road"]) == rows["road-level vote: road share"]
+    assert (
+        _profile_row(line, lambda b: b["curb_height_shares"]["road"]) == rows["curb-height vote: road share"]
+    )
+
+
+KERB_LINE_ROWS = {
+    "without the kerb line": ("sfm", False, 0.0),
+    "kerb foot": ("variant_kerb_foot", False, 0.3),
+    "kerb line": ("variant_kerb_line_toggled", True, 0.0),
+}
+
+
+def test_kerb_line_surface_table() -> None:
+    t = table("kerb cells, SfM poses", "bench/surface.py")
+    for site, results_file in (
+        ("default site", "surface_kerb_line.json"),
+        ("9011", "surface_kerb_line_9011.json"),
+    ):
+        assert_names_source(t, results_file, "bench/surface.py")
+        recorded = results(results_file)
+        for variant, (key, kerb_line, band) in KERB_LINE_ROWS.items():
+            run = _surface_run(recorded, key)
+            assert (run["poses"], run["kerb_line"], run["kerb_band_m"]) == ("sfm", kerb_line, band)
+            label = f"{site}, {variant}"
+            assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(run), f"kerb line row {label!r}")
+
+
+def test_kerb_line_end_to_end_table() -> None:
+    t = table("end to end, kerb line", "bench/end_to_end.py")
+    for site, suffix in (("default site", ""), ("9011", "_9011")):
+        for state in ("off", "on"):
+            results_file = f"end_to_end_kerb_line_{state}{suffix}.json"
+            assert_names_source(t, results_file, "bench/end_to_end.py")
+            recorded = results(results_file)
+            observed, annotator = recorded["proposals_ap"]["observed_truth"], recorded["annotator"]
+            counts = annotator["corrected"]["counts"]
+            expected: list[Expected] = [
+                observed["mean_ap"],
+                observed["class_ap"]["boundary"],
+                annotator["speed_up"],
+                recorded["annotator_in_reconstruction_frame"]["speed_up"],
+                *(counts.get(kind, 0) for kind in ("accept", "fix", "reject", "drawn")),
+                recorded["sre"]["c1_proposals"]["sre_ref_px"],
+            ]
+            assert_shows(" | ".join(row(t, f"{site}, {state}")[1:]), expected, f"end to end {site} {state}")
+    # the same drawing in both runs of a site: only the proposals differ
+    for suffix in ("", "_9011"):
+        off, on = (results(f"end_to_end_kerb_line_{s}{suffix}.json")["annotator"] for s in ("off", "on"))
+        assert off["scratch"]["total_s"] == on["scratch"]["total_s"]
+
+
+def test_kerb_line_twenty_layouts_table() -> None:
+    t = table("twenty held-out layouts at 256x144, kerb line", "bench/vma_masks.py")
+    commands = {}
+    for state in ("off", "on"):
+        results_file = f"vma_masks_kerb_line_{state}_256.json"
+        assert_names_source(t, results_file, "bench/vma_masks.py")
+        recorded = results(results_file)
+        commands[state] = recorded["command"]
+        network, rules = (
+            recorded["results"]["reconstructed"][name] for name in ("element_masks", "rule_based")
+        )
+        expected: list[Expected] = [
+            network["observed_truth"]["mean_ap"],
+            network["observed_truth"]["class_ap"]["divider"],
+            network["observed_truth"]["class_ap"]["boundary"],
+            network["annotator"]["correction_s"],
+            network["annotator"]["speed_up"],
+            rules["observed_truth"]["mean_ap"],
+            rules["annotator"]["speed_up"],
+        ]
+        assert_shows(" | ".join(row(t, state)[1:]), expected, f"twenty layouts, kerb line {state}")
+    # the same twenty layouts, the copies rerun with the kerb line
+    sites = {
+        state: re.findall(r"--recon-site data/synthetic/(\S+)", command)
+        for state, command in commands.items()
+    }
+    assert sites["off"] == [f"random-{seed}" for seed in range(9211, 9231)]
+    assert sites["on"] == [f"line-{seed}" for seed in range(9211, 9231)]

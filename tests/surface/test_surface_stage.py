@@ -118,9 +118,11 @@ def test_elevation_matches_the_true_road_under_the_trajectory(
 
 @pytest.fixture(scope="module")
 def stepped(dataset_root: Path, tmp_path_factory: pytest.TempPathFactory) -> ItemResult:
-    """The surface at 0.1 m, where a kerb is a few cells wide, in a workspace of its own."""
+    """The surface at 0.1 m, where a kerb is a few cells wide, in a workspace of its own; the kerb step alone,
+    without the kerb line (which the test below turns on)."""
     workspace = build_site_workspace(dataset_root, tmp_path_factory.mktemp("stepped-ws"))
     config = replace(FAST, resolution_m=0.1, epochs=0)
+    config = replace(config, kerb_step=replace(config.kerb_step, kerb_line=False))
     return run(config, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
 
 
@@ -202,7 +204,7 @@ def test_the_kerb_line_raises_road_labelled_kerb_cells_and_reads_them_at_curb_he
 ) -> None:
     workspace = build_site_workspace(dataset_root, tmp_path_factory.mktemp("kerb-line-ws"))
     config = replace(FAST, resolution_m=0.1, epochs=0)
-    config = replace(config, kerb_step=replace(config.kerb_step, kerb_line=True))
+    assert config.kerb_step.kerb_line  # on by default
     lined = run(config, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
     before, after = read_layer(stepped.path / "bev", "semantic"), read_layer(lined.path / "bev", "semantic")
     step = read_kerb_step(lined.path / "kerb_step.npy", after.shape)
