@@ -1,6 +1,6 @@
 """Curb labels: voted at curb height off the road, a raised curb seen obliquely lands in place."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -86,10 +86,15 @@ class FakeDataset:
 
 
 def curb_rows_y(
-    curb_height_m: float, camera_ys: tuple[float, ...] = (0.0,), foot_road: bool = False
+    curb_height_m: float,
+    camera_ys: tuple[float, ...] = (0.0,),
+    foot_road: bool = False,
+    kerb_line: bool = False,
 ) -> np.ndarray:
-    """y of the grid rows (x = 0 column) labelled curb after observing oblique views from `camera_ys`."""
+    """y of the grid rows (x = 0 column) labelled curb after observing oblique views from `camera_ys`; the two
+    class votes alone unless `kerb_line` (`steps.beyond_kerb_line`)."""
     config = SurfaceConfig(resolution_m=0.05, control_spacing_m=0.5, curb_height_m=curb_height_m)
+    config = replace(config, kerb_step=replace(config.kerb_step, kerb_line=kerb_line))
     rows, cols = 81, 21  # y 8 .. 4, x -0.5 .. 0.5
     grid = SurfaceGrid((-0.5, 8.0), 0.05, rows, cols, np.arange(rows * cols).reshape(rows, cols))
     mlp = new_elevation_mlp(grid, np.zeros(1), config)
@@ -119,3 +124,19 @@ def test_with_the_faces_foot_labelled_road_several_views_still_place_the_curb_to
     placed = curb_rows_y(CURB_HEIGHT_M, (0.0, 1.5, 3.0), foot_road=True)
     truth = (CURB_LINE_Y - 0.03, CURB_LINE_Y + CURB_WIDTH_M + 0.03)
     assert len(placed) >= 3 and placed.min() >= truth[0] and placed.max() <= truth[1]
+
+
+def test_the_kerb_line_places_the_curb_top_where_the_vote_alone_leaves_its_edge_road() -> None:
+    truth = (CURB_LINE_Y - 0.03, CURB_LINE_Y + CURB_WIDTH_M + 0.03)
+    # the face's foot labelled road, as the rendered masks do: the votes alone leave the first curb rows road
+    # (one view: every row), the kerb line takes exactly the curb top
+    for views in ((0.0,), (0.0, 1.5, 3.0)):
+        alone = curb_rows_y(CURB_HEIGHT_M, views, foot_road=True)
+        placed = curb_rows_y(CURB_HEIGHT_M, views, foot_road=True, kerb_line=True)
+        assert len(placed) == 5 and placed.min() >= truth[0] and placed.max() <= truth[1]
+        assert len(alone) < len(placed)
+    # the whole face labelled curb: a road cell read at curb height sees the face from every view, so on both
+    # sides of the line one vote of two says road, and the 0.1 m smoothing takes up to three 0.05 m road rows
+    # before the kerb (README, "The kerb line of the two votes")
+    placed = curb_rows_y(CURB_HEIGHT_M, (0.0,), kerb_line=True)
+    assert placed.max() <= truth[1] and CURB_LINE_Y - 0.16 <= placed.min() < truth[0]
