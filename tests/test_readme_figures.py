@@ -3037,24 +3037,33 @@ KERB_LINE_ROWS = {
 }
 
 
+KERB_LINE_DEFAULT_ROWS = {
+    "without the kerb line": ("variant_kerb_line_toggled", False, 0.0),
+    "kerb line": ("sfm", True, 0.0),
+}
+"""The rows of a site measured with the kerb line on by default (its toggled run is the one without)."""
+
+
 def test_kerb_line_surface_table() -> None:
     t = table("kerb cells, SfM poses", "bench/surface.py")
-    for site, results_file in (
-        ("default site", "surface_kerb_line.json"),
-        ("9011", "surface_kerb_line_9011.json"),
+    for site, results_file, rows in (
+        ("default site", "surface_kerb_line.json", KERB_LINE_ROWS),
+        ("9011", "surface_kerb_line_9011.json", KERB_LINE_ROWS),
+        ("9011 mask-free", "surface_kerb_line_9011_nomasks.json", KERB_LINE_DEFAULT_ROWS),
     ):
         assert_names_source(t, results_file, "bench/surface.py")
         recorded = results(results_file)
-        for variant, (key, kerb_line, band) in KERB_LINE_ROWS.items():
+        for variant, (key, kerb_line, band) in rows.items():
             run = _surface_run(recorded, key)
             assert (run["poses"], run["kerb_line"], run["kerb_band_m"]) == ("sfm", kerb_line, band)
+            assert run["masks"] == ("predicted" if "mask-free" in site else "dataset")
             label = f"{site}, {variant}"
             assert_shows(" | ".join(row(t, label)[1:]), _surface_figures(run), f"kerb line row {label!r}")
 
 
 def test_kerb_line_end_to_end_table() -> None:
     t = table("end to end, kerb line", "bench/end_to_end.py")
-    for site, suffix in (("default site", ""), ("9011", "_9011")):
+    for site, suffix in (("default site", ""), ("9011", "_9011"), ("9011 mask-free", "_9011_nomasks")):
         for state in ("off", "on"):
             results_file = f"end_to_end_kerb_line_{state}{suffix}.json"
             assert_names_source(t, results_file, "bench/end_to_end.py")
@@ -3071,7 +3080,7 @@ def test_kerb_line_end_to_end_table() -> None:
             ]
             assert_shows(" | ".join(row(t, f"{site}, {state}")[1:]), expected, f"end to end {site} {state}")
     # the same drawing in both runs of a site: only the proposals differ
-    for suffix in ("", "_9011"):
+    for suffix in ("", "_9011", "_9011_nomasks"):
         off, on = (results(f"end_to_end_kerb_line_{s}{suffix}.json")["annotator"] for s in ("off", "on"))
         assert off["scratch"]["total_s"] == on["scratch"]["total_s"]
 
