@@ -42,7 +42,7 @@ from cama_pipeline.surface import SurfaceConfig
 from cama_pipeline.surface import optimise as surface_optimise
 from cama_pipeline.surface import stage as surface_stage
 from cama_pipeline.surface.labels import shares
-from cama_pipeline.surface.steps import VARIANCE_FLOOR
+from cama_pipeline.surface.steps import curb_height_agreement
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -132,11 +132,9 @@ def captured_decisions() -> Iterator[dict[str, Any]]:
 
     def raised_vertices(grid, road_level, curb_level, off_road, painted, config):  # type: ignore[no-untyped-def]
         result = original_raised(grid, road_level, curb_level, off_road, painted, config)
-        ratio = (road_level.variance() + VARIANCE_FLOOR) / (curb_level.variance() + VARIANCE_FLOOR)
         weight = road_level.weight.cpu().numpy()
-        kept.update(
-            grid=grid, seen=weight > 0, observed=np.round(weight) > 0, score=torch.log(ratio).cpu().numpy()
-        )
+        score = curb_height_agreement(road_level, curb_level)
+        kept.update(grid=grid, seen=weight > 0, observed=np.round(weight) > 0, score=score)
         kept["raised"] = result[0]
         return result
 

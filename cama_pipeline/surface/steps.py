@@ -136,6 +136,13 @@ def _drop_small(raised: np.ndarray, min_area_m2: float, resolution_m: float) -> 
     return raised & ~np.isin(labelled, np.flatnonzero(areas < min_area_m2) + 1)
 
 
+def curb_height_agreement(road_level: ColourMoments, curb_level: ColourMoments) -> np.ndarray:
+    """(V,) how much better each vertex's views agree in colour at curb height than at road level: the log ratio
+    of the two weighted colour variances (each floored by `VARIANCE_FLOOR`), positive where curb height fits."""
+    ratio = (road_level.variance() + VARIANCE_FLOOR) / (curb_level.variance() + VARIANCE_FLOOR)
+    return torch.log(ratio).cpu().numpy()
+
+
 def raised_vertices(
     grid: SurfaceGrid,
     road_level: ColourMoments,
@@ -148,8 +155,7 @@ def raised_vertices(
     (`off_road` (V,) False), which are kerb cells the road-level vote smeared (see the module docstring); the
     `painted` (V,) vertices (lane marking, crosswalk) are never among the latter."""
     both = ((road_level.weight > 0) & (curb_level.weight > 0)).cpu().numpy()
-    ratio = (road_level.variance() + VARIANCE_FLOOR) / (curb_level.variance() + VARIANCE_FLOOR)
-    score = torch.log(ratio).cpu().numpy()
+    score = curb_height_agreement(road_level, curb_level)
     rows, cols = grid.vertex_cells()
     candidates = both & off_road
     mean = _local_mean(grid, score, candidates, config.smoothing_m)
