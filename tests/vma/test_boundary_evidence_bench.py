@@ -1,5 +1,5 @@
 """`bench/boundary_evidence.py` scores each proposed boundary against the true boundary it lies along; it,
-`bench/boundary_offset.py` and `bench/annotator_split.py` refuse a checkpoint on a site it saw."""
+`bench/boundary_offset.py`, `bench/annotator_split.py` and `bench/annotator_seconds.py` refuse a checkpoint on a site it saw."""
 
 import sys
 from pathlib import Path
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.review_effort.plan import Polyline, SimulationConfig
-from bench import annotator_split, boundary_evidence, boundary_offset, vma_measures
+from bench import annotator_seconds, annotator_split, boundary_evidence, boundary_offset, vma_measures
 from bench.boundary_evidence import boundary_errors
 from cama_pipeline.site_identity import SeenSiteError
 from models.vma.vectors import Vector
@@ -43,7 +43,9 @@ def test_each_boundary_is_scored_against_the_truth_it_lies_along() -> None:
 
 
 @pytest.mark.parametrize(
-    "bench", [boundary_evidence, boundary_offset, annotator_split], ids=lambda m: m.__name__
+    "bench",
+    [boundary_evidence, boundary_offset, annotator_split, annotator_seconds],
+    ids=lambda m: m.__name__,
 )
 def test_the_settings_benches_refuse_a_checkpoint_on_a_site_it_saw(
     bench: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
