@@ -3113,3 +3113,96 @@ def test_kerb_line_twenty_layouts_table() -> None:
     }
     assert sites["off"] == [f"random-{seed}" for seed in range(9211, 9231)]
     assert sites["on"] == [f"line-{seed}" for seed in range(9211, 9231)]
+
+
+def test_kerb_line_trained_network_table() -> None:
+    """v0004 and its recipe retrained on the twelve reconstructions with and without the kerb line, each cell
+    against its bench/vma_masks.py results, on the twenty layouts with the kerb line; the halves add up."""
+    t = table("network, twenty held-out layouts with the kerb line", "bench/vma_masks.py")
+    rows = {
+        "v0004 (shipped)": "vma_masks_kerb_line_on_256_rerun.json",
+        "v0004's recipe on rasters without the kerb line": "vma_masks_kerb_line_trained_off_256.json",
+        "v0004's recipe on rasters with the kerb line": "vma_masks_kerb_line_trained_on_256.json",
+    }
+    trained_on = {}
+    for label, results_file in rows.items():
+        assert_names_source(t, results_file, "bench/vma_masks.py")
+        recorded = results(results_file)
+        assert re.findall(r"--recon-site data/synthetic/(\S+)", recorded["command"]) == [
+            f"line-{seed}" for seed in range(9211, 9231)
+        ]
+        network = _recon_masks(recorded)
+        observed, annotator = network["observed_truth"], network["annotator"]
+        halves = [sum(annotator["per_site_correction_s"][:10]), sum(annotator["per_site_correction_s"][10:])]
+        clean = recorded["results"]["clean"]["element_masks"]
+        expected: list[Expected] = [
+            observed["mean_ap"],
+            *(observed["class_ap"][c] for c in ("divider", "ped_crossing", "boundary")),
+            annotator["correction_s"],
+            *halves,
+            annotator["speed_up"],
+            clean["mean_ap"],
+            clean["annotator"]["speed_up"],
+        ]
+        assert_shows(" | ".join(row(t, label)[1:]), expected, label)
+        trained_on[label] = recorded["checkpoint"]["data"]["reconstructions"]
+    assert all("/off-91" in path for path in trained_on["v0004's recipe on rasters without the kerb line"])
+    assert all("/random-91" in path for path in trained_on["v0004's recipe on rasters with the kerb line"])
+    # the rerun of v0004 is the run the kerb line's table shows, figure for figure
+    rerun, before = (
+        results(name)["results"]
+        for name in ("vma_masks_kerb_line_on_256_rerun.json", "vma_masks_kerb_line_on_256.json")
+    )
+    assert rerun["reconstructed"] == before["reconstructed"]
+
+
+def test_annotator_seconds_table() -> None:
+    """Each cell of the annotator's seconds against bench/annotator_seconds.py's results, and the sums and
+    ceilings the paragraph below it gives."""
+    t = table("annotator's seconds, twenty layouts, v0004", "bench/annotator_seconds.py")
+    assert_names_source(t, "annotator_seconds_256.json", "bench/annotator_seconds.py")
+    recorded = results("annotator_seconds_256.json")
+    assert len(recorded["per_site"]) == 20
+    booked = recorded["booked"]
+    actions = {
+        "accepted": "accept",
+        "fixed": "fix",
+        "rejected": "reject",
+        "drawn, no proposal covered it": "drawn",
+    }
+    for label, action in actions.items():
+        expected: list[Expected] = []
+        for cls in ("divider", "ped_crossing", "boundary"):
+            entry = booked[cls][action]
+            expected += [entry["seconds"], entry["count"]]
+        assert_shows(" | ".join(row(t, label)[1:]), expected, label)
+    text = readme_text()
+    scan = booked["road"]["scan"]["seconds"]
+    assert (
+        f"With the road scan ({scan:.0f} s) that is the {recorded['correction_s']:,.0f} s of correction"
+        in text
+    )
+    assert f"against {recorded['drawing_s']:,.0f} s of drawing ({recorded['speed_up']:.2f}x)" in text
+    ceilings = recorded["ceilings"]
+    assert f"the speed-up would be {ceilings['fixes_within_chamfer_accepted']['speed_up']:.2f}x" in text
+    assert (
+        f"With nothing left to draw it would be {ceilings['nothing_left_to_draw']['speed_up']:.2f}x" in text
+    )
+    at_end = [
+        entry
+        for cls in ("divider", "boundary")
+        for reason, entry in recorded["fix_reasons"][cls].items()
+        if "at the end vertex" in reason
+    ]
+    within = [
+        entry
+        for cls in ("divider", "boundary")
+        for reason, entry in recorded["fix_reasons"][cls].items()
+        if reason.startswith("within")
+    ]
+    line_fixes = [booked[cls]["fix"] for cls in ("divider", "boundary")]
+    assert (
+        f"{sum(e['count'] for e in at_end)} of the {sum(e['count'] for e in line_fixes)} line fixes "
+        f"({sum(e['seconds'] for e in at_end):.0f} of their {sum(e['seconds'] for e in line_fixes):.0f} s)"
+    ) in text
+    assert f"{sum(e['count'] for e in within)} of those ({sum(e['seconds'] for e in within):.0f} s)" in text
