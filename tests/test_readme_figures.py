@@ -3206,3 +3206,32 @@ def test_annotator_seconds_table() -> None:
         f"({sum(e['seconds'] for e in at_end):.0f} of their {sum(e['seconds'] for e in line_fixes):.0f} s)"
     ) in text
     assert f"{sum(e['count'] for e in within)} of those ({sum(e['seconds'] for e in within):.0f} s)" in text
+
+
+def test_kerb_count_at_step_height_figures() -> None:
+    """The curb IoU and confusion the paragraph on counting step cells at curb height gives, from its files."""
+    text = readme_text()
+    for name in (
+        "kerb_profile_count_at_step.json",
+        "kerb_profile_count_at_step_9011.json",
+        "kerb_profile_line_9011.json",
+        "kerb_profile_line.json",
+    ):
+        assert f"bench/results/{name}" in text
+    sfm = {
+        name: results(f"kerb_profile_{name}.json")["runs"]["sfm"]
+        for name in ("line", "count_at_step", "line_9011", "count_at_step_9011")
+    }
+    iou = {name: run["iou"]["curb"] for name, run in sfm.items()}
+    assert f"default site ({iou['line']:.3f} -> {iou['count_at_step']:.3f} against" in text
+    assert f"on 9011 ({iou['line_9011']:.3f} -> {iou['count_at_step_9011']:.3f})" in text
+    background = {
+        name: sfm[name]["curb_confusion"]["true_curb_labelled_background"]
+        for name in ("line", "count_at_step")
+    }
+    assert (
+        f"background {background['line']:.3f} -> {background['count_at_step']:.3f} on the default site"
+        in text
+    )
+    # the baseline on 9011 is the code as it is, with the kerb line
+    assert sfm["line_9011"]["kerb_line"] and sfm["count_at_step_9011"]["kerb_line"]
