@@ -24,18 +24,16 @@ from typing import Any
 import numpy as np
 from shapely.geometry import LineString, Point
 
-from annotations.geometry import resample_fixed
 from app.review_effort.costs import ActionCosts
-from app.review_effort.plan import (
-    Decision,
-    Polyline,
-    SimulationConfig,
-    chamfer,
-    drawing_seconds,
-    worst_gap,
-)
+from app.review_effort.plan import Decision, Polyline, SimulationConfig, chamfer, farthest_point
 from app.review_effort.review_time import MIN_CONFIDENCE, review_queue
-from app.review_effort.session import MemoryQueue, SessionLog, draw_from_scratch, work_queue
+from app.review_effort.session import (
+    MemoryQueue,
+    SessionLog,
+    draw_from_scratch,
+    drawn_seconds,
+    work_queue,
+)
 from app.review_effort.truth import observed_true_polylines
 from models.vma.element_masks.net import ElementMaskNet
 from models.vma.element_masks.propose import (
@@ -54,35 +52,34 @@ RESULTS = Path(__file__).parent / "results"
 END_BINS_M = (0.5, 2.0)
 """Where a fix's farthest point lies, in metres from the nearer end of its line: at the end vertex (within the
 first bound), near the end (within the second), or inside the line."""
-_SAMPLES = 64
 
 
-def farthest_point(src: Polyline, dst: Polyline) -> tuple[float, float]:
-    """(distance to `dst`'s line, distance along `src` from its nearer end) of `src`'s point farthest from `dst`
-    (vertices and evenly resampled points, as the acceptance's worst gap reads them)."""
-    line, own = LineString(dst.points), LineString(src.points)
-    points = np.vstack([src.points, resample_fixed(src.points, _SAMPLES)])
-    distances = [line.distance(Point(p)) for p in points]
-    k = int(np.argmax(distances))
-    along = own.project(Point(points[k]))
-    return float(distances[k]), float(min(along, own.length - along))
+def _from_nearer_end(line: Polyline, point: np.ndarray) -> float:
+    """Metres along `line` from its nearer end to `point` (on it)."""
+    own = LineString(line.points)
+    along = own.project(Point(point))
+    return float(min(along, own.length - along))
 
 
 def fix_reason(proposal: Polyline, truth: Polyline, config: SimulationConfig) -> dict[str, Any]:
     """Why a proposal matched to `truth` was fixed rather than accepted: its Chamfer distance and worst gap, whether
-    it lay within the acceptance's Chamfer distance (so only the worst gap failed it), and where the farthest point
-    either way lies along its own line (its distance from the nearer end; None on a closed outline)."""
+    it lay within the acceptance's Chamfer distance (so only the worst gap failed it), and which shape's point the
+    worst gap is read at (`plan.farthest_point`, as the acceptance reads it) and its distance from the nearer end of
+    that shape's line (None on a closed outline, a crossing, which has no ends)."""
     distance_chamfer = chamfer(proposal, truth)
-    ways = [farthest_point(proposal, truth), farthest_point(truth, proposal)]
-    gap_m, from_end_m = max(ways)
+    ways = {
+        "proposal": (proposal, farthest_point(proposal, truth)),
+        "truth": (truth, farthest_point(truth, proposal)),
+    }
+    side = max(ways, key=lambda name: ways[name][1][0])
+    line, (gap_m, point) = ways[side]
+    closed = truth.closed or proposal.closed
     return {
         "chamfer_m": round(distance_chamfer, 3),
-        "worst_gap_m": round(worst_gap(proposal, truth), 3),
+        "worst_gap_m": round(gap_m, 3),
         "within_chamfer": distance_chamfer <= config.accept_m,
-        # a closed outline (a crossing) has no ends
-        "farthest_from_end_m": None if truth.closed or proposal.closed else round(from_end_m, 2),
-        "farthest_side": "proposal" if ways[0] >= ways[1] else "truth",
-        "farthest_gap_m": round(gap_m, 3),
+        "farthest_from_end_m": None if closed else round(_from_nearer_end(line, point), 2),
+        "farthest_side": side,
     }
 
 
@@ -111,14 +108,12 @@ def booked_seconds(
     accepts, fixes and rejects are the queue's verdicts by the proposal's class; "drawn" are the true elements the
     annotator drew at the end (by their class); "scan" is the road scan, booked to no class. The booked seconds
     sum to the session's total."""
-    booked: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(lambda: [0.0, 0]))
+    booked = _tally()
     fixes = []
     for item, decision in queue.verdicts.items():
         proposal = queue.polyline(item)
         seconds = decision.seconds(costs)
-        entry = booked[proposal.cls][decision.kind]
-        entry[0] += seconds
-        entry[1] += 1
+        _add(booked[proposal.cls][decision.kind], seconds)
         if decision.kind == "fix" and decision.target is not None:
             fixes.append(
                 {
@@ -129,17 +124,25 @@ def booked_seconds(
                 }
             )
     for truth in queue.drawn:
-        entry = booked[truth.cls]["drawn"]
-        entry[0] += drawing_seconds(truth, config, costs) + costs.verdict_s
-        entry[1] += 1
-    booked["road"]["scan"] = [log.seconds["scan"], 1]
-    return {
-        "booked": {
-            cls: {action: {"seconds": s, "count": n} for action, (s, n) in actions.items()}
-            for cls, actions in booked.items()
-        },
-        "fixes": fixes,
-    }
+        _add(booked[truth.cls]["drawn"], drawn_seconds(truth, config, costs))
+    _add(booked["road"]["scan"], log.seconds["scan"])
+    return {"booked": _plain(booked), "fixes": fixes}
+
+
+def _tally() -> defaultdict[str, defaultdict[str, dict[str, float]]]:
+    """Seconds and counts by class, then by action or reason, starting at zero."""
+    return defaultdict(lambda: defaultdict(lambda: {"seconds": 0.0, "count": 0}))
+
+
+def _add(entry: dict[str, float], seconds: float, count: int = 1) -> None:
+    entry["seconds"] += seconds
+    entry["count"] += count
+
+
+def _plain(
+    tally: defaultdict[str, defaultdict[str, dict[str, float]]],
+) -> dict[str, dict[str, dict[str, float]]]:
+    return {cls: dict(entries) for cls, entries in tally.items()}
 
 
 def _edits(decision: Decision) -> dict[str, Any]:
@@ -185,25 +188,19 @@ def summary(figures: dict[str, Any]) -> dict[str, Any]:
     per_site = figures["per_site"]
     correction_s = sum(s["correction_s"] for s in per_site)
     drawing_s = sum(s["drawing_s"] for s in per_site)
-    booked: dict[str, dict[str, dict[str, float]]] = defaultdict(
-        lambda: defaultdict(lambda: {"seconds": 0.0, "count": 0})
-    )
+    booked = _tally()
     for site in per_site:
         for cls, actions in site["booked"].items():
             for action, entry in actions.items():
-                booked[cls][action]["seconds"] += entry["seconds"]
-                booked[cls][action]["count"] += entry["count"]
+                _add(booked[cls][action], entry["seconds"], entry["count"])
     fixes = [fix for site in per_site for fix in site["fixes"]]
-    reasons: dict[str, dict[str, dict[str, float]]] = defaultdict(
-        lambda: defaultdict(lambda: {"seconds": 0.0, "count": 0})
-    )
+    reasons = _tally()
     for fix in fixes:
         within_or_beyond = "within" if fix["within_chamfer"] else "beyond"
         reason = (
             f"{within_or_beyond} the Chamfer distance; farthest point {_where(fix['farthest_from_end_m'])}"
         )
-        reasons[fix["class"]][reason]["seconds"] += fix["seconds"]
-        reasons[fix["class"]][reason]["count"] += 1
+        _add(reasons[fix["class"]][reason], fix["seconds"])
     accept_s = Decision("accept").seconds(ActionCosts())
     within = [fix for fix in fixes if fix["within_chamfer"]]
     as_accepts_s = correction_s - sum(fix["seconds"] for fix in within) + accept_s * len(within)
@@ -212,8 +209,8 @@ def summary(figures: dict[str, Any]) -> dict[str, Any]:
         "correction_s": correction_s,
         "drawing_s": drawing_s,
         "speed_up": drawing_s / correction_s if correction_s > 0 else None,
-        "booked": {cls: dict(actions) for cls, actions in booked.items()},
-        "fix_reasons": {cls: dict(r) for cls, r in reasons.items()},
+        "booked": _plain(booked),
+        "fix_reasons": _plain(reasons),
         "ceilings": {
             "fixes_within_chamfer_accepted": {
                 "correction_s": as_accepts_s,

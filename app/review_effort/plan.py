@@ -151,17 +151,20 @@ def chamfer(a: Polyline, b: Polyline) -> float:
     return chamfer_distance(resample_fixed(a.points, _SAMPLES), resample_fixed(b.points, _SAMPLES))
 
 
+def farthest_point(src: Polyline, dst: Polyline) -> tuple[float, np.ndarray]:
+    """(distance to `dst`'s line, the point) of `src`'s vertex or evenly resampled point farthest from `dst`: one
+    way of `worst_gap`."""
+    line = LineString(dst.points)
+    points = np.vstack([src.points, resample_fixed(src.points, _SAMPLES)])
+    distances = [line.distance(Point(p)) for p in points]
+    k = int(np.argmax(distances))
+    return float(distances[k]), points[k]
+
+
 def worst_gap(a: Polyline, b: Polyline) -> float:
     """The largest gap between the two shapes either way (vertices and resampled points): a kink of one, or a
     corner of the other that it cuts or falls short of."""
-
-    def one_way(src: Polyline, dst: Polyline) -> float:
-        line = LineString(dst.points)
-        return max(
-            line.distance(Point(p)) for p in np.vstack([src.points, resample_fixed(src.points, _SAMPLES)])
-        )
-
-    return max(one_way(a, b), one_way(b, a))
+    return max(farthest_point(a, b)[0], farthest_point(b, a)[0])
 
 
 def acceptable_as_is(proposal: Polyline, truth: Polyline, config: SimulationConfig) -> bool:

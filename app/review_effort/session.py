@@ -119,9 +119,14 @@ def draw_all(
     """Draw every one of `truths` and book it, then the scan of the whole site's road."""
     for truth in truths:
         queue.draw(truth, config)
-        log.seconds["draw"] += drawing_seconds(truth, config, costs) + costs.verdict_s
+        log.seconds["draw"] += drawn_seconds(truth, config, costs)
         log.counts["drawn"] += 1
     log.seconds["scan"] += log.road_km * 10 * costs.scan_per_100m_s
+
+
+def drawn_seconds(truth: Polyline, config: SimulationConfig, costs: ActionCosts) -> float:
+    """What drawing one true element costs in a session: its drawing and its verdict."""
+    return drawing_seconds(truth, config, costs) + costs.verdict_s
 
 
 def draw_from_scratch(

@@ -71,7 +71,7 @@ def test_the_farthest_point_of_a_line_that_stops_short_is_the_truths_end() -> No
         Polyline("divider", line(0.0, 0.0, 29.0)), Polyline("divider", line(0.0)), SimulationConfig()
     )
     assert reason["farthest_side"] == "truth"
-    assert reason["farthest_gap_m"] == pytest.approx(1.0, abs=0.01)
+    assert reason["worst_gap_m"] == pytest.approx(1.0, abs=0.01)
     assert reason["farthest_from_end_m"] == pytest.approx(0.0, abs=0.01)
 
 
@@ -104,4 +104,4 @@ def test_a_crossings_outline_has_no_ends() -> None:
         Polyline("ped_crossing", square + [0.6, 0.0]), Polyline("ped_crossing", square), SimulationConfig()
     )
     assert reason["farthest_from_end_m"] is None
-    assert reason["farthest_gap_m"] == pytest.approx(0.6, abs=0.01)
+    assert reason["worst_gap_m"] == pytest.approx(0.6, abs=0.01)
