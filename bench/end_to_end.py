@@ -44,7 +44,6 @@ from typing import Any
 import matplotlib
 import numpy as np
 from scipy.spatial.transform import Rotation
-from surface import truth_at  # bench/surface.py: this script's folder is on sys.path
 
 from annotations.lift import lift_points
 from annotations.schema import AnnotationSet, Georeference
@@ -64,6 +63,7 @@ from cama_pipeline.sfm.baseline import aligned_poses, pose_errors
 from cama_pipeline.sfm.io import read_refined_poses
 from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.synthetic.generate import truth_dataset
+from cama_pipeline.synthetic.truth_grid import truth_on_grid
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
@@ -131,16 +131,16 @@ def pose_figures(site: Path, views: list[CameraView], workspace: Workspace, site
 
 def elevation_figures(site: Path, folder: Path) -> tuple[dict[str, Any], np.ndarray]:
     """RMSE of the reconstructed elevation over observed cells that are road in the truth; the error map.
-    Cells are paired with the true raster as `bench/surface.py` pairs them."""
-    ours, truth = read_bev(folder), read_bev(site / "ground_truth" / "bev")
-    inside, tr, tc = truth_at(ours, truth)
+    The truth is rendered on the reconstruction's own grid, as `bench/surface.py` scores it."""
+    ours = read_bev(folder)
+    truth = truth_on_grid(site, ours.georeference)
     elevation = ours.require("elevation").astype(np.float64)
-    true_sem = truth.require("semantic")[tr, tc]
-    road = inside & (true_sem >= int(Semantic.ROAD)) & (true_sem != int(Semantic.UNOBSERVED))
+    true_sem = truth.require("semantic")
+    road = (true_sem >= int(Semantic.ROAD)) & (true_sem != int(Semantic.UNOBSERVED))
     observed = (ours.require("semantic") != int(Semantic.UNOBSERVED)) & np.isfinite(elevation)
     use = road & observed
     error = np.full(elevation.shape, np.nan)
-    error[use] = elevation[use] - truth.require("elevation")[tr[use], tc[use]]
+    error[use] = elevation[use] - truth.require("elevation")[use]
     values = error[use]
     figures = {
         "cells": int(use.sum()),

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from cama_pipeline.bev import BevRasters, read_bev
+from cama_pipeline.bev import BevRasters, RasterGeoreference
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.surface import SurfaceConfig
@@ -43,6 +43,7 @@ from cama_pipeline.surface import optimise as surface_optimise
 from cama_pipeline.surface import stage as surface_stage
 from cama_pipeline.surface.labels import shares
 from cama_pipeline.surface.steps import curb_height_agreement
+from cama_pipeline.synthetic.truth_grid import truth_on_grid
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -157,11 +158,14 @@ def source_profile(
     site: Path, poses: str, config: SurfaceConfig, scratch: Path, max_distance_m: float
 ) -> dict[str, Any]:
     """Run the stage with `poses` and profile its decisions across the kerbs of `site`."""
-    truth = read_bev(site / "ground_truth" / "bev")
     with captured_decisions() as kept:
         row = run_source(site, poses, config, scratch)
     grid, seen, label = kept["grid"], kept["seen"], kept["label"]
     xy = grid.vertex_xy()
+    georeference = RasterGeoreference(
+        origin_xy=grid.origin_xy, resolution=grid.resolution_m, width=grid.cols, height=grid.rows
+    )
+    truth = truth_on_grid(site, georeference)  # at the stage's own cell centres, as bench/surface.py scores
     inside, rows, cols = nearest_true_cells(xy, truth)
     true_class = truth.require("semantic")[rows, cols]
     distance = signed_edge_distance(truth)[rows, cols]

@@ -48,7 +48,7 @@ from end_to_end import (  # bench/end_to_end.py: this script's folder is on sys.
     simulated_pass,
     sre_rows,
 )
-from surface import IOU_CLASSES, truth_at  # bench/surface.py
+from surface import IOU_CLASSES  # bench/surface.py
 
 from cama_pipeline.bev import read_bev
 from cama_pipeline.cameras import site_views
@@ -66,6 +66,7 @@ from cama_pipeline.segment.train import cpu_seconds_per_image
 from cama_pipeline.semantics import INSTANCE_ID_BASE, Semantic
 from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.synthetic.generate import truth_dataset
+from cama_pipeline.synthetic.truth_grid import truth_on_grid
 from cama_pipeline.workspace import Workspace
 from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import run as run_pipeline
@@ -205,12 +206,11 @@ def segmentation_figures(
 
 def bev_iou(site: Path, rasters: Path) -> dict[str, Any]:
     """Per-class IoU of the reconstructed semantic raster against the true one, over cells both observed (the
-    classes and cell pairing of `bench/surface.py`)."""
-    ours, truth = read_bev(rasters), read_bev(site / "ground_truth" / "bev")
-    inside, tr, tc = truth_at(ours, truth)
+    classes and the truth on the reconstruction's own grid of `bench/surface.py`)."""
+    ours = read_bev(rasters)
     semantic = ours.require("semantic")
-    true_semantic = np.where(inside, truth.require("semantic")[tr, tc], int(Semantic.UNOBSERVED))
-    both = inside & (semantic != int(Semantic.UNOBSERVED)) & (true_semantic != int(Semantic.UNOBSERVED))
+    true_semantic = truth_on_grid(site, ours.georeference).require("semantic")
+    both = (semantic != int(Semantic.UNOBSERVED)) & (true_semantic != int(Semantic.UNOBSERVED))
     out = {}
     for name, cls in IOU_CLASSES.items():
         a, b = semantic[both] == int(cls), true_semantic[both] == int(cls)

@@ -2,7 +2,9 @@
 
 For each pose source (ground_truth, wigo, and sfm when the workspace has `sfm/<site>/poses.json`),
 `cama surface` runs into its own temporary workspace (sharing the site's `sites/` and `sfm/`), and its rasters
-are compared with the site's `ground_truth/bev/` at each reconstructed cell's centre (nearest true cell):
+are compared with the site's truth at each reconstructed cell's centre (the generator's world rebuilt from the
+site's manifest and rendered on the reconstruction's own grid, `cama_pipeline.synthetic.truth_grid`; unobserved where
+the stored `ground_truth/bev/` is):
   elevation  RMSE / MAE / p95 of |z - z_true| over observed road cells (true class road, marking, crosswalk),
              the median signed error (an offset of the pose frame shows there), and RMSE by distance from
              the site's keyframe trajectory (beyond the strip it is extrapolated);
@@ -56,6 +58,7 @@ from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
+from cama_pipeline.synthetic.truth_grid import truth_on_grid
 from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
@@ -225,7 +228,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     trajectory_xy = ego_poses(views)[:, :2, 3]
     ours = read_bev(workspace.surface_bev(result.name))
     kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
-    figures = compare(ours, read_bev(site / "ground_truth" / "bev"), trajectory_xy, kerb_step)
+    figures = compare(ours, truth_on_grid(site, ours.georeference), trajectory_xy, kerb_step)
     report = result.report
     return {
         "poses": poses,

@@ -16,25 +16,19 @@ Usage: .venv/bin/python bench/surface_grid.py [--site DIR ...] [--samples 4] [--
 """
 
 import argparse
-import json
 import platform
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 from scipy import ndimage
 
-from cama_pipeline.bev import read_bev
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth
-from cama_pipeline.synthetic.config import SynthConfig, preset
-from cama_pipeline.synthetic.randomise import randomised_config
-from cama_pipeline.synthetic.site_model import build_synthetic_site
+from cama_pipeline.synthetic.truth_grid import centre_labels, rebuilt_world, stored_truth
 
 RESULTS = Path(__file__).parent / "results"
 CLASSES = {"curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING, "crosswalk": Semantic.CROSSWALK}
@@ -42,49 +36,22 @@ UNDECIDED = (0.3, 0.7)
 """Area shares of a class in a cell that a centimetre or two of the paint's edge moves across one half."""
 
 
-def site_config(site: Path) -> SynthConfig:
-    """The generator config of a site from its manifest: its preset and seed, randomised when it was."""
-    manifest = json.loads((site / "manifest.json").read_text(encoding="utf-8"))
-    stored = manifest["config"]
-    base = (
-        randomised_config(int(manifest["random_seed"]), base=manifest["preset"])
-        if manifest.get("random_seed") is not None
-        else preset(manifest["preset"], seed=int(manifest["seed"]))
-    )
-    return replace(base, ground_texel_m=stored["ground_texel_m"], bev_resolution_m=stored["bev_resolution_m"])
-
-
 def cell_labels(site: Path, samples: int) -> tuple[np.ndarray, np.ndarray]:
     """The stored true semantic raster and the (classes, rows, cols) shares of each class in every cell's area;
-    ValueError when the world rebuilt from the manifest does not give the stored truth at the cell centres."""
-    cfg = site_config(site)
-    world = build_synthetic_site(cfg).world
+    TruthMismatch (a ValueError) when the world rebuilt from the manifest does not give the stored truth at the
+    cell centres."""
+    truth = stored_truth(site)
+    cfg, world = rebuilt_world(site, truth)
     grid = ground_truth.bev_grid_for(world, cfg.bev_resolution_m)
-    truth = read_bev(site / "ground_truth" / "bev").require("semantic")
-    if truth.shape != (grid.rows, grid.cols):
-        raise ValueError(
-            f"{site}: the rebuilt grid is {grid.rows}x{grid.cols}, the stored truth {truth.shape}"
-        )
-    xs, ys = grid.cell_centres()
-    atlas = world.atlas
-
-    def labels_at(dx: float, dy: float) -> np.ndarray:
-        yy, xx = np.meshgrid(ys + dy, xs + dx, indexing="ij")
-        x, y = torch.from_numpy(xx.astype(np.float32)), torch.from_numpy(yy.astype(np.float32))
-        return atlas.nearest(atlas.label, x, y).numpy()
-
-    centre = labels_at(0.0, 0.0)
-    observed = truth != 255
-    if not np.array_equal(centre[observed], truth[observed]):
-        raise ValueError(f"{site}: the world rebuilt from its manifest does not give its stored truth raster")
+    semantic = truth.require("semantic")
     offsets = ((np.arange(samples) + 0.5) / samples - 0.5) * cfg.bev_resolution_m
     shares = np.zeros((int(max(Semantic)) + 1, grid.rows, grid.cols), np.float32)
     for dy in offsets:
         for dx in offsets:
-            label = labels_at(float(dx), float(dy))
+            label = centre_labels(world, grid, float(dx), float(dy))
             for cls in CLASSES.values():
                 shares[int(cls)] += label == int(cls)
-    return truth, shares / samples**2
+    return semantic, shares / samples**2
 
 
 def ceiling(site: Path, samples: int) -> dict[str, Any]:
