@@ -13,6 +13,9 @@ the stored `ground_truth/bev/` is):
              true road or background);
   photometric PSNR of the BEV colour against the true top-down albedo over cells observed in both, raw and
              after a per-channel gain/offset fit (the images are shaded, the truth is albedo);
+  own frame  the semantic and photometric figures again against the truth carried into the reconstruction's frame
+             (`in_reconstruction_frame`: the best 2D similarity of its key frames onto the true ones,
+             `cama_pipeline.evaluate.frame`): what the stage makes of its poses, their absolute error aside;
   coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
   kerbs      the surface standing on its kerb steps (elevation + `kerb_step.npy`) against the truth, whose
              sidewalks are raised: RMSE over the true curb cells and over road and curb cells together, and the
@@ -51,6 +54,7 @@ from scipy import ndimage
 from cama_pipeline.bev import BevRasters, read_bev
 from cama_pipeline.data import load_dataset
 from cama_pipeline.data.masks import has_masks
+from cama_pipeline.evaluate.frame import reconstruction_frame
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
@@ -169,6 +173,26 @@ def curb_confusion(semantic: np.ndarray, true_sem: np.ndarray, both: np.ndarray)
     }
 
 
+def class_figures(ours: BevRasters, truth: BevRasters) -> dict[str, Any]:
+    """IoU per class, where the curb IoU is lost, and the photometric PSNR (raw and after a per-channel gain and
+    offset) of `ours` against `truth`, over the cells observed in both."""
+    inside, tr, tc = truth_at(ours, truth)
+    semantic = ours.require("semantic")
+    true_sem = np.where(inside, truth.require("semantic")[tr, tc], 255)
+    both = inside & (semantic != 255) & (true_sem != 255)
+    ious = {}
+    for name, cls in IOU_CLASSES.items():
+        a, b = semantic[both] == int(cls), true_sem[both] == int(cls)
+        ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
+    rgb, true_rgb = ours.require("photometric")[both], truth.require("photometric")[tr[both], tc[both]]
+    return {
+        "iou": ious,
+        "curb_confusion": curb_confusion(semantic, true_sem, both),
+        "psnr_db": psnr(rgb, true_rgb),
+        "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
+    }
+
+
 def compare(
     ours: BevRasters, truth: BevRasters, trajectory_xy: np.ndarray, kerb_step: np.ndarray
 ) -> dict[str, Any]:
@@ -178,17 +202,11 @@ def compare(
     semantic, true_semantic = ours.require("semantic"), truth.require("semantic")
     true_sem = np.where(inside, true_semantic[tr, tc], 255)
     observed = inside & (semantic != 255)
-    both = observed & (true_sem != 255)
     road = observed & np.isin(true_sem, ROAD_SURFACE_IDS)
     signed = ours.require("elevation") - truth.require("elevation")[tr, tc]
     error = np.abs(signed[road])
     distance = distance_from_trajectory(ours, trajectory_xy)
     near = road & (distance < NEAR_TRAJECTORY_M)
-    ious = {}
-    for name, cls in IOU_CLASSES.items():
-        a, b = semantic[both] == int(cls), true_sem[both] == int(cls)
-        ious[name] = float((a & b).sum() / max((a | b).sum(), 1))
-    rgb, true_rgb = ours.require("photometric")[both], truth.require("photometric")[tr[both], tc[both]]
     true_road = np.isin(true_semantic, ROAD_SURFACE_IDS).sum()
     scale = (ours.georeference.resolution / truth.georeference.resolution) ** 2
     return {
@@ -199,10 +217,7 @@ def compare(
         "elevation_median_signed_m_near_trajectory": float(np.median(signed[near])) if near.any() else None,
         "road_cells_evaluated": int(road.sum()),
         "elevation_rmse_m_by_distance_from_trajectory_m": rmse_by_distance(road, signed, distance),
-        "iou": ious,
-        "curb_confusion": curb_confusion(semantic, true_sem, both),
-        "psnr_db": psnr(rgb, true_rgb),
-        "psnr_affine_db": psnr(affine_fit(rgb, true_rgb), true_rgb),
+        **class_figures(ours, truth),
         "cells_observed": int(observed.sum()),
         "true_road_coverage": float(road.sum() * scale / max(true_road, 1)),
         "kerb": kerb_figures(signed, kerb_step, observed, true_sem),
@@ -229,6 +244,11 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     ours = read_bev(workspace.surface_bev(result.name))
     kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
     figures = compare(ours, truth_on_grid(site, ours.georeference), trajectory_xy, kerb_step)
+    # the classes and colours again with the truth carried into the reconstruction's frame (the best 2D similarity
+    # of its key frames onto the true ones): what the stage makes of its own poses, their absolute error aside
+    frame = reconstruction_frame(site / "nuscenes", workspace, result.name)
+    framed = truth_on_grid(site, ours.georeference, frame.world_of)
+    figures["in_reconstruction_frame"] = {"frame": frame.as_dict(), **class_figures(ours, framed)}
     report = result.report
     return {
         "poses": poses,
@@ -272,6 +292,10 @@ def print_side_by_side(runs: list[dict[str, Any]]) -> None:
     for name in ("true_curb_labelled_road", "curb_label_on_true_road"):
         lines[name.replace("_", " ")[:22]] = [row["curb_confusion"][name] for row in runs]
     lines["PSNR dB"] = [row["psnr_db"] for row in runs]
+    framed = [row["in_reconstruction_frame"] for row in runs]
+    for name in IOU_CLASSES:
+        lines[f"own frame IoU {name}"[:22]] = [f["iou"][name] for f in framed]
+    lines["own frame PSNR dB"] = [f["psnr_db"] for f in framed]
     for phase in ("elevation", "refine", "observe", "optimise", "export", "total"):
         lines[f"seconds {phase}"] = [row["seconds"].get(phase, float("nan")) for row in runs]
     for label, values in lines.items():

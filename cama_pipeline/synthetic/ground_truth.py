@@ -73,16 +73,26 @@ def render_bev(
     elevation = np.zeros((grid.rows, grid.cols), np.float32)
     for r0 in range(0, grid.rows, chunk_rows):
         yy, xx = np.meshgrid(ys[r0 : r0 + chunk_rows], xs, indexing="ij")
-        x = torch.from_numpy(xx.ravel().astype(np.float32))
-        y = torch.from_numpy(yy.ravel().astype(np.float32))
-        albedo, label, _ = ground_color(
-            world.atlas, world.noise, x, y, torch.full_like(x, grid.resolution_m), world.look
-        )
+        label, albedo, height = render_points(world, xx.ravel(), yy.ravel(), grid.resolution_m)
         shape = xx.shape
-        semantic[r0 : r0 + shape[0]] = label.numpy().reshape(shape)
-        photometric[r0 : r0 + shape[0]] = (albedo.numpy().reshape(*shape, 3) * 255 + 0.5).astype(np.uint8)
-        elevation[r0 : r0 + shape[0]] = world.ground_height(x.double(), y.double()).numpy().reshape(shape)
+        semantic[r0 : r0 + shape[0]] = label.reshape(shape)
+        photometric[r0 : r0 + shape[0]] = albedo.reshape(*shape, 3)
+        elevation[r0 : r0 + shape[0]] = height.reshape(shape)
     return semantic, photometric, elevation
+
+
+def render_points(
+    world: World, x: np.ndarray, y: np.ndarray, footprint_m: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The true label (N,) uint8, top-down albedo (N, 3) uint8 and ground height (N,) float32 at layout points
+    (x, y), each seen over `footprint_m` (a cell's size)."""
+    xt = torch.from_numpy(np.asarray(x, np.float32))
+    yt = torch.from_numpy(np.asarray(y, np.float32))
+    albedo, label, _ = ground_color(
+        world.atlas, world.noise, xt, yt, torch.full_like(xt, footprint_m), world.look
+    )
+    height = world.ground_height(xt.double(), yt.double()).numpy().astype(np.float32)
+    return label.numpy().astype(np.uint8), (albedo.numpy() * 255 + 0.5).astype(np.uint8), height
 
 
 def observation_count(

@@ -6,11 +6,12 @@ global frame instead, so on a randomised site the two grids' centres lie up to h
 Paired by nearest cell, the stored truth is then read up to 5 cm from where it is scored at 0.1 m cells; on 0.15 m
 lane lines that shift alone costs a third of the IoU. So the generator's world is rebuilt from the site's manifest
 (and checked against the stored truth: same labels at every observed cell centre, else `TruthMismatch`), and
-sampled at the other grid's own cell centres. Where the stored truth is unobserved (no key-frame camera looked,
-255) or has no cell, so is the truth on the other grid.
+sampled at the other grid's own cell centres, or where a reconstruction's frame puts them. Where the stored truth is
+unobserved (no key-frame camera looked, 255) or has no cell, so is the truth on the other grid.
 """
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -75,19 +76,37 @@ def centre_labels(world: World, grid: ground_truth.BevGrid, dx: float = 0.0, dy:
     return world.atlas.nearest(world.atlas.label, x, y).numpy()
 
 
-def truth_on_grid(site: Path, georeference: RasterGeoreference) -> BevRasters:
+def truth_on_grid(
+    site: Path,
+    georeference: RasterGeoreference,
+    world_of: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> BevRasters:
     """The site's true semantic, photometric and elevation rasters and observation count on `georeference`
     (global metres), each cell rendered at its own centre; unobserved (255, count 0) where the stored truth's
-    nearest cell is, or where the stored truth has none. TruthMismatch when the site cannot be rebuilt."""
+    nearest cell is, or where the stored truth has none. `world_of` maps (N, 2) global x, y of the grid into the
+    world's first (a reconstruction's frame: `cama_pipeline.evaluate.frame.ReconstructionFrame.world_of`), so
+    that each cell takes the ground that stands where the reconstruction's frame puts it. TruthMismatch when the
+    site cannot be rebuilt."""
     truth = stored_truth(site)
     cfg, world = rebuilt_world(site, truth)
-    origin = (
-        georeference.origin_xy[0] - cfg.site_origin_xy[0],
-        georeference.origin_xy[1] - cfg.site_origin_xy[1],
-    )
-    grid = ground_truth.BevGrid(origin, georeference.resolution, georeference.height, georeference.width)
-    semantic, photometric, elevation = ground_truth.render_bev(world, grid)
-    count = nearest_stored(truth, georeference)
+    if world_of is None:
+        origin = (
+            georeference.origin_xy[0] - cfg.site_origin_xy[0],
+            georeference.origin_xy[1] - cfg.site_origin_xy[1],
+        )
+        grid = ground_truth.BevGrid(origin, georeference.resolution, georeference.height, georeference.width)
+        semantic, photometric, elevation = ground_truth.render_bev(world, grid)
+        centres = cell_centres(georeference)
+    else:
+        centres = world_of(cell_centres(georeference))
+        local = centres - np.asarray(cfg.site_origin_xy)
+        label, albedo, height = ground_truth.render_points(
+            world, local[:, 0], local[:, 1], georeference.resolution
+        )
+        semantic = label.reshape(georeference.shape)
+        photometric = albedo.reshape(*georeference.shape, 3)
+        elevation = height.reshape(georeference.shape)
+    count = nearest_stored(truth, centres).reshape(georeference.shape)
     semantic[count == 0] = int(Semantic.UNOBSERVED)
     return BevRasters(
         georeference.as_raster(),
@@ -98,12 +117,16 @@ def truth_on_grid(site: Path, georeference: RasterGeoreference) -> BevRasters:
     )
 
 
-def nearest_stored(truth: BevRasters, georeference: RasterGeoreference) -> np.ndarray:
-    """(rows, cols) uint16 of `georeference`: the stored truth's observation count at the nearest stored cell, 0
-    where that cell is unobserved or there is none (the count is a coverage map on a 0.5 m grid)."""
-    stored_geo = truth.georeference
+def cell_centres(georeference: RasterGeoreference) -> np.ndarray:
+    """(rows * cols, 2) global x, y of every cell centre, row by row."""
     rows, cols = np.indices(georeference.shape)
-    xy = georeference.global_from_pixel(np.column_stack([cols.ravel(), rows.ravel()]))
+    return georeference.global_from_pixel(np.column_stack([cols.ravel(), rows.ravel()]))
+
+
+def nearest_stored(truth: BevRasters, xy: np.ndarray) -> np.ndarray:
+    """(N,) uint16: the stored truth's observation count at the stored cell nearest each global (x, y), 0 where
+    that cell is unobserved or there is none (the count is a coverage map on a 0.5 m grid)."""
+    stored_geo = truth.georeference
     colrow = np.round(stored_geo.pixel_from_global(xy)).astype(np.int64)
     col, row = colrow[:, 0], colrow[:, 1]
     inside = (row >= 0) & (row < stored_geo.height) & (col >= 0) & (col < stored_geo.width)
@@ -111,4 +134,4 @@ def nearest_stored(truth: BevRasters, georeference: RasterGeoreference) -> np.nd
     observed = truth.require("semantic")[row[inside], col[inside]] != int(Semantic.UNOBSERVED)
     stored_count = truth.require("observation_count")[row[inside], col[inside]]
     count[inside] = np.where(observed, np.maximum(stored_count, 1), 0)
-    return count.reshape(georeference.shape)
+    return count

@@ -14,6 +14,7 @@ from cama_pipeline.semantics import Semantic
 from cama_pipeline.synthetic import ground_truth
 from cama_pipeline.synthetic.truth_grid import (
     TruthMismatch,
+    cell_centres,
     centre_labels,
     nearest_stored,
     rebuilt_world,
@@ -97,7 +98,7 @@ def test_cells_the_stored_truth_did_not_observe_or_hold_are_unobserved(tiny_site
     assert (semantic[:, :20] == int(Semantic.UNOBSERVED)).all() and (count[:, :20] == 0).all()
     held = stored.require("semantic")[:, :40]
     assert np.array_equal(semantic[:, 20:] == int(Semantic.UNOBSERVED), held == int(Semantic.UNOBSERVED))
-    assert np.array_equal(count, nearest_stored(stored, beyond))
+    assert np.array_equal(count.ravel(), nearest_stored(stored, cell_centres(beyond)))
 
 
 def test_a_site_whose_rebuilt_world_does_not_give_its_truth_is_refused(
@@ -114,3 +115,17 @@ def test_a_site_whose_rebuilt_world_does_not_give_its_truth_is_refused(
     write_bev(site / "ground_truth" / "bev", replace(rasters, semantic=semantic))
     with pytest.raises(TruthMismatch, match=f"{site}: the world rebuilt from its manifest does not give"):
         truth_on_grid(site, _window(rasters.georeference, window))
+
+
+def test_a_reconstruction_frame_moves_where_each_cell_is_read(
+    tiny_site: GeneratedSite, window: Window
+) -> None:
+    """A frame that puts the reconstruction one cell east of the world reads every cell's truth one cell east."""
+    site = tiny_site.result.out_dir
+    stored = stored_truth(site)
+    geo = stored.georeference
+    rows, cols = window
+    framed = truth_on_grid(site, _window(geo, window), lambda xy: xy + np.array([geo.resolution, 0.0]))
+    east = (rows, slice(cols.start + 1, cols.stop + 1))
+    assert np.array_equal(framed.require("semantic"), stored.require("semantic")[east])
+    assert np.abs(framed.require("elevation") - stored.require("elevation")[east]).max() < 1e-4
