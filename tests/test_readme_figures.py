@@ -3235,3 +3235,47 @@ def test_kerb_count_at_step_height_figures() -> None:
     )
     # the baseline on 9011 is the code as it is, with the kerb line
     assert sfm["line_9011"]["kerb_line"] and sfm["count_at_step_9011"]["kerb_line"]
+
+
+TRUTH_GRID_SITES = {
+    "default site": ("surface_kerb_line.json", "surface_truth_grid_default.json"),
+    "9011": ("surface_kerb_line_9011.json", "surface_truth_grid_9011.json"),
+    "9011 mask-free": ("surface_kerb_line_9011_nomasks.json", "surface_truth_grid_9011_nomasks.json"),
+}
+"""Per site of the truth-grid table: the nearest-cell results (the kerb line's table) and the own-grid ones."""
+
+
+def _class_figures(scored: dict[str, Any]) -> list[Expected]:
+    iou = scored["iou"]
+    return [iou["road"], iou["curb"], iou["lane_marking"], iou["crosswalk"], scored["psnr_db"]]
+
+
+def test_truth_grid_table() -> None:
+    t = table("surface with the kerb line, scored against", "truth_grid")
+    for site, (nearest_file, own_file) in TRUTH_GRID_SITES.items():
+        for results_file in (nearest_file, own_file):
+            assert_names_source(t, results_file, "bench/surface.py")
+        nearest = next(
+            run
+            for run in (*results(nearest_file)["runs"], results(nearest_file)["variant_kerb_line_toggled"])
+            if run["poses"] == "sfm" and run["kerb_line"]
+        )
+        own = {run["poses"]: run for run in results(own_file)["runs"]}
+        assert own["sfm"]["kerb_line"] and own["ground_truth"]["kerb_line"]
+        for label, run in (
+            (f"{site}, SfM, nearest stored cell", nearest),
+            (f"{site}, SfM, own grid", own["sfm"]),
+        ):
+            cells = row(t, label)
+            assert_shows(cells[1], [run["elevation_rmse_m"] * 100], label)
+            assert_shows(" | ".join(cells[2:]), _class_figures(run), label)
+        framed = own["sfm"]["in_reconstruction_frame"]
+        label, cells = row_starting(t, f"{site}, SfM, reconstruction's frame")
+        assert_shows(label.removeprefix(site), [framed["frame"]["shift_cm"]], label)
+        assert cells[1] == "-"
+        assert_shows(" | ".join(cells[2:]), _class_figures(framed), label)
+        label = f"{site}, true poses, own grid"
+        if label in t.rows:
+            truth_run = own["ground_truth"]
+            assert_shows(row(t, label)[1], [truth_run["elevation_rmse_m"] * 100], label)
+            assert_shows(" | ".join(row(t, label)[2:]), _class_figures(truth_run), label)
