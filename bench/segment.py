@@ -31,6 +31,7 @@ import logging
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +49,7 @@ from end_to_end import (  # bench/end_to_end.py: this script's folder is on sys.
     simulated_pass,
     sre_rows,
 )
-from surface import IOU_CLASSES  # bench/surface.py
+from surface import class_figures  # bench/surface.py
 
 from cama_pipeline.bev import read_bev
 from cama_pipeline.cameras import site_views
@@ -204,18 +205,14 @@ def segmentation_figures(
     }
 
 
-def bev_iou(site: Path, rasters: Path) -> dict[str, Any]:
-    """Per-class IoU of the reconstructed semantic raster against the true one, over cells both observed (the
-    classes and the truth on the reconstruction's own grid of `bench/surface.py`)."""
+def bev_iou(
+    site: Path, rasters: Path, world_of: Callable[[np.ndarray], np.ndarray] | None = None
+) -> dict[str, Any]:
+    """Per-class IoU of the reconstructed semantic raster against the truth, over cells both observed (the classes
+    of `bench/surface.py`, the truth on the reconstruction's own grid; with `world_of`, carried into its frame)."""
     ours = read_bev(rasters)
-    semantic = ours.require("semantic")
-    true_semantic = truth_on_grid(site, ours.georeference).require("semantic")
-    both = (semantic != int(Semantic.UNOBSERVED)) & (true_semantic != int(Semantic.UNOBSERVED))
-    out = {}
-    for name, cls in IOU_CLASSES.items():
-        a, b = semantic[both] == int(cls), true_semantic[both] == int(cls)
-        out[name] = round(float((a & b).sum() / max((a | b).sum(), 1)), 4)
-    return out
+    scored = class_figures(ours, truth_on_grid(site, ours.georeference, world_of))
+    return {name: round(value, 4) for name, value in scored["iou"].items()}
 
 
 def run_figures(site: Path, workspace: Workspace, site_id: str, seconds: dict[str, float]) -> dict[str, Any]:
@@ -236,6 +233,7 @@ def run_figures(site: Path, workspace: Workspace, site_id: str, seconds: dict[st
         "poses": pose_figures(site, views, workspace, site_id),
         "elevation": elevation,
         "bev_iou": bev_iou(site, rasters),
+        "bev_iou_in_reconstruction_frame": bev_iou(site, rasters, frame.world_of),
         "proposals_ap": proposals_ap(site, rasters, proposals),
         "annotator_speed_up": annotator["speed_up"],
         "reconstruction_frame": frame.as_dict(),
