@@ -3282,16 +3282,16 @@ def test_truth_grid_table() -> None:
 
 
 def test_segment_bev_iou_in_own_frame_table() -> None:
-    t = table("9004 (14.2 cm frame shift), BEV IoU road / curb / lane marking / crosswalk")
-    assert_names_source(t, "segment_truth_grid_9004.json", "bench/segment.py")
-    recorded = results("segment_truth_grid_9004.json")
-    shift = recorded["runs"]["generator_masks"]["reconstruction_frame"]["shift_cm"]
-    assert_shows(t.header[0].removeprefix("9004"), [shift], "header")
+    t = table("BEV IoU road / curb / lane marking / crosswalk, site (frame shift)")
     classes = ("road", "curb", "lane_marking", "crosswalk")
-    for label, key in (("generator masks", "generator_masks"), ("predicted masks", "predicted_masks")):
-        run = recorded["runs"][key]
-        cells = row(t, label)
-        assert_shows(cells[1], [run["bev_iou"][c] for c in classes], label)
-        assert_shows(cells[2], [run["bev_iou_in_reconstruction_frame"][c] for c in classes], label)
-        speed_ups = [run["annotator_speed_up"], run["annotator_speed_up_in_reconstruction_frame"]]
-        assert_shows(cells[3], speed_ups, label)
+    for seed in (9004, 9005, 9006):
+        results_file = f"segment_truth_grid_{seed}.json"
+        assert_names_source(t, results_file, "bench/segment.py")
+        for masks, key in (("generator masks", "generator_masks"), ("predicted masks", "predicted_masks")):
+            run = results(results_file)["runs"][key]
+            label, cells = next((k, v) for k, v in t.rows.items() if k.startswith(f"{seed} (") and masks in k)
+            assert_shows(label.removeprefix(str(seed)), [run["reconstruction_frame"]["shift_cm"]], label)
+            assert_shows(cells[1], [run["bev_iou"][c] for c in classes], label)
+            assert_shows(cells[2], [run["bev_iou_in_reconstruction_frame"][c] for c in classes], label)
+            speed_ups = [run["annotator_speed_up"], run["annotator_speed_up_in_reconstruction_frame"]]
+            assert_shows(cells[3], speed_ups, label)
