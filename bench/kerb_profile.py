@@ -43,11 +43,11 @@ from cama_pipeline.surface import optimise as surface_optimise
 from cama_pipeline.surface import stage as surface_stage
 from cama_pipeline.surface.labels import shares
 from cama_pipeline.surface.steps import curb_height_agreement
-from cama_pipeline.synthetic.truth_grid import truth_on_grid
+from cama_pipeline.synthetic.truth_grid import nearest_true_cells, truth_on_grid
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.surface import RESULTS, nearest_true_cells, run_source  # noqa: E402
+from bench.surface import RESULTS, run_source  # noqa: E402
 
 BIN_M = 0.1
 SHOWN = {"road": Semantic.ROAD, "curb": Semantic.CURB, "background": Semantic.BACKGROUND}

@@ -34,13 +34,14 @@ from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import Semantic
 from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.surface.poses import posed_views
+from cama_pipeline.synthetic.truth_grid import nearest_true_cells
 from cama_pipeline.workspace import Workspace
 from models.vma.rasters import SiteRasters, load_site_rasters
 from models.vma.validation import reconstruction_of
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.surface import RESULTS, nearest_true_cells  # noqa: E402
+from bench.surface import RESULTS  # noqa: E402
 
 STATION_M = 0.5
 REACH_M = 1.0

@@ -62,7 +62,7 @@ from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
-from cama_pipeline.synthetic.truth_grid import truth_on_grid
+from cama_pipeline.synthetic.truth_grid import cell_centres, nearest_true_cells, truth_on_grid
 from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
@@ -74,23 +74,11 @@ IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
 logger = logging.getLogger("bench.surface")
 
 
-def nearest_true_cells(xy: np.ndarray, truth: BevRasters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(N,) whether each global x, y falls on the true raster, and the (row, col) of its nearest true cell (0
-    outside)."""
-    true_geo = truth.georeference
-    colrow = np.round(true_geo.pixel_from_global(xy)).astype(int)
-    tc, tr = colrow[:, 0], colrow[:, 1]
-    inside = (tr >= 0) & (tr < true_geo.height) & (tc >= 0) & (tc < true_geo.width)
-    return inside, np.where(inside, tr, 0), np.where(inside, tc, 0)
-
-
 def truth_at(ours: BevRasters, truth: BevRasters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows, cols) of our cells and the nearest true cells (-1 when outside the true raster)."""
-    geo = ours.georeference
-    rows, cols = np.indices(geo.shape)
-    xy = geo.global_from_pixel(np.column_stack([cols.ravel(), rows.ravel()]))
-    inside, true_rows, true_cols = nearest_true_cells(xy, truth)
-    return inside.reshape(geo.shape), true_rows.reshape(geo.shape), true_cols.reshape(geo.shape)
+    shape = ours.georeference.shape
+    inside, true_rows, true_cols = nearest_true_cells(cell_centres(ours.georeference), truth)
+    return inside.reshape(shape), true_rows.reshape(shape), true_cols.reshape(shape)
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

@@ -43,10 +43,11 @@ from cama_pipeline.surface import SurfaceConfig
 from cama_pipeline.surface import stage as surface_stage
 from cama_pipeline.surface.elevation import ControlGrid
 from cama_pipeline.surface.optimise import Mesh
+from cama_pipeline.synthetic.truth_grid import nearest_true_cells
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from bench.surface import RESULTS, nearest_true_cells, run_source  # noqa: E402
+from bench.surface import RESULTS, run_source  # noqa: E402
 
 
 def true_heights(mesh: Mesh, truth: BevRasters, road_only: bool, offset_m: float = 0.0) -> torch.Tensor:

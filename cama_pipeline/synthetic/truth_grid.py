@@ -123,15 +123,20 @@ def cell_centres(georeference: RasterGeoreference) -> np.ndarray:
     return georeference.global_from_pixel(np.column_stack([cols.ravel(), rows.ravel()]))
 
 
+def nearest_true_cells(xy: np.ndarray, truth: BevRasters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N,) whether each global x, y falls on the `truth` raster, and the (row, col) of its nearest cell (0
+    outside)."""
+    geo = truth.georeference
+    colrow = np.round(geo.pixel_from_global(xy)).astype(np.int64)
+    col, row = colrow[:, 0], colrow[:, 1]
+    inside = (row >= 0) & (row < geo.height) & (col >= 0) & (col < geo.width)
+    return inside, np.where(inside, row, 0), np.where(inside, col, 0)
+
+
 def nearest_stored(truth: BevRasters, xy: np.ndarray) -> np.ndarray:
     """(N,) uint16: the stored truth's observation count at the stored cell nearest each global (x, y), 0 where
     that cell is unobserved or there is none (the count is a coverage map on a 0.5 m grid)."""
-    stored_geo = truth.georeference
-    colrow = np.round(stored_geo.pixel_from_global(xy)).astype(np.int64)
-    col, row = colrow[:, 0], colrow[:, 1]
-    inside = (row >= 0) & (row < stored_geo.height) & (col >= 0) & (col < stored_geo.width)
-    count = np.zeros(len(xy), np.uint16)
-    observed = truth.require("semantic")[row[inside], col[inside]] != int(Semantic.UNOBSERVED)
-    stored_count = truth.require("observation_count")[row[inside], col[inside]]
-    count[inside] = np.where(observed, np.maximum(stored_count, 1), 0)
-    return count
+    inside, row, col = nearest_true_cells(xy, truth)
+    observed = inside & (truth.require("semantic")[row, col] != int(Semantic.UNOBSERVED))
+    count = np.maximum(truth.require("observation_count")[row, col], 1).astype(np.uint16)
+    return np.where(observed, count, 0).astype(np.uint16)
