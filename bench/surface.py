@@ -16,6 +16,10 @@ the stored `ground_truth/bev/` is):
   own frame  the semantic and photometric figures again against the truth carried into the reconstruction's frame
              (`in_reconstruction_frame`: the best 2D similarity of its key frames onto the true ones,
              `cama_pipeline.evaluate.frame`): what the stage makes of its poses, their absolute error aside;
+  ego frames the heights (road; road and kerbs) and class IoU again in each key frame's ego frame within MapTR's
+             range (`in_ego_frames`, `cama_pipeline.evaluate.ego_frames`), each source's surface under its own
+             poses against the truth under the true ones: what the exports' consumer reads, where a height
+             offset, tilt or shift that the poses and the surface share cancels;
   coverage   observed cells, and the share of the truly observed road cells that are reconstructed;
   kerbs      the surface standing on its kerb steps (elevation + `kerb_step.npy`) against the truth, whose
              sidewalks are raised: RMSE over the true curb cells and over road and curb cells together, and the
@@ -52,8 +56,10 @@ import torch
 from scipy import ndimage
 
 from cama_pipeline.bev import BevRasters, read_bev
+from cama_pipeline.cameras import CameraView
 from cama_pipeline.data import load_dataset
 from cama_pipeline.data.masks import has_masks
+from cama_pipeline.evaluate.ego_frames import ego_class_iou, ego_height_errors
 from cama_pipeline.evaluate.frame import reconstruction_frame
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
@@ -62,7 +68,13 @@ from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
-from cama_pipeline.synthetic.truth_grid import cell_centres, nearest_true_cells, truth_on_grid
+from cama_pipeline.synthetic.truth_grid import (
+    cell_centres,
+    ground_height_of,
+    ground_label_of,
+    nearest_true_cells,
+    truth_on_grid,
+)
 from cama_pipeline.workspace import StageFolder, Workspace
 
 RESULTS = Path(__file__).parent / "results"
@@ -71,6 +83,8 @@ NEAR_TRAJECTORY_M = 4.0
 """Road cells this near a keyframe position give the surface's height offset (that of its pose frame)."""
 IOU_CLASSES = {"road": Semantic.ROAD, "curb": Semantic.CURB, "lane_marking": Semantic.LANE_MARKING}
 IOU_CLASSES["crosswalk"] = Semantic.CROSSWALK
+EGO_STRIDE = 5
+"""The ego-frame heights are scored on every 5th cell along rows and columns (0.5 m apart at 0.1 m cells)."""
 logger = logging.getLogger("bench.surface")
 
 
@@ -212,6 +226,53 @@ def compare(
     }
 
 
+def keyframe_ego_poses(views: list[CameraView]) -> dict[tuple[str, int], tuple[str, np.ndarray]]:
+    """Per key frame (scene, frame index): the token and world_from_ego of its first camera image in `views`."""
+    poses: dict[tuple[str, int], tuple[str, np.ndarray]] = {}
+    for view in sorted(views, key=lambda v: (v.scene, v.frame_index, v.channel)):
+        poses.setdefault((view.scene, view.frame_index), (view.token, view.world_from_ego))
+    return poses
+
+
+def ego_frame_figures(
+    site: Path,
+    ours: BevRasters,
+    kerb_step: np.ndarray,
+    our_views: list[CameraView],
+    true_views: list[CameraView],
+) -> dict[str, object]:
+    """The surface in each key frame's ego frame, within MapTR's range: what a consumer of the exports sees
+    (`cama_pipeline.evaluate.ego_frames`). Heights on every EGO_STRIDE-th row and column: the road (cells labelled
+    a road class, against the true road) and the road with the kerbs (cells labelled curb too, standing on their
+    kerb step, against the true road and curb, raised as they are). Classes on every observed cell. Each key frame
+    at the image both sources posed (the ego pose moves between the cameras' firing times)."""
+    true_by_token = {v.token: v.world_from_ego for v in true_views}
+    ours_by_frame = keyframe_ego_poses([v for v in our_views if v.token in true_by_token])
+    ours_poses = {f"{scene}/{index}": pose for (scene, index), (_, pose) in ours_by_frame.items()}
+    true_poses = {
+        f"{scene}/{index}": true_by_token[token] for (scene, index), (token, _) in ours_by_frame.items()
+    }
+    semantic = ours.require("semantic")
+    centres = cell_centres(ours.georeference)
+    sampled = np.zeros(semantic.shape, dtype=bool)
+    sampled[::EGO_STRIDE, ::EGO_STRIDE] = True
+    height = ours.require("elevation") + np.nan_to_num(kerb_step)
+    curb = (int(Semantic.CURB),)
+    figures: dict[str, object] = {"stride_cells": EGO_STRIDE}
+    for name, classes in (("road", ROAD_SURFACE_IDS), ("road_and_curb", (*ROAD_SURFACE_IDS, *curb))):
+        cells = sampled & np.isin(semantic, classes)
+        points = np.column_stack([centres[cells.ravel()], height[cells]])
+        errors = ego_height_errors(points, ours_poses, true_poses, ground_height_of(site, classes))
+        figures[f"heights_{name}"] = errors.summary()
+    observed = semantic != int(Semantic.UNOBSERVED)
+    points = np.column_stack([centres[observed.ravel()], ours.require("elevation")[observed]])
+    classes = {name: int(cls) for name, cls in IOU_CLASSES.items()}
+    figures["iou"] = ego_class_iou(
+        points, semantic[observed], ours_poses, true_poses, ground_label_of(site), classes
+    )
+    return figures
+
+
 def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
     """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
     workspace = Workspace(scratch / f"{len(list(scratch.iterdir()))}-{poses}")
@@ -229,6 +290,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     manifest = read_site_manifest(workspace.site_manifest(result.name))
     views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, "ground_truth")
     trajectory_xy = ego_poses(views)[:, :2, 3]
+    our_views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, poses)
     ours = read_bev(workspace.surface_bev(result.name))
     kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
     figures = compare(ours, truth_on_grid(site, ours.georeference), trajectory_xy, kerb_step)
@@ -237,6 +299,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     frame = reconstruction_frame(site / "nuscenes", workspace, result.name)
     framed = truth_on_grid(site, ours.georeference, frame.world_of)
     figures["in_reconstruction_frame"] = {"frame": frame.as_dict(), **class_figures(ours, framed)}
+    figures["in_ego_frames"] = ego_frame_figures(site, ours, kerb_step, our_views, views)
     report = result.report
     return {
         "poses": poses,

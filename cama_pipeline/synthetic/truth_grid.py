@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from cama_pipeline.bev import BevRasters, RasterGeoreference, read_bev
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.synthetic import ground_truth
 from cama_pipeline.synthetic.config import SynthConfig, preset
 from cama_pipeline.synthetic.randomise import randomised_config
@@ -115,6 +115,41 @@ def truth_on_grid(
         elevation=elevation,
         observation_count=count,
     )
+
+
+def ground_height_of(
+    site: Path, classes: tuple[int, ...] = ROAD_SURFACE_IDS
+) -> Callable[[np.ndarray], np.ndarray]:
+    """A function from (N, 2) global x, y to the site's true ground height there (N,), raised sidewalks and kerbs
+    included, NaN where the ground's class is not one of `classes` (by default the road surface: road, lane
+    marking, crosswalk): the true elevation anywhere, not only at cell centres. TruthMismatch when the site cannot
+    be rebuilt."""
+    cfg, world = rebuilt_world(site)
+    wanted = torch.tensor([int(c) for c in classes])
+
+    def height(xy: np.ndarray) -> np.ndarray:
+        local = np.asarray(xy, dtype=np.float64)[:, :2] - np.asarray(cfg.site_origin_xy)
+        x, y = torch.from_numpy(local[:, 0]), torch.from_numpy(local[:, 1])
+        kept = torch.isin(world.atlas.nearest(world.atlas.label, x.float(), y.float()), wanted)
+        return torch.where(kept, world.ground_height(x, y), torch.nan).numpy()
+
+    return height
+
+
+def ground_label_of(site: Path) -> Callable[[np.ndarray], np.ndarray]:
+    """A function from (N, 2) global x, y to the site's true class there (N,) uint8, unobserved (255) where the
+    stored truth's nearest cell is (no key-frame camera looked) or where it has none. TruthMismatch when the site
+    cannot be rebuilt."""
+    truth = stored_truth(site)
+    cfg, world = rebuilt_world(site, truth)
+
+    def label(xy: np.ndarray) -> np.ndarray:
+        global_xy = np.asarray(xy, dtype=np.float64)[:, :2]
+        local = torch.from_numpy((global_xy - np.asarray(cfg.site_origin_xy)).astype(np.float32))
+        labels = world.atlas.nearest(world.atlas.label, local[:, 0], local[:, 1]).numpy().astype(np.uint8)
+        return np.where(nearest_stored(truth, global_xy) > 0, labels, np.uint8(Semantic.UNOBSERVED))
+
+    return label
 
 
 def cell_centres(georeference: RasterGeoreference) -> np.ndarray:

@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 
 from cama_pipeline.bev import RasterGeoreference, write_bev
-from cama_pipeline.semantics import Semantic
+from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.synthetic import ground_truth
 from cama_pipeline.synthetic.truth_grid import (
     TruthMismatch,
     cell_centres,
     centre_labels,
+    ground_height_of,
+    ground_label_of,
     nearest_stored,
     rebuilt_world,
     stored_truth,
@@ -129,3 +131,27 @@ def test_a_reconstruction_frame_moves_where_each_cell_is_read(
     east = (rows, slice(cols.start + 1, cols.stop + 1))
     assert np.array_equal(framed.require("semantic"), stored.require("semantic")[east])
     assert np.abs(framed.require("elevation") - stored.require("elevation")[east]).max() < 1e-4
+
+
+def test_the_true_ground_anywhere_has_the_stored_height_and_class(
+    tiny_site: GeneratedSite, window: Window
+) -> None:
+    """At the stored cell centres: the stored elevation for the classes asked for (NaN for others), the stored
+    class, and unobserved where the stored truth has no cell."""
+    site = tiny_site.result.out_dir
+    stored = stored_truth(site)
+    centres = cell_centres(_window(stored.georeference, window))
+    semantic = stored.require("semantic")[window].ravel()
+    elevation = stored.require("elevation")[window].ravel()
+    road = np.isin(semantic, ROAD_SURFACE_IDS)
+    heights = ground_height_of(site)(centres)
+    assert road.sum() > 1000
+    assert np.abs(heights[road] - elevation[road]).max() < 1e-4
+    assert np.isnan(heights[~road & (semantic != int(Semantic.UNOBSERVED))]).all()
+    curb = semantic == int(Semantic.CURB)
+    with_curb = ground_height_of(site, (*ROAD_SURFACE_IDS, int(Semantic.CURB)))(centres)
+    assert curb.sum() > 20
+    assert np.abs(with_curb[curb] - elevation[curb]).max() < 1e-4
+    label = ground_label_of(site)
+    assert np.array_equal(label(centres), semantic)
+    assert label(centres.min(axis=0, keepdims=True) - 50.0) == int(Semantic.UNOBSERVED)
