@@ -14,7 +14,7 @@ into the true ego frame. Only points inside MapTR's perception range are kept (x
 every key frame that has it in range, as the samples of a training set do.
 """
 
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,20 +151,42 @@ def ego_class_iou(
     true_label: Callable[[np.ndarray], np.ndarray],
     classes: Mapping[str, int],
     box: Box = MAPTR_RANGE,
-) -> dict[str, float | None]:
+) -> dict[str, dict[str, float | None]]:
     """IoU per named class over the (key frame, point) pairs in range (`ego_pairs`): each point's label (N,)
-    against the true class where the true pose puts it; `true_label` maps (M, 2) true global x, y to the true
-    class there, `Semantic.UNOBSERVED` where the truth is not scored. None for a class neither side holds."""
+    against the true class where the true pose puts it (`ego`), and the same pairs against the true class at the
+    point's own global x, y (`same_pairs_in_global_frame`: the shared placement error kept); `true_label` maps
+    (M, 2) true global x, y to the true class there, `Semantic.UNOBSERVED` where the truth is not scored. None for
+    a class neither side holds."""
     labels = np.asarray(labels)
     if labels.shape != (len(points_xyz),):
         raise ValueError(f"labels: expected one per point ({len(points_xyz)}), got shape {labels.shape}")
-    wanted: Sequence[int] = list(classes.values())
-    intersection, union = np.zeros(len(wanted), np.int64), np.zeros(len(wanted), np.int64)
-    for pairs in ego_pairs(points_xyz, world_from_ego, true_world_from_ego, box):
-        truth = true_label(pairs.true_world_xyz[:, :2])
+    points = _checked_points(points_xyz)
+    in_place = true_label(points[:, :2])
+    counts = {frame: _ClassCounts(classes) for frame in ("ego", "same_pairs_in_global_frame")}
+    for pairs in ego_pairs(points, world_from_ego, true_world_from_ego, box):
+        ours = labels[pairs.index]
+        counts["ego"].add(ours, true_label(pairs.true_world_xyz[:, :2]))
+        counts["same_pairs_in_global_frame"].add(ours, in_place[pairs.index])
+    return {frame: count.iou() for frame, count in counts.items()}
+
+
+class _ClassCounts:
+    """Intersections and unions per named class, over the pairs where the truth is scored."""
+
+    def __init__(self, classes: Mapping[str, int]) -> None:
+        self.classes = dict(classes)
+        self.intersection = dict.fromkeys(classes, 0)
+        self.union = dict.fromkeys(classes, 0)
+
+    def add(self, ours: np.ndarray, truth: np.ndarray) -> None:
         scored = truth != int(Semantic.UNOBSERVED)
-        ours, true = labels[pairs.index[scored]], truth[scored]
-        for i, cls in enumerate(wanted):
-            intersection[i] += int(((ours == cls) & (true == cls)).sum())
-            union[i] += int(((ours == cls) | (true == cls)).sum())
-    return {name: float(intersection[i] / union[i]) if union[i] else None for i, name in enumerate(classes)}
+        ours, truth = ours[scored], truth[scored]
+        for name, cls in self.classes.items():
+            self.intersection[name] += int(((ours == cls) & (truth == cls)).sum())
+            self.union[name] += int(((ours == cls) | (truth == cls)).sum())
+
+    def iou(self) -> dict[str, float | None]:
+        return {
+            name: self.intersection[name] / self.union[name] if self.union[name] else None
+            for name in self.classes
+        }

@@ -112,9 +112,10 @@ def test_labels_placed_by_a_shifted_frame_score_in_the_ego_frames_of_poses_shift
     moved_points = moved(np.column_stack([FINE, np.zeros(len(FINE))]), site)
     poses = {key: site @ matrix for key, matrix in TRUE_POSES.items()}
     iou = ego_class_iou(moved_points, labels, poses, TRUE_POSES, true_label, CLASSES)
-    assert iou == {"road": 1.0, "lane_marking": 1.0}
-    in_place = ego_class_iou(moved_points, labels, TRUE_POSES, TRUE_POSES, true_label, CLASSES)
-    assert in_place["lane_marking"] < 0.8
+    assert iou["ego"] == {"road": 1.0, "lane_marking": 1.0}
+    assert iou["same_pairs_in_global_frame"]["lane_marking"] < 0.8
+    unshared = ego_class_iou(moved_points, labels, TRUE_POSES, TRUE_POSES, true_label, CLASSES)
+    assert unshared["ego"] == unshared["same_pairs_in_global_frame"]
 
 
 def test_unobserved_truth_is_not_scored_and_a_class_nobody_holds_has_no_iou() -> None:
@@ -123,7 +124,7 @@ def test_unobserved_truth_is_not_scored_and_a_class_nobody_holds_has_no_iou() ->
     west = FINE[:, 0] < -5.0
     labels[west] = int(Semantic.CROSSWALK)  # wrong, but where the truth is unobserved
     classes = {**CLASSES, "crosswalk": int(Semantic.CROSSWALK)}
-    iou = ego_class_iou(points, labels, TRUE_POSES, TRUE_POSES, true_label, classes)
+    iou = ego_class_iou(points, labels, TRUE_POSES, TRUE_POSES, true_label, classes)["ego"]
     assert iou["crosswalk"] is None and iou["lane_marking"] == 0.0
     with pytest.raises(ValueError, match="labels: expected one per point"):
         ego_class_iou(points, labels[:-1], TRUE_POSES, TRUE_POSES, true_label, classes)
