@@ -3295,3 +3295,30 @@ def test_segment_bev_iou_in_own_frame_table() -> None:
             assert_shows(cells[2], [run["bev_iou_in_reconstruction_frame"][c] for c in classes], label)
             speed_ups = [run["annotator_speed_up"], run["annotator_speed_up_in_reconstruction_frame"]]
             assert_shows(cells[3], speed_ups, label)
+
+
+EGO_SITES = {
+    "default site": "surface_ego_default.json",
+    "9011": "surface_ego_9011.json",
+    "9011 mask-free": "surface_ego_9011_nomasks.json",
+}
+"""Per site of the ego-frame table: its results file (`bench/surface.py`'s `in_ego_frames`)."""
+
+
+def test_surface_in_ego_frames_table() -> None:
+    t = table("surface, in each key frame's ego frame")
+    thin = ("curb", "lane_marking", "crosswalk")
+    for site, results_file in EGO_SITES.items():
+        assert_names_source(t, results_file, "bench/surface.py")
+        for poses, shown in (("sfm", "SfM"), ("ground_truth", "true poses")):
+            run = next(r for r in results(results_file)["runs"] if r["poses"] == poses)
+            assert run["kerb_line"]
+            ego, label = run["in_ego_frames"], f"{site}, {shown}"
+            cells = row(t, label)
+            road, kerbs = ego["heights_road"], ego["heights_road_and_curb"]
+            global_road = road["same_pairs_in_global_frame"]["rmse_cm"]
+            assert_shows(cells[1], [road["rmse_cm"], global_road, run["elevation_rmse_m"] * 100], label)
+            assert_shows(cells[2], [kerbs["rmse_cm"], kerbs["same_pairs_in_global_frame"]["rmse_cm"]], label)
+            assert_shows(cells[3], [ego["iou"]["ego"][c] for c in thin], label)
+            assert_shows(cells[4], [ego["iou"]["same_pairs_in_global_frame"][c] for c in thin], label)
+            assert_shows(cells[5], [run["iou"][c] for c in thin], label)
