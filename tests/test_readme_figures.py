@@ -3322,3 +3322,27 @@ def test_surface_in_ego_frames_table() -> None:
             assert_shows(cells[3], [ego["iou"]["ego"][c] for c in thin], label)
             assert_shows(cells[4], [ego["iou"]["same_pairs_in_global_frame"][c] for c in thin], label)
             assert_shows(cells[5], [run["iou"][c] for c in thin], label)
+
+
+def test_surface_parts_in_ego_frames_table() -> None:
+    t = table("SfM poses, in each key frame's ego frame")
+    for site, results_file in EGO_SITES.items():
+        assert_names_source(t, results_file, "bench/surface.py")
+        recorded = results(results_file)
+        runs = {
+            "the stage": next(r for r in recorded["runs"] if r["poses"] == "sfm"),
+            "vote alone (no refinement)": next(r for r in recorded["vote_runs"] if r["poses"] == "sfm"),
+            "flat (no kerb step)": recorded["ablation_no_kerb_step"],
+        }
+        assert (
+            not runs["vote alone (no refinement)"]["refine"] and not runs["flat (no kerb step)"]["kerb_step"]
+        )
+        for shown, run in runs.items():
+            assert run["poses"] == "sfm"
+            ego, label = run["in_ego_frames"], f"{site}, {shown}"
+            cells = row(t, label)
+            heights = [ego["heights_road"]["rmse_cm"], ego["heights_road_and_curb"]["rmse_cm"]]
+            assert_shows(cells[1], heights, label)
+            assert_shows(
+                cells[2], [ego["iou"]["ego"][c] for c in ("curb", "lane_marking", "crosswalk")], label
+            )
