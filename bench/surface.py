@@ -69,9 +69,8 @@ from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
 from cama_pipeline.synthetic.truth_grid import (
+    TrueGround,
     cell_centres,
-    ground_height_of,
-    ground_label_of,
     nearest_true_cells,
     truth_on_grid,
 )
@@ -226,16 +225,16 @@ def compare(
     }
 
 
-def keyframe_ego_poses(views: list[CameraView]) -> dict[tuple[str, int], tuple[str, np.ndarray]]:
-    """Per key frame (scene, frame index): the token and world_from_ego of its first camera image in `views`."""
-    poses: dict[tuple[str, int], tuple[str, np.ndarray]] = {}
+def first_image_per_keyframe(views: list[CameraView]) -> list[CameraView]:
+    """One image per key frame (scene, frame index): the first camera's in channel order."""
+    first: dict[tuple[str, int], CameraView] = {}
     for view in sorted(views, key=lambda v: (v.scene, v.frame_index, v.channel)):
-        poses.setdefault((view.scene, view.frame_index), (view.token, view.world_from_ego))
-    return poses
+        first.setdefault((view.scene, view.frame_index), view)
+    return list(first.values())
 
 
 def ego_frame_figures(
-    site: Path,
+    ground: TrueGround,
     ours: BevRasters,
     kerb_step: np.ndarray,
     our_views: list[CameraView],
@@ -245,13 +244,11 @@ def ego_frame_figures(
     (`cama_pipeline.evaluate.ego_frames`). Heights on every EGO_STRIDE-th row and column: the road (cells labelled
     a road class, against the true road) and the road with the kerbs (cells labelled curb too, standing on their
     kerb step, against the true road and curb, raised as they are). Classes on every observed cell. Each key frame
-    at the image both sources posed (the ego pose moves between the cameras' firing times)."""
+    at an image both sources posed (the ego pose moves between the cameras' firing times), keyed by its token."""
     true_by_token = {v.token: v.world_from_ego for v in true_views}
-    ours_by_frame = keyframe_ego_poses([v for v in our_views if v.token in true_by_token])
-    ours_poses = {f"{scene}/{index}": pose for (scene, index), (_, pose) in ours_by_frame.items()}
-    true_poses = {
-        f"{scene}/{index}": true_by_token[token] for (scene, index), (token, _) in ours_by_frame.items()
-    }
+    keyframes = first_image_per_keyframe([v for v in our_views if v.token in true_by_token])
+    ours_poses = {v.token: v.world_from_ego for v in keyframes}
+    true_poses = {v.token: true_by_token[v.token] for v in keyframes}
     semantic = ours.require("semantic")
     centres = cell_centres(ours.georeference)
     sampled = np.zeros(semantic.shape, dtype=bool)
@@ -262,14 +259,12 @@ def ego_frame_figures(
     for name, classes in (("road", ROAD_SURFACE_IDS), ("road_and_curb", (*ROAD_SURFACE_IDS, *curb))):
         cells = sampled & np.isin(semantic, classes)
         points = np.column_stack([centres[cells.ravel()], height[cells]])
-        errors = ego_height_errors(points, ours_poses, true_poses, ground_height_of(site, classes))
+        errors = ego_height_errors(points, ours_poses, true_poses, ground.height_of(classes))
         figures[f"heights_{name}"] = errors.summary()
     observed = semantic != int(Semantic.UNOBSERVED)
     points = np.column_stack([centres[observed.ravel()], ours.require("elevation")[observed]])
     classes = {name: int(cls) for name, cls in IOU_CLASSES.items()}
-    figures["iou"] = ego_class_iou(
-        points, semantic[observed], ours_poses, true_poses, ground_label_of(site), classes
-    )
+    figures["iou"] = ego_class_iou(points, semantic[observed], ours_poses, true_poses, ground.label, classes)
     return figures
 
 
@@ -288,9 +283,10 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     ).items[0]
     seconds = time.perf_counter() - started
     manifest = read_site_manifest(workspace.site_manifest(result.name))
-    views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, "ground_truth")
+    dataset = load_dataset(site / "nuscenes")
+    views = posed_views(dataset, manifest, workspace, result.name, "ground_truth")
     trajectory_xy = ego_poses(views)[:, :2, 3]
-    our_views = posed_views(load_dataset(site / "nuscenes"), manifest, workspace, result.name, poses)
+    our_views = posed_views(dataset, manifest, workspace, result.name, poses)
     ours = read_bev(workspace.surface_bev(result.name))
     kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
     figures = compare(ours, truth_on_grid(site, ours.georeference), trajectory_xy, kerb_step)
@@ -299,7 +295,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     frame = reconstruction_frame(site / "nuscenes", workspace, result.name)
     framed = truth_on_grid(site, ours.georeference, frame.world_of)
     figures["in_reconstruction_frame"] = {"frame": frame.as_dict(), **class_figures(ours, framed)}
-    figures["in_ego_frames"] = ego_frame_figures(site, ours, kerb_step, our_views, views)
+    figures["in_ego_frames"] = ego_frame_figures(TrueGround.of(site), ours, kerb_step, our_views, views)
     report = result.report
     return {
         "poses": poses,

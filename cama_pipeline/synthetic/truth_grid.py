@@ -12,7 +12,7 @@ unobserved (no key-frame camera looked, 255) or has no cell, so is the truth on 
 
 import json
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -117,39 +117,49 @@ def truth_on_grid(
     )
 
 
-def ground_height_of(
-    site: Path, classes: tuple[int, ...] = ROAD_SURFACE_IDS
-) -> Callable[[np.ndarray], np.ndarray]:
-    """A function from (N, 2) global x, y to the site's true ground height there (N,), raised sidewalks and kerbs
-    included, NaN where the ground's class is not one of `classes` (by default the road surface: road, lane
-    marking, crosswalk): the true elevation anywhere, not only at cell centres. TruthMismatch when the site cannot
-    be rebuilt."""
-    cfg, world = rebuilt_world(site)
-    wanted = torch.tensor([int(c) for c in classes])
+@dataclass(frozen=True, eq=False)
+class TrueGround:
+    """A site's generator world, rebuilt once and checked against its stored truth: the true ground's class and
+    height at any global point, not only at cell centres."""
 
-    def height(xy: np.ndarray) -> np.ndarray:
-        local = np.asarray(xy, dtype=np.float64)[:, :2] - np.asarray(cfg.site_origin_xy)
-        x, y = torch.from_numpy(local[:, 0]), torch.from_numpy(local[:, 1])
-        kept = torch.isin(world.atlas.nearest(world.atlas.label, x.float(), y.float()), wanted)
-        return torch.where(kept, world.ground_height(x, y), torch.nan).numpy()
+    config: SynthConfig
+    world: World
+    truth: BevRasters
 
-    return height
+    @classmethod
+    def of(cls, site: Path) -> "TrueGround":
+        """The site's true ground; TruthMismatch when the site cannot be rebuilt."""
+        truth = stored_truth(site)
+        config, world = rebuilt_world(site, truth)
+        return cls(config, world, truth)
 
+    def _local(self, xy: np.ndarray) -> np.ndarray:
+        return np.asarray(xy, dtype=np.float64)[:, :2] - np.asarray(self.config.site_origin_xy)
 
-def ground_label_of(site: Path) -> Callable[[np.ndarray], np.ndarray]:
-    """A function from (N, 2) global x, y to the site's true class there (N,) uint8, unobserved (255) where the
-    stored truth's nearest cell is (no key-frame camera looked) or where it has none. TruthMismatch when the site
-    cannot be rebuilt."""
-    truth = stored_truth(site)
-    cfg, world = rebuilt_world(site, truth)
+    def _classes(self, local: np.ndarray) -> torch.Tensor:
+        x, y = torch.from_numpy(local.astype(np.float32)).unbind(dim=1)
+        return self.world.atlas.nearest(self.world.atlas.label, x, y)
 
-    def label(xy: np.ndarray) -> np.ndarray:
-        global_xy = np.asarray(xy, dtype=np.float64)[:, :2]
-        local = torch.from_numpy((global_xy - np.asarray(cfg.site_origin_xy)).astype(np.float32))
-        labels = world.atlas.nearest(world.atlas.label, local[:, 0], local[:, 1]).numpy().astype(np.uint8)
-        return np.where(nearest_stored(truth, global_xy) > 0, labels, np.uint8(Semantic.UNOBSERVED))
+    def label(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) uint8 the true class at (N, 2) global x, y; unobserved (255) where the stored truth's nearest cell
+        is (no key-frame camera looked) or where it has none."""
+        labels = self._classes(self._local(xy)).numpy().astype(np.uint8)
+        observed = nearest_stored(self.truth, np.asarray(xy, dtype=np.float64)[:, :2]) > 0
+        return np.where(observed, labels, np.uint8(Semantic.UNOBSERVED))
 
-    return label
+    def height_of(self, classes: tuple[int, ...] = ROAD_SURFACE_IDS) -> Callable[[np.ndarray], np.ndarray]:
+        """A function from (N, 2) global x, y to the true ground height there (N,), raised sidewalks and kerbs
+        included, NaN where the ground's class is not one of `classes` (by default the road surface: road, lane
+        marking, crosswalk)."""
+        wanted = torch.tensor([int(c) for c in classes])
+
+        def height(xy: np.ndarray) -> np.ndarray:
+            local = self._local(xy)
+            kept = torch.isin(self._classes(local), wanted)
+            x, y = torch.from_numpy(local).unbind(dim=1)
+            return torch.where(kept, self.world.ground_height(x, y), torch.nan).numpy()
+
+        return height
 
 
 def cell_centres(georeference: RasterGeoreference) -> np.ndarray:

@@ -11,7 +11,7 @@ from bench.surface import ego_frame_figures
 from cama_pipeline.bev import BevRasters
 from cama_pipeline.cameras import CameraView
 from cama_pipeline.semantics import ROAD_SURFACE_IDS
-from cama_pipeline.synthetic.truth_grid import cell_centres, stored_truth
+from cama_pipeline.synthetic.truth_grid import TrueGround, cell_centres, stored_truth
 from tests.conftest import GeneratedSite
 
 SHIFT_M = 0.1
@@ -64,12 +64,15 @@ def truth(tiny_site: GeneratedSite) -> BevRasters:
     return stored_truth(tiny_site.result.out_dir)
 
 
-def test_the_truth_scores_perfectly_in_its_own_ego_frames(
-    tiny_site: GeneratedSite, truth: BevRasters
-) -> None:
+@pytest.fixture(scope="module")
+def ground(tiny_site: GeneratedSite) -> TrueGround:
+    return TrueGround.of(tiny_site.result.out_dir)
+
+
+def test_the_truth_scores_perfectly_in_its_own_ego_frames(ground: TrueGround, truth: BevRasters) -> None:
     views = keyframe_views(truth)
     step = np.zeros(truth.georeference.shape, np.float32)
-    figures = ego_frame_figures(tiny_site.result.out_dir, truth, step, views, views)
+    figures = ego_frame_figures(ground, truth, step, views, views)
     road = figures["heights_road"]
     assert road["keyframes"] == 4 and road["pairs"] > 1000
     assert road["rmse_cm"] < 0.01 and road["same_pairs_in_global_frame"]["rmse_cm"] < 0.01
@@ -77,15 +80,15 @@ def test_the_truth_scores_perfectly_in_its_own_ego_frames(
 
 
 def test_a_shift_the_raster_and_poses_share_cancels_and_an_unshared_one_does_not(
-    tiny_site: GeneratedSite, truth: BevRasters
+    ground: TrueGround, truth: BevRasters
 ) -> None:
     views = keyframe_views(truth)
     step = np.zeros(truth.georeference.shape, np.float32)
     ours = shifted(truth)
-    alike = ego_frame_figures(tiny_site.result.out_dir, ours, step, moved_views(views), views)
+    alike = ego_frame_figures(ground, ours, step, moved_views(views), views)
     assert alike["iou"]["ego"]["lane_marking"] == pytest.approx(1.0, abs=1e-6)
     assert alike["iou"]["same_pairs_in_global_frame"]["lane_marking"] < 0.9
     assert alike["heights_road"]["rmse_cm"] < 0.01
-    alone = ego_frame_figures(tiny_site.result.out_dir, ours, step, views, views)
+    alone = ego_frame_figures(ground, ours, step, views, views)
     assert alone["iou"]["ego"]["lane_marking"] < 0.9
     assert alone["iou"]["ego"]["curb"] < alike["iou"]["ego"]["curb"]

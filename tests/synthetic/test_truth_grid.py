@@ -13,11 +13,10 @@ from cama_pipeline.bev import RasterGeoreference, write_bev
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.synthetic import ground_truth
 from cama_pipeline.synthetic.truth_grid import (
+    TrueGround,
     TruthMismatch,
     cell_centres,
     centre_labels,
-    ground_height_of,
-    ground_label_of,
     nearest_stored,
     rebuilt_world,
     stored_truth,
@@ -144,14 +143,14 @@ def test_the_true_ground_anywhere_has_the_stored_height_and_class(
     semantic = stored.require("semantic")[window].ravel()
     elevation = stored.require("elevation")[window].ravel()
     road = np.isin(semantic, ROAD_SURFACE_IDS)
-    heights = ground_height_of(site)(centres)
+    ground = TrueGround.of(site)
+    heights = ground.height_of()(centres)
     assert road.sum() > 1000
     assert np.abs(heights[road] - elevation[road]).max() < 1e-4
     assert np.isnan(heights[~road & (semantic != int(Semantic.UNOBSERVED))]).all()
     curb = semantic == int(Semantic.CURB)
-    with_curb = ground_height_of(site, (*ROAD_SURFACE_IDS, int(Semantic.CURB)))(centres)
+    with_curb = ground.height_of((*ROAD_SURFACE_IDS, int(Semantic.CURB)))(centres)
     assert curb.sum() > 20
     assert np.abs(with_curb[curb] - elevation[curb]).max() < 1e-4
-    label = ground_label_of(site)
-    assert np.array_equal(label(centres), semantic)
-    assert label(centres.min(axis=0, keepdims=True) - 50.0) == int(Semantic.UNOBSERVED)
+    assert np.array_equal(ground.label(centres), semantic)
+    assert ground.label(centres.min(axis=0, keepdims=True) - 50.0) == int(Semantic.UNOBSERVED)
