@@ -19,7 +19,7 @@ import numpy as np
 from annotations.poses import PoseLookup, PoseSource, SourcedPose
 from cama_pipeline.data import CameraImage, Dataset, Pose
 from cama_pipeline.sfm.io import matrix_to_quaternion, read_refined_poses
-from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.site.io import manifest_scenes, read_site_manifest
 from cama_pipeline.wigo.io import read_wigo
 from cama_pipeline.workspace import Workspace
 
@@ -92,7 +92,7 @@ def site_scenes(workspace: Workspace, site_id: str) -> list[str]:
     path = workspace.site_manifest(site_id)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no site manifest for {site_id!r}")
-    return [str(entry["scene"]) for entry in read_site_manifest(path)["scenes"]]
+    return manifest_scenes(read_site_manifest(path))
 
 
 def _required(path: Path) -> Path:

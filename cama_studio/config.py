@@ -4,7 +4,8 @@ or YAML and written as TOML.
 A file sets any stage parameter; what it leaves out keeps its default, so a file need hold only what differs:
 
 ```toml
-workers = 4                      # run-level choices: executor, workers, proposer, checkpoint, surface_poses, masks
+workers = 4                      # run-level choices: executor, workers, proposer, checkpoint, surface_poses,
+                                 # masks, scenes
 
 [features]
 max_num_features = 2048          # a table per stage, named as in `cama run --stop-after`: [wigo] [keyframes]
@@ -109,6 +110,9 @@ class PipelineConfig:
     """Where the image masks come from (`cama_pipeline.data.masks`): auto (the data set's own, else the workspace's
     predicted, else its imported; the segment stage runs when none is there), dataset, predicted (the segment
     stage makes them), imported (`cama import-masks`) or a folder laid out like a data set's masks."""
+    scenes: tuple[str, ...] = ()
+    """The scenes (names) the run works on; empty: every scene of the data set. On a large data set (nuScenes
+    v1.0-trainval's 850 scenes) the stages then read only these scenes' records (`load_dataset(scenes=...)`)."""
     wigo: WigoConfig = field(default_factory=WigoConfig)
     keyframes: KeyframeConfig = field(default_factory=KeyframeConfig)
     sites: SiteConfig = field(default_factory=SiteConfig)
@@ -136,6 +140,10 @@ class PipelineConfig:
                 f"masks must be auto, dataset, predicted, imported or a folder, got {self.masks!r}"
             )
         parse_mask_choice(self.masks)
+        if any(not isinstance(name, str) or not name.strip() for name in self.scenes):
+            raise ValueError(f"scenes must be scene names, got {list(self.scenes)!r}")
+        if len(set(self.scenes)) != len(self.scenes):
+            raise ValueError(f"scenes names a scene twice: {list(self.scenes)!r}")
 
 
 HIDDEN_FIELDS: dict[type, frozenset[str]] = {

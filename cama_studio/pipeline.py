@@ -85,11 +85,12 @@ def _stage_calls(
     from cama_pipeline.wigo import run as run_wigo
 
     root, ws, c = dataset_root, workspace, config
+    scenes = c.scenes or None
     return {
         "segment": lambda: _segment(root, ws, c, overwrite),
-        "wigo": lambda: run_wigo(c.wigo, root, ws, overwrite=overwrite),
-        "keyframes": lambda: run_keyframes(c.keyframes, root, ws, overwrite=overwrite),
-        "sites": lambda: run_sites(c.sites, root, ws, overwrite=overwrite),
+        "wigo": lambda: run_wigo(c.wigo, root, ws, scenes=scenes, overwrite=overwrite),
+        "keyframes": lambda: run_keyframes(c.keyframes, root, ws, scenes=scenes, overwrite=overwrite),
+        "sites": lambda: run_sites(c.sites, root, ws, scenes=scenes, overwrite=overwrite),
         "pairs": lambda: run_pairs(c.pairs, root, ws, overwrite=overwrite),
         "features": lambda: run_features(c.features, root, ws, masks=c.masks, overwrite=overwrite),
         "sfm": lambda: run_sfm(
@@ -124,6 +125,7 @@ def _segment(dataset_root: Path, workspace: Path, config: PipelineConfig, overwr
         workspace,
         executor=config.executor,
         workers=config.workers,
+        scenes=config.scenes or None,
         overwrite=overwrite,
     )
     return None

@@ -56,6 +56,12 @@ def run_command(
             "segmenter when there are none), dataset, predicted, imported or a folder (sets masks)."
         ),
     ] = None,
+    scene: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--scene", help="Only this scene (repeatable; sets scenes). Default: every scene of the data set."
+        ),
+    ] = None,
     stop_after: Annotated[str, typer.Option(help="Last stage to run.")] = "propose",
     overwrite: Annotated[bool, typer.Option(help="Recompute every stage even if up to date.")] = False,
 ) -> None:
@@ -67,7 +73,9 @@ def run_command(
     from cama_studio.pipeline import STAGES, PipelineError, run
 
     try:
-        config = effective_config(config_file, executor, workers, max_features, proposer, checkpoint, masks)
+        config = effective_config(
+            config_file, executor, workers, max_features, proposer, checkpoint, masks, scene
+        )
         if print_config:
             console.out(dump_toml(config), end="", highlight=False)
             return
@@ -106,6 +114,7 @@ def effective_config(
     proposer: str | None,
     checkpoint: Path | None,
     masks: str | None = None,
+    scenes: list[str] | None = None,
 ) -> "PipelineConfig":
     """The --config file's configuration (the defaults without one), with the options given on top; ValueError
     naming the option or the file and key at fault."""
@@ -129,6 +138,11 @@ def effective_config(
             config = replace(config, masks=masks)
         except ValueError as err:
             raise ValueError(f"--masks: {err}") from None
+    if scenes:
+        try:
+            config = replace(config, scenes=tuple(scenes))
+        except ValueError as err:
+            raise ValueError(f"--scene: {err}") from None
     if max_features is not None:
         try:
             config = replace(config, features=replace(config.features, max_num_features=max_features))

@@ -21,7 +21,7 @@ from cama_pipeline.bev import is_raster_folder, read_bev, read_layer
 from cama_pipeline.cameras import CameraView, site_views
 from cama_pipeline.data import load_dataset
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.site.io import manifest_scenes, read_site_ids, read_site_manifest
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.workspace import Workspace
 
@@ -164,7 +164,8 @@ def road_mesh(
 def keyframe_cameras(dataset_root: Path, workspace: Path, site_id: str) -> list[CameraView]:
     """The site's keyframe cameras, posed by SfM when `cama sfm` has run, else by the site manifest (WIGO)."""
     ws = Workspace(workspace)
-    views = site_views(load_dataset(dataset_root), read_site_manifest(ws.site_manifest(site_id)))
+    manifest = read_site_manifest(ws.site_manifest(site_id))
+    views = site_views(load_dataset(dataset_root, scenes=manifest_scenes(manifest)), manifest)
     poses_path = ws.sfm_poses(site_id)
     if not poses_path.is_file():
         return views

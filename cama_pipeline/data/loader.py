@@ -30,14 +30,14 @@ from cama_pipeline.data.schema import (
     IMU_FIELDS,
     IMU_MESSAGE,
     INSTANCE_DIR,
-    REQUIRED_TABLES,
     SEMANTIC_DIR,
     WHEEL_FIELDS,
     WHEEL_MESSAGE,
     can_file_name,
     mask_relpath,
 )
-from cama_pipeline.data.tables import Record, Table, read_records, read_tables, table_path
+from cama_pipeline.data.selection import CAMERA_MODALITY, read_camera_tables
+from cama_pipeline.data.tables import Record, Table, read_records, table_path
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +57,6 @@ TOKEN_LINKS: tuple[tuple[str, str, str, bool], ...] = (
 )
 """(table, field, target table, may be empty): every token field the loader checks resolves."""
 
-CAMERA_MODALITY = "camera"
 _S = TypeVar("_S")
 
 
@@ -83,6 +82,7 @@ def load_dataset(
     *,
     check_files: bool = True,
     mask_roots: Sequence[Path] | None = None,
+    scenes: Sequence[str] | None = None,
 ) -> Dataset:
     """Read and validate the tables, CAN files and image paths of a data set (images are not decoded).
 
@@ -90,6 +90,8 @@ def load_dataset(
     skips the per-image existence check (e.g. for a partial download); masks are looked up either way.
     `mask_roots` are the folders the masks are looked up in, in order, each laid out like a data set's masks
     (`cama_pipeline.data.masks.mask_roots` resolves a `--masks` choice to them); None: the data set's own.
+    `scenes` (names) loads only those scenes, reading only their records of the large tables
+    (`cama_pipeline.data.selection`); a prev/next link that leaves them is then not checked. None: every scene.
     """
     root = Path(root).absolute()
     if not root.is_dir():
@@ -102,9 +104,9 @@ def load_dataset(
         raise DatasetError(
             f"version folder {version!r} has no scene.json; subfolders found: {found}", path=root
         )
-    tables = read_tables(version_dir, REQUIRED_TABLES)
+    tables = read_camera_tables(version_dir, scenes)
     roots = (root,) if mask_roots is None else tuple(Path(r).absolute() for r in mask_roots)
-    loader = _Loader(root, version_dir, tables, check_files, roots)
+    loader = _Loader(root, version_dir, tables, check_files, roots, subset=scenes is not None)
     loader.check_links()
     dataset = loader.build(version)
     n_images = sum(1 for _ in dataset.camera_images())
@@ -122,8 +124,11 @@ class _Loader:
         tables: dict[str, Table],
         check_files: bool,
         mask_roots: tuple[Path, ...],
+        subset: bool = False,
     ) -> None:
         self.root = root
+        self.subset = subset
+        """Whether only some scenes were read: an unresolved prev/next link may then lead out of them."""
         self.root_str = str(root)
         self.version_dir = version_dir
         self.tables = tables
@@ -146,7 +151,7 @@ class _Loader:
             targets = self.tables[target]
             for token, record in self.tables[table].items():
                 value = record[field]
-                if optional and value == "":
+                if optional and (value == "" or (self.subset and isinstance(value, str))):
                     continue
                 if not isinstance(value, str) or value not in targets:
                     raise self.error(table, token, field, f"token {value!r} not found in {target}.json")

@@ -50,15 +50,20 @@ def read_records(path: Path, fields: Iterable[str]) -> list[Record]:
             raise DatasetError(
                 f"expected a JSON object, got {type(record).__name__}", path=path, record=f"#{index}"
             )
-        if not required <= record.keys():
-            missing = sorted(required - record.keys())
-            raise DatasetError(
-                "missing field" if len(missing) == 1 else f"missing fields {missing}",
-                path=path,
-                record=record_label(record, index),
-                field=missing[0],
-            )
+        check_fields(path, record, required, record_label(record, index))
     return data
+
+
+def check_fields(path: Path, record: Record, required: frozenset[str], label: str) -> None:
+    """DatasetError naming the record (`label`) and its first missing field when it lacks one of `required`."""
+    if not required <= record.keys():
+        missing = sorted(required - record.keys())
+        raise DatasetError(
+            "missing field" if len(missing) == 1 else f"missing fields {missing}",
+            path=path,
+            record=label,
+            field=missing[0],
+        )
 
 
 def record_label(record: Record, index: int) -> str:

@@ -18,7 +18,7 @@ import numpy as np
 from skimage.transform import SimilarityTransform
 
 from cama_pipeline.data import load_dataset
-from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.site.io import manifest_scenes, read_site_manifest
 from cama_pipeline.surface.outputs import read_report
 from cama_pipeline.surface.poses import posed_views
 from cama_pipeline.workspace import Workspace
@@ -96,8 +96,8 @@ def reconstruction_frame(dataset_root: Path, workspace: Workspace, site_id: str)
     if not report_path.is_file():
         raise FrameError(f"site {site_id}: no surface report at {report_path} (run `cama surface` first)")
     poses = str(read_report(report_path)["poses"])
-    dataset = load_dataset(Path(dataset_root))
     manifest = read_site_manifest(workspace.site_manifest(site_id))
+    dataset = load_dataset(Path(dataset_root), scenes=manifest_scenes(manifest))
     true = {
         v.token: v.world_from_ego[:2, 3]
         for v in posed_views(dataset, manifest, workspace, site_id, "ground_truth")

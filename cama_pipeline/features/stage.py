@@ -39,7 +39,7 @@ from cama_pipeline.io import WorkspaceError, atomic_write_json, read_json
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -80,13 +80,16 @@ def _start_worker(
     root: Path,
     version: str,
     roots: tuple[Path, ...],
+    scenes: tuple[str, ...],
     extractor: FeatureExtractor,
     config: FeaturesConfig,
     ego: EgoMasks,
 ) -> None:
-    """Worker-process set-up: its own data set tables (masks from the same roots) and extractor."""
+    """Worker-process set-up: its own data set tables of the scenes it works on (masks from the same roots) and
+    extractor."""
     global _worker_state
-    _worker_state = (load_dataset(root, version, check_files=False, mask_roots=roots), extractor, config, ego)
+    dataset = load_dataset(root, version, check_files=False, mask_roots=roots, scenes=scenes)
+    _worker_state = (dataset, extractor, config, ego)
 
 
 def _extract_in_worker(view: CameraView) -> tuple[Features, int]:
@@ -110,7 +113,8 @@ def _extracted(
         for view in todo:
             yield image_features(dataset, view, extractor, config, ego.get((view.scene, view.channel)))
         return
-    setup = (dataset.root, dataset.version, dataset.mask_roots, extractor, config, ego)
+    scenes = tuple(sorted({view.scene for view in todo}))
+    setup = (dataset.root, dataset.version, dataset.mask_roots, scenes, extractor, config, ego)
     context = multiprocessing.get_context("spawn")  # forking a process that may hold threads is unsafe
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker, initargs=setup) as pool:
         yield from pool.map(_extract_in_worker, todo, chunksize=4)
@@ -295,7 +299,7 @@ def run(
     ws = Workspace.resolve(workspace, Path(dataset_root))
     site_ids = read_site_ids(ws.sites_index())
     roots = mask_roots(masks, Path(dataset_root), ws)
-    dataset = load_dataset(Path(dataset_root), mask_roots=roots)
+    dataset = load_dataset(Path(dataset_root), mask_roots=roots, scenes=read_site_scenes(ws.sites_index()))
     extractor = extractor or SiftExtractor(config)
     matcher = matcher or (BlasMatcher(config) if config.matcher == "blas" else ColmapMatcher(config))
     items = tuple(

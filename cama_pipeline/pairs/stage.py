@@ -15,7 +15,7 @@ from cama_pipeline.pairs.io import PAIR_REASONS, read_pairs, write_pairs
 from cama_pipeline.pairs.repeats import repeat_pairs, repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
 from cama_pipeline.results import ItemResult, StageResult
-from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -64,7 +64,10 @@ def run(
             done.append(ItemResult(site_id, folder, {k: stored[k] for k in REPORT_FIELDS}, skipped=True))
             continue
         if dataset is None:
-            dataset = load_dataset(Path(dataset_root), check_files=False)  # poses only: no image is read
+            # poses only: no image is read
+            dataset = load_dataset(
+                Path(dataset_root), check_files=False, scenes=read_site_scenes(ws.sites_index())
+            )
         views = site_views(dataset, read_site_manifest(manifest_path))
         pairs, funnel = select_pairs(views, config)
         rows = [(views[i].name, views[j].name, reason) for (i, j), reason in sorted(pairs.items())]

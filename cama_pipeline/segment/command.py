@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.segment.calibrate import CalibrationConfig, calibrate
 from cama_pipeline.segment.checkpoint import read_meta
@@ -42,6 +42,7 @@ def segment_command(
             help="Average each image's class probabilities with its mirror image's (twice the cost)."
         ),
     ] = SegmentConfig().flip_average,
+    scene: ScenesOpt = None,
     overwrite: OverwriteOpt = False,
 ) -> None:
     """Predict semantic masks and lane instances for every image the pipeline uses, into the workspace's
@@ -55,7 +56,9 @@ def segment_command(
             device=device,  # type: ignore[arg-type]
             flip_average=flip_average,
         )
-        result = run(config, dataset, workspace, executor=executor, workers=workers, overwrite=overwrite)
+        result = run(
+            config, dataset, workspace, executor=executor, workers=workers, scenes=scene, overwrite=overwrite
+        )
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     (item,) = result.items

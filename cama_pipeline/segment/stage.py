@@ -257,18 +257,19 @@ def run(
     *,
     executor: str = "local",
     workers: int = 2,
+    scenes: Sequence[str] | None = None,
     overwrite: bool = False,
     show_progress: bool = True,
 ) -> StageResult:
-    """Segment the images the pipeline uses (see the module docstring) into `masks/predicted/`; one item, that
-    folder, with the manifest as its report."""
+    """Segment the images the pipeline uses (see the module docstring) of the scenes named in `scenes` (else of
+    all) into `masks/predicted/`; one item, that folder, with the manifest as its report."""
     started = time.perf_counter()
     if executor not in EXECUTORS:
         raise ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
     if workers < 1:
         raise ValueError(f"--workers must be >= 1, got {workers}")
     ws = Workspace.resolve(workspace, Path(dataset_root))
-    dataset = load_dataset(Path(dataset_root), mask_roots=())
+    dataset = load_dataset(Path(dataset_root), mask_roots=(), scenes=scenes or None)
     checkpoint_dir = config.checkpoint or shipped_checkpoint()
     checkpoint = load_checkpoint(checkpoint_dir)
     device = resolve_device(config.device)

@@ -48,7 +48,7 @@ from cama_pipeline.sfm.merge import (
     merge_groups,
 )
 from cama_pipeline.sfm.triangulate import model_seeds
-from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -399,7 +399,11 @@ def run(
     ws = Workspace.resolve(workspace, Path(dataset_root))
     site_ids = read_site_ids(ws.sites_index())
     runner = make_executor(executor, workers)
-    dataset = load_dataset(Path(dataset_root), mask_roots=mask_roots(masks, Path(dataset_root), ws))
+    dataset = load_dataset(
+        Path(dataset_root),
+        mask_roots=mask_roots(masks, Path(dataset_root), ws),
+        scenes=read_site_scenes(ws.sites_index()),
+    )
     sites = tuple(
         run_site(
             dataset,

@@ -4,7 +4,7 @@ from typing import Annotated
 
 import typer
 
-from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, WorkspaceOpt
+from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.site.config import SiteConfig
 from cama_pipeline.site.stage import run
@@ -13,6 +13,7 @@ from cama_pipeline.site.stage import run
 def sites_command(
     dataset: DatasetArg,
     workspace: WorkspaceOpt = None,
+    scene: ScenesOpt = None,
     overlap_radius_m: Annotated[float, typer.Option(help="Scenes closer than this share a site.")] = 30.0,
     night_brightness: Annotated[
         float, typer.Option(help="Mean 8-bit luma below which a scene counts as night.")
@@ -23,7 +24,7 @@ def sites_command(
     keyframes)."""
     try:
         config = SiteConfig(overlap_radius_m=overlap_radius_m, night_brightness=night_brightness)
-        result = run(config, dataset, workspace, overwrite=overwrite)
+        result = run(config, dataset, workspace, scenes=scene, overwrite=overwrite)
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     for site in result.items:

@@ -54,3 +54,17 @@ def read_site_manifest(path: Path) -> dict[str, Any]:
 def read_site_ids(path: Path) -> list[str]:
     """The site ids of `sites/index.json`, in its order (what every per-site stage runs over)."""
     return [entry["site_id"] for entry in read_sites_index(path)["sites"]]
+
+
+def read_site_scenes(path: Path) -> list[str]:
+    """Every scene of the sites of `sites/index.json` (a site's scenes include its merged stationary ones), once
+    each, in its order: what the per-site stages load of the data set (`load_dataset(scenes=...)`)."""
+    names: dict[str, None] = {}
+    for entry in read_sites_index(path)["sites"]:
+        names.update(dict.fromkeys(entry["scenes"]))
+    return list(names)
+
+
+def manifest_scenes(manifest: dict[str, Any]) -> list[str]:
+    """The scene names of a site manifest (`read_site_manifest`), in its order."""
+    return [str(entry["scene"]) for entry in manifest["scenes"]]

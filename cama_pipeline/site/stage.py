@@ -3,6 +3,7 @@ sites, and write `sites/index.json` plus one `sites/<site_id>/manifest.json` per
 
 import logging
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -76,14 +77,16 @@ def run(
     dataset_root: Path,
     workspace: Path | Workspace | None = None,
     *,
+    scenes: Sequence[str] | None = None,
     overwrite: bool = False,
     dataset: Dataset | None = None,
 ) -> StageResult:
-    """Aggregate the data set's scenes into sites (default workspace: beside the data set). One item per site
-    (its manifest; report: its `sites/index.json` entry), the run's report the whole index (with the dropped
-    scenes); an up-to-date index skips every site."""
+    """Aggregate the data set's scenes (those named in `scenes`, else all) into sites (default workspace: beside
+    the data set). One item per site (its manifest; report: its `sites/index.json` entry), the run's report the
+    whole index (with the dropped scenes); an up-to-date index skips every site."""
     started = time.perf_counter()
-    dataset = dataset if dataset is not None else load_dataset(Path(dataset_root), check_files=False)
+    if dataset is None:
+        dataset = load_dataset(Path(dataset_root), check_files=False, scenes=scenes or None)
     ws = Workspace.resolve(workspace, Path(dataset_root))
     outputs = _read_scene_outputs(dataset, ws)
     digest = fingerprint(

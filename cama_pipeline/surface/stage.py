@@ -25,7 +25,7 @@ from cama_pipeline.data import Dataset, DatasetError, MaskChoice, load_dataset, 
 from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
-from cama_pipeline.site.io import read_site_ids, read_site_manifest
+from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
 from cama_pipeline.surface.coverage import weak_observation
 from cama_pipeline.surface.fit import fit_steps, fit_surface
@@ -220,7 +220,9 @@ def run(
             if not overwrite and is_up_to_date(path, digest):
                 done.append(ItemResult(site_id, folder, read_report(path), skipped=True))
                 continue
-            dataset = dataset or load_dataset(Path(dataset_root), mask_roots=roots)
+            dataset = dataset or load_dataset(
+                Path(dataset_root), mask_roots=roots, scenes=read_site_scenes(ws.sites_index())
+            )
             torch.manual_seed(config.seed)
             report = reconstruct_site(dataset, ws, site_id, config, poses, _Phases(progress, site_id))
             report = write_report(path, {**report, "fingerprint": digest})

@@ -73,7 +73,8 @@ def run(
     `dataset` may pass an already loaded data set of the same root.
     """
     started = time.perf_counter()
-    dataset = dataset if dataset is not None else load_dataset(Path(dataset_root), check_files=False)
+    if dataset is None:
+        dataset = load_dataset(Path(dataset_root), check_files=False, scenes=scenes or None)
     ws = Workspace.resolve(workspace, Path(dataset_root))
     chosen = select_scenes(dataset, scenes)
     items: list[ItemResult] = []

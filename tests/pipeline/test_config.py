@@ -46,6 +46,7 @@ def _changed() -> PipelineConfig:
         checkpoint=Path("/models/vma/v7"),
         surface_poses="wigo",
         masks="masks/from-oneformer",
+        scenes=("scene-0061", "scene-0103"),
         segment=SegmentConfig(batch_size=2, device="cpu"),
         features=FeaturesConfig(max_num_features=1024, masked_classes=(5,), matcher="colmap"),
         sfm=SfmConfig(first_ba_max_iterations=None, loss="huber"),
@@ -94,6 +95,8 @@ def test_a_file_sets_only_what_it_names_and_numbers_keep_their_fingerprint(tmp_p
         ("wigo = 3\n", ["wigo must be a table"]),
         ("[propose.rule]\nboundary_source = 'curb'\n", ["propose.rule.boundary_source"]),
         ("[sfm\n", ["not valid TOML"]),
+        ("scenes = ['scene-1', 'scene-1']\n", ["scenes names a scene twice"]),
+        ("scenes = 'scene-1'\n", ["scenes must be a list"]),
     ],
 )
 def test_a_bad_key_or_value_is_refused_naming_file_and_key(
@@ -133,6 +136,11 @@ def test_print_config_shows_the_effective_configuration_and_exits_0(tmp_path: Pa
     )
     empty = runner.invoke(app, ["run", "--masks", "", "--print-config"])
     assert empty.exit_code == 2 and "--masks" in empty.output
+    chosen = runner.invoke(app, ["run", "--scene", "scene-0061", "--scene", "scene-0103", "--print-config"])
+    assert chosen.exit_code == 0, chosen.output
+    assert 'scenes = ["scene-0061", "scene-0103"]' in chosen.output.splitlines()
+    twice = runner.invoke(app, ["run", "--scene", "scene-0061", "--scene", "scene-0061", "--print-config"])
+    assert twice.exit_code == 2 and "--scene" in twice.output
 
 
 def test_cama_run_refuses_a_bad_config_file_with_exit_2(tmp_path: Path) -> None:
@@ -173,6 +181,7 @@ def test_each_stage_runs_with_its_table_of_the_file(tmp_path: Path, monkeypatch:
             workers = 3
             surface_poses = "wigo"
             masks = "dataset"
+            scenes = ["scene-0061"]
             [wigo]
             node_rate_hz = 5.0
             [keyframes]
@@ -219,6 +228,7 @@ def test_each_stage_runs_with_its_table_of_the_file(tmp_path: Path, monkeypatch:
     assert all(calls[stage][1]["masks"] == "dataset" for stage in ("features", "sfm", "surface"))
     assert calls["sfm"][1]["merge_config"] == config.sfm_merge and calls["sfm"][1]["workers"] == 3
     assert calls["surface"][1]["poses"] == "wigo"
+    assert all(calls[stage][1]["scenes"] == ("scene-0061",) for stage in ("wigo", "keyframes", "sites"))
     proposed = calls["propose"][1]
     assert proposed["min_confidence"] == 0.2 and proposed["inference"] == config.propose.inference
     assert proposed["rule"] == RuleConfig(join_gap_m=5.0, boundary_source="curb")
@@ -236,6 +246,7 @@ def test_the_segment_stage_runs_with_its_table_when_the_masks_need_it(
     result = run(tmp_path / "nuscenes", tmp_path / "workspace", config, stop_after="segment")
     ((args, kwargs),) = calls
     assert args[0] == config.segment and kwargs["workers"] == 3 and kwargs["executor"] == "local"
+    assert kwargs["scenes"] is None  # every scene: the file names none
     assert list(result.seconds)[-1] == "segment" and result.skipped == {}
 
 

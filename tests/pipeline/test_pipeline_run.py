@@ -6,8 +6,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.data import load_dataset
 from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
+from cama_studio.config import PipelineConfig
 from cama_studio.pipeline import STAGES, PipelineError, PipelineResult, run
 
 
@@ -21,6 +23,30 @@ def test_the_path_runs_in_order_up_to_the_asked_stage_and_reruns_skip(
     assert index["sites"]
     again = run(site_root / "nuscenes", tmp_path / "ws", stop_after="sites")
     assert again.seconds["wigo"] < result.seconds["wigo"] + 5.0
+
+
+def test_a_run_on_named_scenes_works_on_those_only(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`scenes` (`cama run --scene`): WIGO, keyframes and sites see the named scene alone, and the stages after
+    the sites load only the sites' scenes of the data set."""
+    import cama_pipeline.pairs.stage as pairs_stage
+
+    chosen = load_dataset(site_root / "nuscenes", check_files=False).scenes[0].name
+    loaded: list[object] = []
+    load = pairs_stage.load_dataset
+    monkeypatch.setattr(
+        pairs_stage, "load_dataset", lambda *a, **k: loaded.append(k["scenes"]) or load(*a, **k)
+    )
+    ws = Workspace(tmp_path / "ws")
+    run(site_root / "nuscenes", ws.root, PipelineConfig(scenes=(chosen,)), stop_after="pairs")
+    assert ws.wigo_scenes() == [chosen]
+    index = json.loads(ws.sites_index().read_text())
+    assert [scene for site in index["sites"] for scene in site["scenes"]] == [chosen]
+    assert loaded == [[chosen]]
+    with pytest.raises(PipelineError, match="scene-no-such") as unknown:
+        run(site_root / "nuscenes", ws.root, PipelineConfig(scenes=("scene-no-such",)), stop_after="wigo")
+    assert unknown.value.bad_input and unknown.value.stage == "wigo"
 
 
 def test_a_failing_stage_is_named(tmp_path: Path) -> None:

@@ -185,6 +185,17 @@ def _posed_views(dataset: Dataset, poses: dict[str, RefinedPose], scenes: list[s
     return views
 
 
+def _reconstruction_scenes(sources: SiteSources) -> list[str] | None:
+    """The scenes of the site's reconstruction, the only ones the panel shows, so that only they are read of a large
+    data set; None (every scene) when there is no reconstruction to read them from."""
+    if sources.workspace_dir is None or sources.recon_site_id is None:
+        return None
+    try:
+        return site_scenes(Workspace(sources.workspace_dir), sources.recon_site_id) or None
+    except (FileNotFoundError, ValueError, KeyError):
+        return None
+
+
 def _reconstruction(
     sources: SiteSources, dataset: Dataset
 ) -> tuple[dict[str, RefinedPose], list[str], str | None]:
@@ -214,7 +225,9 @@ def load_context(sources: SiteSources) -> CameraContext:
     root = sources.dataset_root
     try:
         roots, mask_source = _mask_roots(sources, root)
-        dataset = load_dataset(root, check_files=False, mask_roots=roots)
+        dataset = load_dataset(
+            root, check_files=False, mask_roots=roots, scenes=_reconstruction_scenes(sources)
+        )
     except (OSError, ValueError) as error:
         logger.warning("site %d: data set %s unreadable: %s", sources.site_id, root, error)
         return _without_images(sources, elevation, UNREADABLE_DATASET)
