@@ -3346,3 +3346,31 @@ def test_surface_parts_in_ego_frames_table() -> None:
             assert_shows(
                 cells[2], [ego["iou"]["ego"][c] for c in ("curb", "lane_marking", "crosswalk")], label
             )
+
+
+LOADER_ROWS = {
+    "the loader before (c7b9d61), every scene": "baseline_loader",
+    "`json.load` of the seven tables alone": "whole_parse",
+    "every scene": "all_scenes",
+    "one scene": "scenes_1",
+    "ten scenes (a site)": "scenes_10",
+}
+
+
+def test_loader_by_scene_table() -> None:
+    t = table("load, trainval-sized tables")
+    assert_names_source(t, "loader_trainval.json", "bench/loader.py")
+    recorded = results("loader_trainval.json")
+    assert recorded["ratios_vs"] == "baseline_loader" and recorded["tables"]["scenes"] == 850
+    for label, key in LOADER_ROWS.items():
+        run = recorded["runs"][key]
+        expected = [
+            run["seconds"],
+            recorded["seconds_ratio"][key],
+            run["peak_rss_mb"],
+            run["rss_anon_mb"],
+            run["images"],
+        ]
+        cells = row(t, label)[1:]
+        for cell, value in zip(cells, expected, strict=True):
+            assert_shows(cell, [] if value is None else [value], f"loader table, {label}")
