@@ -157,6 +157,7 @@ def _register_stage_commands() -> None:
     from app.backend.serve import serve_command
     from app.demo import demo_command
     from app.viewer.command import view_command
+    from cama_pipeline.data.command import scenes_command
     from cama_pipeline.evaluate.command import eval_command
     from cama_pipeline.features.command import features_command
     from cama_pipeline.keyframes.command import keyframes_command
@@ -188,6 +189,7 @@ def _register_stage_commands() -> None:
     app.command("serve")(serve_command)
     app.command("demo")(demo_command)
     app.command("view")(view_command)
+    app.command("scenes")(scenes_command)
     app.command("wigo")(wigo_command)
     app.command("keyframes")(keyframes_command)
     app.command("sites")(sites_command)
