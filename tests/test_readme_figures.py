@@ -3374,3 +3374,19 @@ def test_loader_by_scene_table() -> None:
         cells = row(t, label)[1:]
         for cell, value in zip(cells, expected, strict=True):
             assert_shows(cell, [] if value is None else [value], f"loader table, {label}")
+
+
+def test_wigo_flat_height_table() -> None:
+    t = table("clip", "Logged poses without heights")
+    files = {"default": "wigo_flat_height.json", "9011": "wigo_flat_height_9011.json"}
+    for site, name in files.items():
+        assert_names_source(t, name, "bench/wigo_flat_height.py")
+        for scene, clip in results(name)["clips"].items():
+            if clip["true_height_range_m"] < 0.1:
+                continue  # standing clips are not shown
+            label, cells = row_starting(t, f"{site}, {scene} ")
+            assert_shows(label.split("climbs")[1], [clip["true_height_range_m"]], f"wigo flat height {label}")
+            for cell, variant in zip(cells[1:], ("logged_3d", "flat_fused", "flat_free"), strict=True):
+                shown = clip[variant]
+                expected = [shown["vertical_rmse_m"] * 100, shown["vertical_max_m"] * 100]
+                assert_shows(cell, expected, f"wigo flat height {label} {variant}")

@@ -55,6 +55,11 @@ class WigoConfig:
     `logged_pose_correlation_s`; heading is loose because the IMU and GNSS track know it better. A value
     <= 0 leaves that component free; all <= 0 leaves the logged pose out, which a clip without GNSS cannot
     afford (it is then refused: nothing else ties it to the global frame)."""
+    free_flat_logged_height: bool = True
+    """A clip whose logged ego poses all have z exactly 0 logged no height: nuScenes' localization is 2D ("z is
+    always 0", its schema says), so a road that climbs would be pulled flat by the vertical sigma above. Such a
+    clip's logged pose then constrains horizontal position, heading and tilt only, and its heights come from the
+    wheels and the IMU (the report's `logged_pose_height`). False: z = 0 is fused as a height like any other."""
     logged_pose_correlation_s: float = 8.0
     """Correlation time of the logged pose's errors: its factors count as one measurement per this long."""
     max_iterations: int = 100
@@ -68,6 +73,12 @@ class WigoConfig:
             if f.name == "gnss_robust":
                 if value not in ("huber", "cauchy", "none"):
                     raise ValueError(f"WigoConfig.gnss_robust must be huber, cauchy or none, got {value!r}")
+                continue
+            if f.name == "free_flat_logged_height":
+                if not isinstance(value, bool):
+                    raise ValueError(
+                        f"WigoConfig.free_flat_logged_height must be true or false, got {value!r}"
+                    )
                 continue
             items = value if isinstance(value, tuple) else (value,)
             if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in items) or not all(

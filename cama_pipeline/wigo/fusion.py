@@ -42,6 +42,9 @@ _LOOSE_TILT_RAD = 0.5
 """Sigma left on roll and pitch by priors that only mean to fix the heading."""
 _FREE_SIGMA = 1e3
 """Sigma of a prior component the configuration leaves free."""
+FLAT_HEIGHT_GAUGE_SIGMA_M = 1.0
+"""Sigma of the one height prior (the first node at the logged z) of a clip whose logged poses carry no height:
+it fixes the gauge the free heights leave open, so that the marginal covariances exist."""
 
 
 class NoGlobalConstraint(ValueError):
@@ -222,6 +225,12 @@ class _GraphBuilder:
         inside = np.flatnonzero((self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1]))
         chosen = inside if len(inside) else first
         horizontal, vertical, heading_deg, tilt_deg = self.config.logged_pose_sigmas
+        flat = self.config.free_flat_logged_height and not np.any(cam.translation[:, 2])
+        if flat:  # a 2D localization (nuScenes'): z = 0 is no height measurement, only the gauge below
+            vertical = 0.0
+            self.report["logged_pose_height"] = "free: every logged z is 0 (a 2D localization)"
+        else:
+            self.report["logged_pose_height"] = "fused"
         # n factors within one correlation time carry the information of one measurement
         per_window = self.config.logged_pose_correlation_s * self.config.node_rate_hz
         spread = math.sqrt(min(len(chosen), max(per_window, 1.0)))
@@ -234,6 +243,13 @@ class _GraphBuilder:
             prior = logged_pose_at(cam, int(self.nodes[k]))
             self.graph.add(gtsam.PriorFactorPose3(X(int(k)), prior, noise))
         self.report["logged_pose_factors"] = len(chosen)
+        if flat:  # the height's gauge: the first node at the logged z, so that the marginals exist
+            gauge = np.array([_FREE_SIGMA] * 5 + [FLAT_HEIGHT_GAUGE_SIGMA_M])
+            first_node = int(chosen[0])
+            prior = logged_pose_at(cam, int(self.nodes[first_node]))
+            self.graph.add(
+                gtsam.PriorFactorPose3(X(first_node), prior, gtsam.noiseModel.Diagonal.Sigmas(gauge))
+            )
 
 
 def _solve(builder: _GraphBuilder) -> gtsam.Values:
