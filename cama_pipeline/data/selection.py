@@ -43,7 +43,9 @@ def read_camera_tables(version_dir: Path, scenes: Sequence[str] | None = None) -
     fields = TABLE_FIELDS["sample_data"]
     if scenes is None:
         records = [
-            r for r in read_records(sample_data_path, fields) if r["calibrated_sensor_token"] not in other
+            r
+            for r in read_records(sample_data_path, fields)
+            if not _named_in(r, "calibrated_sensor_token", other)
         ]
     else:
         samples = tables["sample"]

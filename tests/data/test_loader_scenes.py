@@ -88,3 +88,14 @@ def test_a_scene_subset_still_checks_its_own_records(fixture: NuScenesFixture) -
     fixture.edit_record("sample_data", "sd-CAM_BACK-0-1", lambda r: r.update({"timestamp": "soon"}))
     with pytest.raises(DatasetError, match=r"'sd-CAM_BACK-0-1', field 'timestamp'"):
         load_dataset(fixture.root, scenes=[fixture.scene_name])
+
+
+def test_a_token_of_the_wrong_type_is_named_not_a_crash(fixture: NuScenesFixture) -> None:
+    token = "sd-CAM_FRONT-1-0"
+    fixture.edit_record(
+        "sample_data", token, lambda r: r.update({"calibrated_sensor_token": ["cs-CAM_FRONT"]})
+    )
+    with pytest.raises(
+        DatasetError, match=rf"sample_data\.json: record '{token}', field 'calibrated_sensor_token'"
+    ):
+        load_dataset(fixture.root)
