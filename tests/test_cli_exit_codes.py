@@ -53,6 +53,7 @@ def bad_input_cases(tmp: Path) -> dict[str, tuple[list[str], str]]:
         "serve": ([str(tmp / "data"), "--review-url", "localhost:8080"], "CAMA_REVIEW_URL"),
         "demo": ([nowhere, "--data-dir", str(tmp / "server"), "--view-port", "0"], nowhere),
         "view": ([nowhere, "--port", str(free_port())], nowhere),
+        "scenes": ([nowhere], nowhere),
         "wigo": ([nowhere], nowhere),
         "keyframes": ([nowhere], str(workspace.stage_dir("wigo"))),
         "sites": ([nowhere], nowhere),
