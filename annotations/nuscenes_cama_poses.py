@@ -28,11 +28,11 @@ from typing import Any, Literal
 from annotations.poses import POSE_SOURCES, PoseLookup, PoseSource
 from cama_pipeline.data import Dataset, Pose
 from cama_pipeline.data.errors import DatasetError
+from cama_pipeline.data.schema import CAMERA_MODALITY
 from cama_pipeline.data.tables import Table, read_table, table_path
 
 EGO_POSE = "ego_pose"
 POSE_SOURCES_FORMAT: Literal["cama-studio-nuscenes-pose-sources"] = "cama-studio-nuscenes-pose-sources"
-CAMERA_MODALITY = "camera"
 MAX_BORROW_GAP_US = 500_000
 """How far in time (microseconds) a non-camera record may borrow a camera image's correction."""
 

@@ -24,6 +24,7 @@ from cama_pipeline.data.model import (
     WheelSeries,
 )
 from cama_pipeline.data.schema import (
+    CAMERA_MODALITY,
     CAN_DIR,
     GNSS_FIELDS,
     GNSS_MESSAGE,
@@ -36,7 +37,7 @@ from cama_pipeline.data.schema import (
     can_file_name,
     mask_relpath,
 )
-from cama_pipeline.data.selection import CAMERA_MODALITY, read_camera_tables
+from cama_pipeline.data.selection import read_camera_tables
 from cama_pipeline.data.tables import Record, Table, read_records, table_path
 
 logger = logging.getLogger(__name__)

@@ -29,6 +29,9 @@ CAMERA_CHANNELS: tuple[str, ...] = (
     "CAM_FRONT_LEFT",
 )
 
+CAMERA_MODALITY = "camera"
+"""`sensor.modality` of a camera (the others are lidar and radar)."""
+
 REQUIRED_TABLES: tuple[str, ...] = (
     "scene",
     "sample",

@@ -12,11 +12,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cama_pipeline.data.errors import DatasetError
-from cama_pipeline.data.schema import REQUIRED_TABLES, TABLE_FIELDS
+from cama_pipeline.data.schema import CAMERA_MODALITY, REQUIRED_TABLES, TABLE_FIELDS
 from cama_pipeline.data.table_scan import select_records
 from cama_pipeline.data.tables import Table, index_by_token, read_records, read_tables, table_path
 
-CAMERA_MODALITY = "camera"
 LARGE_TABLES = ("sample_data", "ego_pose")
 SHOWN_SCENE_NAMES = 12
 """How many of the data set's scene names an unknown-scene error lists."""
@@ -42,18 +41,10 @@ def read_camera_tables(version_dir: Path, scenes: Sequence[str] | None = None) -
     sample_data_path = table_path(version_dir, "sample_data")
     fields = TABLE_FIELDS["sample_data"]
     if scenes is None:
-        records = [
-            r
-            for r in read_records(sample_data_path, fields)
-            if not _named_in(r, "calibrated_sensor_token", other)
-        ]
+        found = read_records(sample_data_path, fields)
     else:
-        samples = tables["sample"]
-        records = [
-            r
-            for r in select_records(sample_data_path, fields, "sample_token", samples.keys())
-            if not _named_in(r, "calibrated_sensor_token", other)
-        ]
+        found = select_records(sample_data_path, fields, "sample_token", tables["sample"].keys())
+    records = [r for r in found if not _named_in(r, "calibrated_sensor_token", other)]
     tables["sample_data"] = index_by_token(sample_data_path, records)
     used = {r["ego_pose_token"] for r in records if isinstance(r["ego_pose_token"], str)}
     ego_pose_path = table_path(version_dir, "ego_pose")
