@@ -17,6 +17,7 @@ from cama_pipeline.data.masks import mask_roots
 from cama_pipeline.export.poses import ExportPoses, export_poses
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET, ExportFormat, ExportRequest, ExportResult
 from cama_pipeline.export.staging import staged_output
+from cama_pipeline.site.io import read_site_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -136,13 +137,21 @@ WRITERS: dict[ExportFormat, Writer] = {
 """One writer per format."""
 
 
+def _scenes_to_load(export_format: ExportFormat, workspace: Workspace) -> list[str] | None:
+    """The scenes of the workspace's sites (a large data set is then read by scene, not whole), or None for
+    every scene: without sites, or for nuscenes-cama, which rewrites every ego pose of the data set."""
+    if export_format is ExportFormat.nuscenes_cama or not workspace.sites_index().is_file():
+        return None
+    return read_site_scenes(workspace.sites_index())
+
+
 def export_inputs(request: ExportRequest) -> ExportInputs:
     """Load the data set and the poses the request's format needs (errors name the missing input)."""
     if request.dataset_root is None or request.format not in FORMATS_NEEDING_DATASET:
         return ExportInputs(request, None, None, None)
     dataset_root = Path(request.dataset_root)
     workspace = Workspace.resolve(request.workspace, dataset_root)
-    data = load_dataset(dataset_root)
+    data = load_dataset(dataset_root, scenes=_scenes_to_load(request.format, workspace))
     poses = export_poses(request.poses, data, workspace, request.annotations.site_id, request.site_id)
     if request.scenes is not None:
         unknown = sorted(set(request.scenes) - set(poses.scenes))

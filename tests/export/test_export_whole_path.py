@@ -157,3 +157,51 @@ def test_maptr_keeps_to_the_site_scenes(site_export, tiny_site: GeneratedSite, t
     }
     assert samples and {s["scene"] for s in samples} <= site_scenes
     assert {s["pose_source"] for s in samples} <= {"sfm", "wigo+sfm", "wigo"}
+
+
+@pytest.mark.parametrize(
+    ("export_format", "by_scene"), [("maptr", True), ("cama", True), ("nuscenes-cama", False)]
+)
+def test_a_large_data_set_is_read_by_the_sites_scenes(
+    site_export,
+    tiny_site: GeneratedSite,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    export_format,
+    by_scene,
+) -> None:
+    """cama and maptr read only the workspace's sites' scenes of the data set (trainval's 850 would take minutes
+    and gigabytes); nuscenes-cama reads every scene, since it rewrites every ego pose of the root."""
+    from cama_pipeline.export import run as export_run
+    from cama_pipeline.site.io import read_site_scenes
+
+    _out, site_id, workspace, _dataset, _count = site_export
+    asked: list[object] = []
+
+    def recording_load(root, **kwargs):
+        asked.append(kwargs.get("scenes"))
+        return load_dataset(root, **kwargs)
+
+    monkeypatch.setattr(export_run, "load_dataset", recording_load)
+    source = tmp_path / "set.json"
+    AnnotationSet.read_json(next(iter(workspace.root.glob("proposals/*.json")))).write_json(source)
+    dataset_root = tiny_site.result.out_dir / "nuscenes"
+    args = [
+        "export",
+        str(source),
+        str(tmp_path / "out"),
+        "--format",
+        export_format,
+        "--dataset",
+        str(dataset_root),
+    ]
+    if export_format == "cama":  # its map needs heights
+        np.save(
+            tmp_path / "elevation.npy",
+            read_bev(workspace.surface_bev(site_id), ["elevation"]).require("elevation"),
+        )
+        args += ["--elevation", str(tmp_path / "elevation.npy")]
+    result = runner.invoke(app, [*args, "--workspace", str(workspace.root)])
+    assert result.exit_code == 0, result.output
+    expected = read_site_scenes(workspace.sites_index()) if by_scene else None
+    assert asked == [expected]
