@@ -66,6 +66,13 @@ def synth(
             "file."
         ),
     ] = True,
+    logged_height: Annotated[
+        bool,
+        typer.Option(
+            help="Logged ego poses with their heights; --no-logged-height writes z = 0 in every ego_pose, as "
+            "nuScenes' 2D localization does (with --no-masks: nuScenes as it really is). The truth keeps them.",
+        ),
+    ] = True,
     image_size: Annotated[
         str | None,
         typer.Option(
@@ -89,7 +96,16 @@ def synth(
         )
     try:
         cfg = _synth_config(preset, seed, random_seed, degrade_masks, image_size)
-        result = run(cfg, out, images=images, masks=masks, gnss=masks, overwrite=overwrite, workers=workers)
+        result = run(
+            cfg,
+            out,
+            images=images,
+            masks=masks,
+            gnss=masks,
+            logged_height=logged_height,
+            overwrite=overwrite,
+            workers=workers,
+        )
     except (ValueError, FileExistsError) as err:
         raise bad_input(err) from err
     _print_site(result, cfg)
@@ -150,6 +166,8 @@ def _print_site(result: "SynthResult", cfg: "SynthConfig") -> None:
         )
     if not result.gnss:
         console.print("  no GNSS CAN files (as real nuScenes)")
+    if not result.logged_height:
+        console.print("  logged ego poses without heights: z = 0 (as real nuScenes)")
 
 
 def _register_stage_commands() -> None:

@@ -20,7 +20,9 @@ Output (`out_dir`):
                               them, so a stage that reads images fails naming the missing file);
                               `masks_in_dataset` false: the masks are in ground_truth/, not in the data set;
                               `gnss` false: no `can_bus/<scene>_gnss.json` (real nuScenes has none; the
-                              IMU and wheel files are those of a run with GNSS, byte for byte)
+                              IMU and wheel files are those of a run with GNSS, byte for byte);
+                              `logged_height` false: every ego_pose's z is 0, as nuScenes' 2D localization
+                              logs it (`cama synth --no-logged-height`; the true poses keep their heights)
 
 The whole tree is built in a sibling staging folder and renamed into place, so an interrupted run never
 leaves a half-written site; a rerun with the same config finds the manifest and does nothing.
@@ -89,6 +91,8 @@ class SynthResult:
     """False for a site generated with `masks=False`: its masks are under `ground_truth_dir`."""
     gnss: bool = True
     """False for a site generated with `gnss=False`: no GNSS CAN file."""
+    logged_height: bool = True
+    """False for a site generated with `logged_height=False`: every logged ego pose has z = 0."""
 
     @property
     def mask_root(self) -> Path:
@@ -96,11 +100,24 @@ class SynthResult:
         return self.dataset_root if self.masks_in_dataset else self.ground_truth_dir
 
 
-def fingerprint(cfg: SynthConfig, *, images: bool = True, masks: bool = True, gnss: bool = True) -> str:
-    """Hash of everything that determines the output; a site without images, masks in the data set or GNSS
-    hashes apart from the full one, so that a later full run over it is never skipped as up to date."""
+def fingerprint(
+    cfg: SynthConfig,
+    *,
+    images: bool = True,
+    masks: bool = True,
+    gnss: bool = True,
+    logged_height: bool = True,
+) -> str:
+    """Hash of everything that determines the output; a site without images, masks in the data set, GNSS or
+    logged heights hashes apart from the full one, so that a later full run over it is never skipped as up to
+    date."""
     content: dict[str, object] = {"config": dataclasses.asdict(cfg), "generator": GENERATOR_VERSION}
-    for name, value in (("images", images), ("masks", masks), ("gnss", gnss)):
+    for name, value in (
+        ("images", images),
+        ("masks", masks),
+        ("gnss", gnss),
+        ("logged_height", logged_height),
+    ):
         if not value:
             content[name] = False
     payload = json.dumps(content, sort_keys=True)
@@ -114,6 +131,7 @@ def run(
     images: bool = True,
     masks: bool = True,
     gnss: bool = True,
+    logged_height: bool = True,
     overwrite: bool = False,
     workers: int = 2,
     show_progress: bool = True,
@@ -123,14 +141,16 @@ def run(
     `images=False` skips rendering (most of the time on big presets): tables, CAN and ground truth only, for
     work that needs poses but no pixels (the pairs benchmark). `masks=False` writes the masks into the
     ground truth instead of the data set, and `gnss=False` leaves out the GNSS CAN files (`cama synth
-    --no-masks` does both: a data set as real nuScenes is). The manifest records all three. Masks in the ground
-    truth are what the segmenter and SRE are scored against, so they are written without the config's mask noise.
+    --no-masks` does both: a data set as real nuScenes is). `logged_height=False` writes every logged ego pose
+    with z = 0, as nuScenes' localization (2D) does; WIGO then leaves the height to the odometry. The manifest
+    records all four. Masks in the ground truth are what the segmenter and SRE are scored against, so they are
+    written without the config's mask noise.
     """
     out_dir = Path(out_dir)
     if not masks:
         cfg = dataclasses.replace(cfg, masks=MaskNoiseConfig())
     existing = _read_manifest(out_dir)
-    digest = fingerprint(cfg, images=images, masks=masks, gnss=gnss)
+    digest = fingerprint(cfg, images=images, masks=masks, gnss=gnss, logged_height=logged_height)
     if existing is not None and existing.get("fingerprint") == digest and not overwrite:
         logger.info("%s is up to date; nothing to do", out_dir)
         return _result_from_manifest(out_dir, existing, skipped=True)
@@ -145,7 +165,7 @@ def run(
     staging.mkdir(parents=True)
     site = build_synthetic_site(cfg)
     dataset_root = staging / DATASET_DIR
-    true_poses = _write_tables_and_can(site, dataset_root, gnss=gnss)
+    true_poses = _write_tables_and_can(site, dataset_root, gnss=gnss, logged_height=logged_height)
     n_images = sum(len(site.schedules[clip.index].shots) for clip in site.clips)
     if images:
         mask_root = dataset_root if masks else staging / GROUND_TRUTH_DIR
@@ -167,6 +187,7 @@ def run(
         "images_rendered": images,
         "masks_in_dataset": masks,
         "gnss": gnss,
+        "logged_height": logged_height,
         "seconds": round(time.perf_counter() - started, 2),
     }
     atomic_write_json(staging / MANIFEST, manifest, indent=2)
@@ -197,6 +218,7 @@ def _result_from_manifest(out_dir: Path, manifest: dict, *, skipped: bool) -> Sy
         bool(manifest.get("images_rendered", True)),
         bool(manifest.get("masks_in_dataset", True)),
         bool(manifest.get("gnss", True)),
+        bool(manifest.get("logged_height", True)),
     )
 
 
@@ -225,9 +247,11 @@ def _description(site: SyntheticSite, clip_index: int) -> str:
     return f"{'Night' if clip.kind == 'night' else 'Day'}, moving, route {clip.route_name}"
 
 
-def _write_tables_and_can(site: SyntheticSite, dataset_root: Path, *, gnss: bool) -> dict[str, dict]:
-    """nuScenes tables with coarse ego poses, CAN messages per scene (GNSS only if `gnss`; it is simulated
-    either way, so the other messages do not change); returns the true pose per sample_data."""
+def _write_tables_and_can(
+    site: SyntheticSite, dataset_root: Path, *, gnss: bool, logged_height: bool
+) -> dict[str, dict]:
+    """nuScenes tables with coarse ego poses (z = 0 unless `logged_height`), CAN messages per scene (GNSS only
+    if `gnss`; both are simulated either way, so nothing else changes); returns the true pose per sample_data."""
     cfg = site.config
     tables = NuScenesTables(location=cfg.log_location)
     tables.add_rig(site.rig)
@@ -238,6 +262,8 @@ def _write_tables_and_can(site: SyntheticSite, dataset_root: Path, *, gnss: bool
         times = np.array([s.timestamp_us for s in schedule.shots])
         rng = sub_rng(cfg.seed, SEED_SENSORS, clip.index)
         coarse_R, coarse_t = coarse_ego_poses(motion, times, cfg.sensors, rng)
+        if not logged_height:
+            coarse_t = coarse_t * np.array([1.0, 1.0, 0.0])
         true_R, true_t = motion.interpolate(times)
         tables.add_clip(
             clip.name,
