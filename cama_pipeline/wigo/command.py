@@ -9,6 +9,7 @@ import typer
 from cama_pipeline.cli_options import DatasetArg, OverwriteOpt, ScenesOpt, WorkspaceOpt
 from cama_pipeline.console import INPUT_ERRORS, bad_input, console
 from cama_pipeline.wigo.config import RobustKernel, WigoConfig
+from cama_pipeline.wigo.logged_only import NO_ODOMETRY
 from cama_pipeline.wigo.stage import run
 
 
@@ -38,3 +39,8 @@ def wigo_command(
     constraints = Counter(str(item.report.get("global_constraint", "unrecorded")) for item in result.items)
     summary = ", ".join(f"{name} ({count} scene(s))" for name, count in sorted(constraints.items()))
     console.print(f"  global constraint: {summary}")
+    passed = [item.name for item in result.items if item.report.get("odometry") == NO_ODOMETRY]
+    if passed:
+        console.print(
+            f"  [yellow]no wheel speeds[/yellow], logged ego poses passed through: {', '.join(passed)}"
+        )

@@ -5,6 +5,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
 RobustKernel = Literal["huber", "cauchy", "none"]
+WithoutWheels = Literal["logged_pose", "refuse"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,11 @@ class WigoConfig:
     always 0", its schema says), so a road that climbs would be pulled flat by the vertical sigma above. Such a
     clip's logged pose then constrains horizontal position, heading and tilt only, and its heights come from the
     wheels and the IMU (the report's `logged_pose_height`). False: z = 0 is fused as a height like any other."""
+    without_wheels: WithoutWheels = "logged_pose"
+    """What a clip without wheel speeds gets (nuScenes' CAN bus expansion leaves some scenes out and the devkit
+    lists others as faulty): `logged_pose`, its logged ego poses as they are, with the sigmas above as their
+    covariance (`cama_pipeline.wigo.logged_only`; the report's `odometry` says so), or `refuse`, an error naming
+    the scene. Without wheels there is no odometry scale to fuse."""
     logged_pose_correlation_s: float = 8.0
     """Correlation time of the logged pose's errors: its factors count as one measurement per this long."""
     max_iterations: int = 100
@@ -73,6 +79,12 @@ class WigoConfig:
             if f.name == "gnss_robust":
                 if value not in ("huber", "cauchy", "none"):
                     raise ValueError(f"WigoConfig.gnss_robust must be huber, cauchy or none, got {value!r}")
+                continue
+            if f.name == "without_wheels":
+                if value not in ("logged_pose", "refuse"):
+                    raise ValueError(
+                        f"WigoConfig.without_wheels must be logged_pose or refuse, got {value!r}"
+                    )
                 continue
             if f.name == "free_flat_logged_height":
                 if not isinstance(value, bool):

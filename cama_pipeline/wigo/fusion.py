@@ -40,7 +40,7 @@ logger = logging.getLogger(__name__)
 _UP = gtsam.Unit3(np.array([0.0, 0.0, 1.0]))
 _LOOSE_TILT_RAD = 0.5
 """Sigma left on roll and pitch by priors that only mean to fix the heading."""
-_FREE_SIGMA = 1e3
+FREE_SIGMA = 1e3
 """Sigma of a prior component the configuration leaves free."""
 FLAT_HEIGHT_GAUGE_SIGMA_M = 1.0
 """Sigma of the one height prior (the first node at the logged z) of a clip whose logged poses carry no height:
@@ -238,13 +238,13 @@ class _GraphBuilder:
             [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg)]
             + [horizontal, horizontal, vertical]
         )
-        noise = gtsam.noiseModel.Diagonal.Sigmas(np.where(base > 0, base, _FREE_SIGMA) * spread)
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.where(base > 0, base, FREE_SIGMA) * spread)
         for k in chosen:
             prior = logged_pose_at(cam, int(self.nodes[k]))
             self.graph.add(gtsam.PriorFactorPose3(X(int(k)), prior, noise))
         self.report["logged_pose_factors"] = len(chosen)
         if flat:  # the height's gauge: the first node at the logged z, so that the marginals exist
-            gauge = np.array([_FREE_SIGMA] * 5 + [FLAT_HEIGHT_GAUGE_SIGMA_M])
+            gauge = np.array([FREE_SIGMA] * 5 + [FLAT_HEIGHT_GAUGE_SIGMA_M])
             first_node = int(chosen[0])
             prior = logged_pose_at(cam, int(self.nodes[first_node]))
             self.graph.add(

@@ -51,8 +51,13 @@ class ClipInputs:
     """GNSS fixes, or None (the logged ego pose is then the clip's only global constraint)."""
 
 
-def clip_inputs(scene: Scene) -> ClipInputs:
-    """The checked inputs of a loaded scene (see the module docstring for what is refused)."""
+class NoWheelSpeeds(ValueError):
+    """A clip without usable wheel speeds: no odometry scale to fuse (`WigoConfig.without_wheels` decides)."""
+
+
+def logged_poses(scene: Scene) -> LoggedPoses:
+    """The logged ego pose of every camera image of a loaded scene; ValueError naming the scene when it has no
+    images or their timestamps are out of order."""
     images = scene.all_images()
     if not images:
         raise ValueError(f"scene {scene.name!r}: no camera images, nothing to estimate poses for")
@@ -63,16 +68,26 @@ def clip_inputs(scene: Scene) -> ClipInputs:
         rotation=np.stack([im.global_from_ego.rotation_matrix() for im in images]),
         translation=np.stack([im.global_from_ego.translation for im in images]),
     )
+    if np.any(np.diff(cameras.times_us) < 0):
+        raise ValueError(f"scene {scene.name!r}: camera timestamps are not in time order")
+    return cameras
+
+
+def clip_inputs(scene: Scene) -> ClipInputs:
+    """The checked inputs of a loaded scene (see the module docstring for what is refused; NoWheelSpeeds for a
+    scene without wheel speeds)."""
+    cameras = logged_poses(scene)
     if scene.can.wheel is None:
         raise _no_wheels(scene.name)
     return checked_inputs(ClipInputs(scene.name, cameras, scene.can.wheel, scene.can.imu, scene.can.gnss))
 
 
-def _no_wheels(scene: str) -> ValueError:
+def _no_wheels(scene: str) -> NoWheelSpeeds:
     """The error for a clip without usable wheel speeds."""
-    return ValueError(
+    return NoWheelSpeeds(
         f"scene {scene!r}: no wheel speeds ({WHEEL_MESSAGE}, at least 2 messages needed); "
-        "WIGO needs them for the odometry's scale"
+        'WIGO needs them for the odometry\'s scale ([wigo] without_wheels = "logged_pose" passes the logged '
+        "ego poses through instead)"
     )
 
 

@@ -15,8 +15,9 @@ from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.wigo.config import WigoConfig
 from cama_pipeline.wigo.fusion import FusedPoses, fuse_clip
-from cama_pipeline.wigo.inputs import clip_inputs
+from cama_pipeline.wigo.inputs import NoWheelSpeeds, clip_inputs, logged_poses
 from cama_pipeline.wigo.io import PoseRecord, WigoFile, read_wigo, write_wigo
+from cama_pipeline.wigo.logged_only import logged_pose_clip
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -40,6 +41,19 @@ def scene_fingerprint(dataset: Dataset, scene: Scene, config: WigoConfig) -> str
     return fingerprint(
         "wigo", code_version("cama_pipeline.wigo"), config.to_json(), scene.token, file_stats(inputs)
     )
+
+
+def fuse_scene(scene: Scene, config: WigoConfig) -> FusedPoses:
+    """WIGO's poses of one scene: the fusion of its inputs, or for a scene without wheel speeds its logged poses
+    passed through (`WigoConfig.without_wheels`; NoWheelSpeeds when that is `refuse`)."""
+    try:
+        inputs = clip_inputs(scene)
+    except NoWheelSpeeds as error:
+        if config.without_wheels == "refuse":
+            raise
+        logger.warning("%s: passing the logged ego poses through", error)
+        return logged_pose_clip(scene.name, logged_poses(scene), config)
+    return fuse_clip(inputs, config)
 
 
 def to_wigo_file(fused: FusedPoses, scene: Scene, digest: str, config: WigoConfig) -> WigoFile:
@@ -87,7 +101,7 @@ def run(
                 logger.info("scene %s: %s is up to date", scene.name, path)
                 items.append(ItemResult(scene.name, path, read_wigo(path).report, skipped=True))
             else:
-                wigo = to_wigo_file(fuse_clip(clip_inputs(scene), config), scene, digest, config)
+                wigo = to_wigo_file(fuse_scene(scene, config), scene, digest, config)
                 write_wigo(path, wigo)
                 items.append(ItemResult(scene.name, path, wigo.report, skipped=False))
             progress.advance(bar)

@@ -96,7 +96,8 @@ def test_data_set_without_gnss_or_imu_files_degrades(site_root: Path, tmp_path: 
     (root / "can_bus" / "scene-0003_zoe_veh_info.json").unlink()
     workspace = tmp_path / "ws"
     with pytest.raises(ValueError, match="scene-0003.*zoe_veh_info"):
-        run(WigoConfig(), root, workspace, show_progress=False)
-    result = run(WigoConfig(), root, workspace, scenes=["scene-0001", "scene-0002"], show_progress=False)
+        run(WigoConfig(without_wheels="refuse"), root, workspace, show_progress=False)
+    result = run(WigoConfig(), root, workspace, show_progress=False)
     assert any("no GNSS" in d for d in read_wigo(result.paths["scene-0001"]).report["degraded"])
     assert any("no IMU" in d for d in read_wigo(result.paths["scene-0002"]).report["degraded"])
+    assert any("no wheel speeds" in d for d in read_wigo(result.paths["scene-0003"]).report["degraded"])
