@@ -29,7 +29,8 @@ def scenes_command(
         return
     for s in summaries:
         console.print(
-            f"{s.name}  {s.location}  {s.samples} samples, {s.duration_s:.1f} s, {s.date_captured}  {s.description}",
+            f"{s.name}  {s.location}  {s.samples} samples, {s.duration_s:.1f} s, {s.date_captured}  "
+            f"CAN {'+'.join(s.can_bus) or 'none'}  {s.description}",
             highlight=False,
             markup=False,
         )

@@ -1,8 +1,8 @@
 """What scenes a data set holds, from its small tables only: to choose the `--scene`s of a run on a large one.
 
 nuScenes v1.0-trainval has 850 scenes in four locations; a run works on a few of them (`cama run --scene`). This
-reads scene.json, sample.json and log.json (never the large sample_data and ego_pose tables), so it answers in
-about a second for trainval.
+reads scene.json, sample.json and log.json (never the large sample_data and ego_pose tables) and looks for each
+scene's CAN bus files, so it answers in about a second for trainval.
 """
 
 from dataclasses import asdict, dataclass
@@ -11,6 +11,7 @@ from typing import Any
 
 from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.data.loader import find_version
+from cama_pipeline.data.schema import CAN_DIR, CAN_MESSAGES, can_file_name
 from cama_pipeline.data.tables import read_tables, table_path
 
 
@@ -26,6 +27,10 @@ class SceneSummary:
     """From the scene's first to its last sample."""
     date_captured: str
     description: str
+    can_bus: tuple[str, ...] = ()
+    """The CAN bus messages the scene has a file of (`cama_pipeline.data.schema.CAN_MESSAGES`): nuScenes' CAN
+    bus expansion leaves some scenes out, and WIGO passes the logged poses of a scene without wheel speeds
+    through unfused."""
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -64,6 +69,9 @@ def scene_summaries(
                 duration_s=(max(stamps) - min(stamps)) / 1e6 if stamps else 0.0,
                 date_captured=str(log["date_captured"]),
                 description=str(scene["description"]),
+                can_bus=tuple(
+                    m for m in CAN_MESSAGES if (root / CAN_DIR / can_file_name(scene["name"], m)).is_file()
+                ),
             )
         )
     return summaries

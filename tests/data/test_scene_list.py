@@ -2,12 +2,14 @@
 tables are named with exit 2."""
 
 import json
+import shutil
 from pathlib import Path
 
 from typer.testing import CliRunner
 
 from cama_pipeline.data import load_dataset
 from cama_pipeline.data.scene_list import scene_summaries
+from cama_pipeline.data.schema import CAN_DIR, GNSS_MESSAGE, IMU_MESSAGE, WHEEL_MESSAGE, can_file_name
 from cama_studio.cli import app
 from tests.conftest import GeneratedSite
 from tests.data.nuscenes_fixture import write_nuscenes_fixture
@@ -22,6 +24,9 @@ def test_the_list_agrees_with_the_loaded_data_set(tiny_site: GeneratedSite) -> N
         assert summary.location == scene.location and summary.samples == len(scene.frames)
         assert summary.duration_s == (scene.frames[-1].timestamp_us - scene.frames[0].timestamp_us) / 1e6
         assert summary.description == scene.description
+        can = scene.can
+        present = {"ms_imu": can.imu, "zoe_veh_info": can.wheel, "gnss": can.gnss}
+        assert set(summary.can_bus) == {name for name, series in present.items() if series is not None}
     assert scene_summaries(root, location=listed[0].location) == listed
     assert scene_summaries(root, location="no-such-city") == []
 
@@ -48,3 +53,17 @@ def test_a_broken_log_link_or_a_missing_table_is_named(tmp_path: Path) -> None:
     fixture.table_path("sample").unlink()
     missing = runner.invoke(app, ["scenes", str(fixture.root)])
     assert missing.exit_code == 2 and "sample.json" in missing.output
+
+
+def test_a_scene_without_a_can_file_lists_what_it_has(tiny_site: GeneratedSite, tmp_path: Path) -> None:
+    source = tiny_site.result.out_dir / "nuscenes"
+    root = tmp_path / "nuscenes"
+    for folder in (p for p in source.iterdir() if (p / "scene.json").is_file() or p.name == CAN_DIR):
+        shutil.copytree(folder, root / folder.name)
+    first = scene_summaries(root)[0].name
+    (root / CAN_DIR / can_file_name(first, WHEEL_MESSAGE)).unlink()
+    listed = {s.name: s.can_bus for s in scene_summaries(root)}
+    assert WHEEL_MESSAGE not in listed[first] and IMU_MESSAGE in listed[first]
+    assert all(WHEEL_MESSAGE in can for name, can in listed.items() if name != first)
+    printed = CliRunner().invoke(app, ["scenes", str(root)])
+    assert printed.exit_code == 0 and f"CAN {IMU_MESSAGE}+{GNSS_MESSAGE} " in printed.output
