@@ -3412,3 +3412,26 @@ def test_logged_height_whole_path_table() -> None:
             ]
             for cell, values in zip(row(t, f"{site}, {label}")[1:], expected, strict=True):
                 assert_shows(cell, values, f"logged height table, {site}, {label}")
+
+
+def test_without_wheels_table() -> None:
+    t = table("whole path, site and scene-0001's wheels", "Scenes without wheel speeds")
+    for site in ("9004", "9005"):
+        name = f"without_wheels_{site}.json"
+        assert_names_source(t, name, "bench/without_wheels.py")
+        for key in ("with_wheels", "without_wheels"):
+            run = results(name)["runs"][key]
+            scene, bev = run["scene_poses"], run["bev_iou_in_reconstruction_frame"]
+            expected: list[list[Expected]] = [
+                [scene["wigo"]["position_cm"], scene["wigo"]["rotation_deg"]],
+                [scene["sfm"]["position_cm"], scene["sfm"]["rotation_deg"]],
+                [run["poses"]["sfm"]["gauge_free_position_cm"]],
+                [run["elevation"]["rmse_cm"]],
+                [run["proposals_ap"]["observed_truth"]["mean_ap"]],
+                [run["sre"]["sre_ref_px"]],
+                [run["annotator_speed_up_in_reconstruction_frame"]],
+                [bev[c] for c in ("road", "curb", "lane_marking", "crosswalk")],
+            ]
+            label = f"{site}, {key.replace('_', ' ')}"
+            for cell, values in zip(row(t, label)[1:], expected, strict=True):
+                assert_shows(cell, values, f"without wheels table, {label}")
