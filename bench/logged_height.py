@@ -24,19 +24,16 @@ Usage: .venv/bin/python bench/logged_height.py --site SITE [--planar-site SITE-n
 import argparse
 import json
 import logging
-import platform
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from end_to_end import elevation_figures  # bench/end_to_end.py: this script's folder is on sys.path
+from paired_runs import path_differences, write_results  # bench/paired_runs.py
 from segment import pipeline_run, run_figures  # bench/segment.py
 
 from cama_pipeline.cameras import site_views
 from cama_pipeline.evaluate import load_true_poses
-from cama_pipeline.io import atomic_write_json
 from cama_pipeline.segment.checkpoint import ensure_unseen as ensure_segmenter_unseen
 from cama_pipeline.segment.checkpoint import load_checkpoint as load_segmenter
 from cama_pipeline.sfm.io import read_refined_poses
@@ -128,21 +125,15 @@ def run_figures_with_heights(site: Path, seconds: dict[str, float], site_id: str
 
 
 def differences(logged: dict[str, Any], planar: dict[str, Any]) -> dict[str, float]:
-    """No-logged-height minus logged-height, for the figures a user of the export reads."""
-
-    def pick(run: dict[str, Any]) -> dict[str, float]:
-        return {
-            "sfm_gauge_free_position_cm": run["poses"]["sfm"]["gauge_free_position_cm"],
-            "elevation_rmse_cm": run["elevation"]["rmse_cm"],
-            "elevation_rmse_about_offset_cm": run["elevation_relative"]["rmse_about_offset_cm"],
-            "sfm_clip_offset_spread_cm": run["clip_heights"]["sfm"]["offset_spread_cm"],
-            "proposal_map": run["proposals_ap"]["observed_truth"]["mean_ap"],
-            "sre_ref_px": run["sre"]["sre_ref_px"],
-            "annotator_speed_up_in_reconstruction_frame": run["annotator_speed_up_in_reconstruction_frame"],
-        }
-
-    a, b = pick(logged), pick(planar)
-    return {key: round(float(b[key]) - float(a[key]), 4) for key in a}
+    """No-logged-height minus logged-height: the common figures, and the relative elevation and the SfM clips'
+    height offsets' spread."""
+    out = path_differences(logged, planar)
+    for key, pick in (
+        ("elevation_rmse_about_offset_cm", lambda run: run["elevation_relative"]["rmse_about_offset_cm"]),
+        ("sfm_clip_offset_spread_cm", lambda run: run["clip_heights"]["sfm"]["offset_spread_cm"]),
+    ):
+        out[key] = round(float(pick(planar)) - float(pick(logged)), 4)
+    return out
 
 
 def main() -> None:
@@ -167,12 +158,8 @@ def main() -> None:
         "sites": {"logged_height": str(site), "no_logged_height": str(planar)},
         "runs": runs,
         "no_logged_minus_logged": differences(runs["logged_height"], runs["no_logged_height"]),
-        "command": "python bench/logged_height.py " + " ".join(sys.argv[1:]),
-        "machine": {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")},
     }
-    atomic_write_json(args.out, results, indent=1)
-    print(json.dumps(results["no_logged_minus_logged"], indent=1))
-    print(f"wrote {args.out}")
+    write_results(args.out, results, "no_logged_minus_logged")
 
 
 if __name__ == "__main__":

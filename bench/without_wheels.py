@@ -13,23 +13,19 @@ Usage: .venv/bin/python bench/without_wheels.py --site SITE [--scene scene-0001]
 """
 
 import argparse
-import json
 import logging
 import os
-import platform
 import shutil
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
 from end_to_end import pose_figures  # bench/end_to_end.py: this script's folder is on sys.path
+from paired_runs import path_differences, write_results  # bench/paired_runs.py
 from segment import run_figures  # bench/segment.py
 
 from cama_pipeline.cameras import site_views
 from cama_pipeline.data.masks import has_masks
 from cama_pipeline.data.schema import CAN_DIR, WHEEL_MESSAGE, can_file_name
-from cama_pipeline.io import atomic_write_json
 from cama_pipeline.site.io import read_site_manifest
 from cama_pipeline.synthetic.generate import DATASET_DIR, GROUND_TRUTH_DIR, MANIFEST, truth_dataset
 from cama_pipeline.wigo.io import read_wigo
@@ -99,26 +95,12 @@ def main() -> None:
         "without_wheels": measured_run(copy, masks, args.site_id, args.scene),
     }
     a, b = runs["with_wheels"], runs["without_wheels"]
-    results = {
-        "site": str(site),
-        "scene": args.scene,
-        "runs": runs,
-        "without_minus_with": {
-            "sfm_gauge_free_position_cm": b["poses"]["sfm"]["gauge_free_position_cm"]
-            - a["poses"]["sfm"]["gauge_free_position_cm"],
-            "scene_sfm_position_cm": b["scene_poses"]["sfm"]["position_cm"]
-            - a["scene_poses"]["sfm"]["position_cm"],
-            "elevation_rmse_cm": b["elevation"]["rmse_cm"] - a["elevation"]["rmse_cm"],
-            "proposal_map": b["proposals_ap"]["observed_truth"]["mean_ap"]
-            - a["proposals_ap"]["observed_truth"]["mean_ap"],
-            "sre_ref_px": b["sre"]["sre_ref_px"] - a["sre"]["sre_ref_px"],
-        },
-        "command": "python bench/without_wheels.py " + " ".join(sys.argv[1:]),
-        "machine": {"python": platform.python_version(), "time": time.strftime("%Y-%m-%d %H:%M")},
-    }
-    atomic_write_json(args.out, results, indent=1)
-    print(json.dumps(results["without_minus_with"], indent=1))
-    print(f"wrote {args.out}")
+    differences = path_differences(a, b)
+    differences["scene_sfm_position_cm"] = round(
+        b["scene_poses"]["sfm"]["position_cm"] - a["scene_poses"]["sfm"]["position_cm"], 4
+    )
+    results = {"site": str(site), "scene": args.scene, "runs": runs, "without_minus_with": differences}
+    write_results(args.out, results, "without_minus_with")
 
 
 if __name__ == "__main__":
