@@ -2,7 +2,7 @@
 
 import math
 from dataclasses import asdict, dataclass, fields
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 RobustKernel = Literal["huber", "cauchy", "none"]
 WithoutWheels = Literal["logged_pose", "refuse"]
@@ -76,15 +76,11 @@ class WigoConfig:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == "gnss_robust":
-                if value not in ("huber", "cauchy", "none"):
-                    raise ValueError(f"WigoConfig.gnss_robust must be huber, cauchy or none, got {value!r}")
-                continue
-            if f.name == "without_wheels":
-                if value not in ("logged_pose", "refuse"):
-                    raise ValueError(
-                        f"WigoConfig.without_wheels must be logged_pose or refuse, got {value!r}"
-                    )
+            if f.name in _CHOICES:
+                choices = get_args(_CHOICES[f.name])
+                if value not in choices:
+                    allowed = f"{', '.join(choices[:-1])} or {choices[-1]}"
+                    raise ValueError(f"WigoConfig.{f.name} must be {allowed}, got {value!r}")
                 continue
             if f.name == "free_flat_logged_height":
                 if not isinstance(value, bool):
@@ -116,6 +112,9 @@ class WigoConfig:
         """Plain JSON values (tuples as lists), for output files and fingerprints."""
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
+
+_CHOICES: dict[str, Any] = {"gnss_robust": RobustKernel, "without_wheels": WithoutWheels}
+"""The fields that take one of a Literal's values."""
 
 _POSITIVE: tuple[str, ...] = (
     "node_rate_hz",

@@ -47,6 +47,23 @@ FLAT_HEIGHT_GAUGE_SIGMA_M = 1.0
 it fixes the gauge the free heights leave open, so that the marginal covariances exist."""
 
 
+FREE_HEIGHT = "free: every logged z is 0 (a 2D localization)"
+"""The report's `logged_pose_height` of a clip whose logged poses carry no height."""
+
+
+def logged_pose_sigmas(cameras: LoggedPoses, config: WigoConfig) -> tuple[np.ndarray, bool]:
+    """The logged pose's sigmas in gtsam's body tangent order [rx, ry, rz, tx, ty, tz] (a component the config
+    leaves free at FREE_SIGMA), and whether the clip's logged z are all 0 with `free_flat_logged_height`: a 2D
+    localization (nuScenes'), whose height is then free as well."""
+    horizontal, vertical, heading_deg, tilt_deg = config.logged_pose_sigmas
+    flat = config.free_flat_logged_height and not np.any(cameras.translation[:, 2])
+    sigmas = np.array(
+        [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg)]
+        + [horizontal, horizontal, 0.0 if flat else vertical]
+    )
+    return np.where(sigmas > 0, sigmas, FREE_SIGMA), flat
+
+
 class NoGlobalConstraint(ValueError):
     """A clip with neither GNSS fixes nor the logged ego pose to tie it to the global frame."""
 
@@ -224,21 +241,12 @@ class _GraphBuilder:
         first = np.array([int(np.argmin(np.abs(self.nodes - cam.times_us[0])))])
         inside = np.flatnonzero((self.nodes >= cam.times_us[0]) & (self.nodes <= cam.times_us[-1]))
         chosen = inside if len(inside) else first
-        horizontal, vertical, heading_deg, tilt_deg = self.config.logged_pose_sigmas
-        flat = self.config.free_flat_logged_height and not np.any(cam.translation[:, 2])
-        if flat:  # a 2D localization (nuScenes'): z = 0 is no height measurement, only the gauge below
-            vertical = 0.0
-            self.report["logged_pose_height"] = "free: every logged z is 0 (a 2D localization)"
-        else:
-            self.report["logged_pose_height"] = "fused"
+        base, flat = logged_pose_sigmas(cam, self.config)  # flat: z = 0 is no height, only the gauge below
+        self.report["logged_pose_height"] = FREE_HEIGHT if flat else "fused"
         # n factors within one correlation time carry the information of one measurement
         per_window = self.config.logged_pose_correlation_s * self.config.node_rate_hz
         spread = math.sqrt(min(len(chosen), max(per_window, 1.0)))
-        base = np.array(
-            [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg)]
-            + [horizontal, horizontal, vertical]
-        )
-        noise = gtsam.noiseModel.Diagonal.Sigmas(np.where(base > 0, base, FREE_SIGMA) * spread)
+        noise = gtsam.noiseModel.Diagonal.Sigmas(base * spread)
         for k in chosen:
             prior = logged_pose_at(cam, int(self.nodes[k]))
             self.graph.add(gtsam.PriorFactorPose3(X(int(k)), prior, noise))

@@ -68,9 +68,14 @@ def logged_poses(scene: Scene) -> LoggedPoses:
         rotation=np.stack([im.global_from_ego.rotation_matrix() for im in images]),
         translation=np.stack([im.global_from_ego.translation for im in images]),
     )
-    if np.any(np.diff(cameras.times_us) < 0):
-        raise ValueError(f"scene {scene.name!r}: camera timestamps are not in time order")
+    _check_camera_order(scene.name, cameras.times_us)
     return cameras
+
+
+def _check_camera_order(scene: str, times_us: np.ndarray) -> None:
+    """ValueError naming the scene when its camera times go back (poses are interpolated in time order)."""
+    if np.any(np.diff(times_us) < 0):
+        raise ValueError(f"scene {scene!r}: camera timestamps are not in time order")
 
 
 def clip_inputs(scene: Scene) -> ClipInputs:
@@ -96,8 +101,7 @@ def checked_inputs(inputs: ClipInputs) -> ClipInputs:
     name = inputs.scene
     if len(inputs.cameras.times_us) == 0:
         raise ValueError(f"scene {name!r}: no camera images, nothing to estimate poses for")
-    if np.any(np.diff(inputs.cameras.times_us) < 0):
-        raise ValueError(f"scene {name!r}: camera timestamps are not in time order")
+    _check_camera_order(name, inputs.cameras.times_us)
     if inputs.wheel is None or len(inputs.wheel.utime) < 2:
         raise _no_wheels(name)
     wheel = _in_time_order(inputs.wheel, name, WHEEL_MESSAGE)

@@ -7,12 +7,16 @@ scene would stop a whole `cama run` over a location. The stage passes its logged
 refines them as it refines fused ones, the logged poses' sigmas standing for their uncertainty.
 """
 
-import math
-
 import numpy as np
 
 from cama_pipeline.wigo.config import WigoConfig
-from cama_pipeline.wigo.fusion import FLAT_HEIGHT_GAUGE_SIGMA_M, FREE_SIGMA, FusedPoses, NoGlobalConstraint
+from cama_pipeline.wigo.fusion import (
+    FLAT_HEIGHT_GAUGE_SIGMA_M,
+    FREE_HEIGHT,
+    FusedPoses,
+    NoGlobalConstraint,
+    logged_pose_sigmas,
+)
 from cama_pipeline.wigo.inputs import LoggedPoses
 
 NO_ODOMETRY = "none: no wheel speeds; the logged ego poses as they are"
@@ -29,17 +33,14 @@ def logged_pose_clip(scene: str, cameras: LoggedPoses, config: WigoConfig) -> Fu
             f"scene {scene!r}: no wheel speeds and the logged ego pose is left out (--no-logged-pose): nothing "
             "gives the clip's poses"
         )
-    horizontal, vertical, heading_deg, tilt_deg = config.logged_pose_sigmas
-    flat = config.free_flat_logged_height and not np.any(cameras.translation[:, 2])
-    sigmas = np.array(
-        [math.radians(tilt_deg), math.radians(tilt_deg), math.radians(heading_deg), horizontal, horizontal]
-        + [FLAT_HEIGHT_GAUGE_SIGMA_M if flat else vertical]
-    )
-    covariance = np.diag(np.where(sigmas > 0, sigmas, FREE_SIGMA) ** 2)
+    sigmas, flat = logged_pose_sigmas(cameras, config)
+    if flat:  # the height as loose as the fusion's gauge leaves it
+        sigmas[5] = FLAT_HEIGHT_GAUGE_SIGMA_M
+    covariance = np.diag(sigmas**2)
     report = {
         "odometry": NO_ODOMETRY,
         "global_constraint": "logged_pose",
-        "logged_pose_height": "free: every logged z is 0 (a 2D localization)" if flat else "fused",
+        "logged_pose_height": FREE_HEIGHT if flat else "fused",
         "degraded": ["no wheel speeds: the logged ego poses are passed through, not fused"],
     }
     return FusedPoses(
