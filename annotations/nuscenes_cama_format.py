@@ -9,8 +9,12 @@ Layout written into `out` (a fresh folder; the caller stages it and renames it i
                                     file system allows (`link_tables`), else copied byte for byte
         ego_pose.json               rewritten: the same records (tokens, order, fields, JSON indentation) with
                                     `translation` and `rotation` of the refined global_from_ego (below)
-        map_vectors.json            per sample (key frame), the map vectors in that sample's refined ego frame:
-                                    a MapTR vectors file (`annotations.maptr_format`, `read_maptr` reads it)
+        map_vectors.json            per sample (key frame) of the exported scenes, the map vectors in that
+                                    sample's refined ego frame: a MapTR vectors file (`annotations.maptr_format`,
+                                    `read_maptr` reads it). Samples of other scenes are left out, not written
+                                    with no vectors: a scene nobody annotated is not a road without markings,
+                                    and another city's scenes share the site's coordinates (each city has its
+                                    own map frame), so the site's vectors would land in them
         pose_sources.json           per ego_pose token its source (sfm, wigo+sfm, wigo, coarse), with counts
     <out>/<entry> -> <source root>/<entry>
                                     an absolute symbolic link for every other top-level entry of the source root
@@ -31,7 +35,7 @@ import logging
 import os
 import shutil
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -200,11 +204,14 @@ def export_nuscenes_cama(
     max_borrow_gap_us: int = MAX_BORROW_GAP_US,
     box: Box = MAPTR_RANGE,
     n_points: int = POINTS_PER_VECTOR,
+    scenes: Collection[str] | None = None,
     show_progress: bool = False,
 ) -> NuscenesCamaResult:
     """Write the nuScenes-CAMAv2 root into `out` (the module docstring's layout), ego poses from `poses`.
 
-    `dataset` is the data set loaded from `dataset_root`; its version folder is the one exported.
+    `dataset` is the data set loaded from `dataset_root`, whole or by scene (`load_dataset(root, scenes=...)`:
+    the records of the scenes left out keep their logged poses); its version folder is the one exported.
+    `scenes`: the scenes whose samples get map vectors (names of loaded scenes); None: every loaded scene.
     `link_tables`: hard-link the unchanged tables where the file system allows (else copy).
     `max_borrow_gap_us`: how far a non-camera record may take a camera image's correction.
     `box`, `n_points`: the map vectors' ego-frame clip box and points per vector (as the MapTR export's).
@@ -216,13 +223,19 @@ def export_nuscenes_cama(
         raise ValueError(f"max_borrow_gap_us: must be >= 0, got {max_borrow_gap_us}")
     dataset_root, out = Path(dataset_root).absolute(), Path(out).absolute()
     _check_out(out)
+    loaded = [scene.name for scene in dataset.scenes]
+    unknown = sorted(set(scenes or ()) - set(loaded))
+    if unknown:
+        raise ValueError(f"scenes {unknown}: not among the loaded scenes {loaded}")
+    exported = loaded if scenes is None else [name for name in loaded if name in scenes]
     source_dir = dataset_root / dataset.version
     tables = source_tables(dataset_root, dataset.version)
     entries = refined_ego_poses(dataset, tables, poses, source_dir, max_borrow_gap_us=max_borrow_gap_us)
     ego_pose = ego_pose_json(source_dir, tables[EGO_POSE], entries)
     frame_pose = reference_poses(entries, tables, poses, source_dir)
     with StageProgress("cama export", logger=logger, enabled=show_progress) as progress:
-        task = progress.add_task("map vectors", total=sum(len(s.frames) for s in dataset.scenes))
+        total = sum(len(scene.frames) for scene in dataset.scenes if scene.name in exported)
+        task = progress.add_task("map vectors", total=total)
         vectors = build_maptr(
             annotations,
             dataset,
@@ -231,6 +244,7 @@ def export_nuscenes_cama(
             n_points=n_points,
             frame_pose=frame_pose,
             on_sample=lambda: progress.advance(task),
+            scenes=exported,
         )
     version = cama_version(dataset.version)
     sources = pose_sources_json(

@@ -11,6 +11,8 @@ Refined ego poses, per ego_pose record (nuScenes has one per sample_data):
   The nearest image's correction rather than an interpolation: cameras fire at 12 Hz, so the nearest one is at
   most ~40 ms away, and the correction (a drift of the logged trajectory) changes little in that time.
 - a record no sample_data refers to: logged. A record shared by several sample_data: the first camera image's.
+- every record of a scene the data set was not loaded with (`load_dataset(root, scenes=...)`, as `cama export`
+  loads the sites' scenes of a large data set): logged, since nothing refined it.
 
 pose_sources.json: {"format": "cama-studio-nuscenes-pose-sources", "format_version": 1, "version",
 "source_version", "non_camera_records" (the rule, in words), "max_borrow_gap_us", "counts": {source: records},
@@ -196,7 +198,7 @@ def refined_ego_poses(
     entries, corrections = _camera_entries(dataset, tables, poses, version_dir)
     channels = sensor_channels(tables, version_dir)
     sample_data_path = table_path(version_dir, "sample_data")
-    dataset_images = {image.token for image in dataset.camera_images()}
+    loaded_scenes = {scene.token for scene in dataset.scenes}
     for token, record in tables["sample_data"].items():
         channel, modality = channels[token]
         ego_pose_token = record["ego_pose_token"]
@@ -207,15 +209,17 @@ def refined_ego_poses(
                 record=token,
                 field="ego_pose_token",
             )
-        if modality == CAMERA_MODALITY and token not in dataset_images:
+        if ego_pose_token in entries:
+            continue
+        scene = _scene_token(tables, token, version_dir)
+        if modality == CAMERA_MODALITY and scene in loaded_scenes:  # else: a scene left out of the load
             raise DatasetError(
                 "camera record missing from the data set: the data set was not loaded from this root",
                 path=sample_data_path,
                 record=token,
             )
-        if ego_pose_token not in entries:
-            near = corrections.get(_scene_token(tables, token, version_dir), [])
-            entries[ego_pose_token] = _borrowed(tables, token, channel, near, max_borrow_gap_us, version_dir)
+        near = corrections.get(scene, [])
+        entries[ego_pose_token] = _borrowed(tables, token, channel, near, max_borrow_gap_us, version_dir)
     for ego_pose_token in tables[EGO_POSE]:
         entries.setdefault(ego_pose_token, EgoPoseEntry("coarse", None, None, None))
     return entries

@@ -117,15 +117,22 @@ def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:
 
 def _write_nuscenes_cama(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     data, poses = inputs.need_dataset()
+    scenes = inputs.request.scenes or poses.scenes
     result = export_nuscenes_cama(
         inputs.request.annotations,
         data.root,
         data,
         staging,
         poses=poses.lookup,
+        scenes=scenes,
         show_progress=inputs.request.show_progress,
     )
-    return {"version": result.version, "pose_sources": result.counts, "samples": result.samples}
+    return {
+        "version": result.version,
+        "scenes": list(scenes),
+        "pose_sources": result.counts,
+        "samples": result.samples,
+    }
 
 
 WRITERS: dict[ExportFormat, Writer] = {
@@ -137,10 +144,10 @@ WRITERS: dict[ExportFormat, Writer] = {
 """One writer per format."""
 
 
-def _scenes_to_load(export_format: ExportFormat, workspace: Workspace) -> list[str] | None:
-    """The scenes of the workspace's sites (a large data set is then read by scene, not whole), or None for
-    every scene: without sites, or for nuscenes-cama, which rewrites every ego pose of the data set."""
-    if export_format is ExportFormat.nuscenes_cama or not workspace.sites_index().is_file():
+def _scenes_to_load(workspace: Workspace) -> list[str] | None:
+    """The scenes of the workspace's sites (a large data set is then read by scene, not whole: nuscenes-cama
+    keeps the logged poses of the other scenes' records), or None for every scene when it has no sites."""
+    if not workspace.sites_index().is_file():
         return None
     return read_site_scenes(workspace.sites_index())
 
@@ -151,7 +158,7 @@ def export_inputs(request: ExportRequest) -> ExportInputs:
         return ExportInputs(request, None, None, None)
     dataset_root = Path(request.dataset_root)
     workspace = Workspace.resolve(request.workspace, dataset_root)
-    data = load_dataset(dataset_root, scenes=_scenes_to_load(request.format, workspace))
+    data = load_dataset(dataset_root, scenes=_scenes_to_load(workspace))
     poses = export_poses(request.poses, data, workspace, request.annotations.site_id, request.site_id)
     if request.scenes is not None:
         unknown = sorted(set(request.scenes) - set(poses.scenes))

@@ -161,6 +161,41 @@ def test_tiny_site_sources_and_map_vectors(
             assert not _on_some_line(wrong, annotations)
 
 
+def test_a_data_set_loaded_by_scene(tiny_site: GeneratedSite, georef: Georeference, tmp_path: Path) -> None:
+    """Loaded with two of its scenes (as `cama export` loads a site's scenes of a large data set), the export
+    still rewrites the whole ego_pose.json: those scenes' images get the lookup's poses, every record of the
+    other scenes stays as logged, and map_vectors.json lists only the samples of the exported scenes, though the
+    annotations lie ahead of every frame (another scene's samples would otherwise get the site's vectors);
+    `scenes` narrows them further, and a scene not loaded is refused before anything is written."""
+    root = tiny_site.result.out_dir / "nuscenes"
+    whole = load_dataset(root)
+    chosen = [scene.name for scene in whole.scenes[:2]]
+    assert len(whole.scenes) > len(chosen)
+    dataset = load_dataset(root, scenes=chosen)
+    annotations = _flat_lines(whole, georef)
+    result = export_nuscenes_cama(annotations, root, dataset, tmp_path / "out", poses=shifting_lookup)
+    exported = load_dataset(tmp_path / "out")
+    for scene in whole.scenes:
+        for image in scene.all_images():
+            want = shifting_lookup(image) if scene.name in chosen else coarse_pose(image)
+            got = exported.image(image.token).global_from_ego
+            np.testing.assert_allclose(got.matrix(), want.global_from_ego.matrix(), atol=1e-9)
+    vectors = read_maptr(result.version_dir / "map_vectors.json")
+    frames = [f.token for scene in dataset.scenes for f in scene.frames]
+    assert [s.sample_token for s in vectors.samples] == frames and result.samples == len(frames)
+    assert all(sample.vectors for sample in vectors.samples)
+    one = export_nuscenes_cama(
+        annotations, root, dataset, tmp_path / "one", poses=shifting_lookup, scenes=chosen[1:]
+    )
+    assert {s.scene for s in read_maptr(one.version_dir / "map_vectors.json").samples} == {chosen[1]}
+    left_out = whole.scenes[-1].name
+    with pytest.raises(ValueError, match=f"scenes \\['{left_out}'\\]: not among the loaded scenes"):
+        export_nuscenes_cama(
+            annotations, root, dataset, tmp_path / "bad", poses=shifting_lookup, scenes=[left_out]
+        )
+    assert not (tmp_path / "bad").exists()
+
+
 def _fixture_dataset(tmp_path: Path, *, n_samples: int = 3, with_lidar: bool = True) -> tuple[Path, Dataset]:
     """The hand-written fixture (6 cameras, a key frame and a sweep per sample, one lidar key frame each)."""
     fixture = write_nuscenes_fixture(

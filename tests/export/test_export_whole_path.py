@@ -16,6 +16,7 @@ from annotations.lift import lift_element
 from cama_pipeline.bev import read_bev
 from cama_pipeline.data import load_dataset
 from cama_pipeline.sfm.io import read_refined_poses
+from cama_pipeline.site.io import read_site_scenes
 from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
 from cama_studio.pipeline import PipelineResult
@@ -122,7 +123,8 @@ def test_nuscenes_cama_root_carries_the_sfm_poses(
     site_export, tiny_site: GeneratedSite, tmp_path: Path
 ) -> None:
     """`--format nuscenes-cama`: a nuScenes root our loader reads, whose camera ego poses are the SfM poses for
-    the images SfM posed; the map vectors beside it."""
+    the images SfM posed; the map vectors beside it for the site's samples only; the scene the site left out
+    (the night clip) keeps its logged poses and gets no map vectors (nobody annotated it)."""
     _out, site_id, workspace, dataset, _count = site_export
     source = tmp_path / "set.json"
     AnnotationSet.read_json(next(iter(workspace.root.glob("proposals/*.json")))).write_json(source)
@@ -139,6 +141,18 @@ def test_nuscenes_cama_root_carries_the_sfm_poses(
     assert posed
     for image in posed:
         np.testing.assert_allclose(image.global_from_ego.matrix(), sfm[image.token], atol=1e-6)
+    site_scenes = set(read_site_scenes(workspace.sites_index()))
+    left_out = [scene for scene in dataset.scenes if scene.name not in site_scenes]
+    assert left_out, "the tiny site's night clip should be left out of its site"
+    samples = json.loads((version / "map_vectors.json").read_text())["samples"]
+    assert samples and {s["scene"] for s in samples} == site_scenes
+    sources = json.loads((version / "pose_sources.json").read_text())["ego_poses"]
+    for scene in left_out:
+        for image in scene.all_images():
+            kept = refined.image(image.token).global_from_ego
+            np.testing.assert_array_equal(kept.matrix(), image.global_from_ego.matrix())
+    logged = {entry["sample_data"] for entry in sources.values() if entry["logged"]}
+    assert {image.token for scene in left_out for image in scene.all_images()} <= logged
 
 
 def test_maptr_keeps_to_the_site_scenes(site_export, tiny_site: GeneratedSite, tmp_path: Path) -> None:
@@ -159,21 +173,17 @@ def test_maptr_keeps_to_the_site_scenes(site_export, tiny_site: GeneratedSite, t
     assert {s["pose_source"] for s in samples} <= {"sfm", "wigo+sfm", "wigo"}
 
 
-@pytest.mark.parametrize(
-    ("export_format", "by_scene"), [("maptr", True), ("cama", True), ("nuscenes-cama", False)]
-)
+@pytest.mark.parametrize("export_format", ["maptr", "cama", "nuscenes-cama"])
 def test_a_large_data_set_is_read_by_the_sites_scenes(
     site_export,
     tiny_site: GeneratedSite,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
     export_format,
-    by_scene,
 ) -> None:
-    """cama and maptr read only the workspace's sites' scenes of the data set (trainval's 850 would take minutes
-    and gigabytes); nuscenes-cama reads every scene, since it rewrites every ego pose of the root."""
+    """Every format reads only the workspace's sites' scenes of the data set (trainval's 850 would take minutes
+    and gigabytes); nuscenes-cama too, keeping the other scenes' ego poses as logged."""
     from cama_pipeline.export import run as export_run
-    from cama_pipeline.site.io import read_site_scenes
 
     _out, site_id, workspace, _dataset, _count = site_export
     asked: list[object] = []
@@ -203,5 +213,4 @@ def test_a_large_data_set_is_read_by_the_sites_scenes(
         args += ["--elevation", str(tmp_path / "elevation.npy")]
     result = runner.invoke(app, [*args, "--workspace", str(workspace.root)])
     assert result.exit_code == 0, result.output
-    expected = read_site_scenes(workspace.sites_index()) if by_scene else None
-    assert asked == [expected]
+    assert asked == [read_site_scenes(workspace.sites_index())]
