@@ -78,10 +78,10 @@ def _check_camera_order(scene: str, times_us: np.ndarray) -> None:
         raise ValueError(f"scene {scene!r}: camera timestamps are not in time order")
 
 
-def clip_inputs(scene: Scene) -> ClipInputs:
+def clip_inputs(scene: Scene, cameras: LoggedPoses | None = None) -> ClipInputs:
     """The checked inputs of a loaded scene (see the module docstring for what is refused; NoWheelSpeeds for a
-    scene without wheel speeds)."""
-    cameras = logged_poses(scene)
+    scene without wheel speeds); `cameras`: its `logged_poses` when the caller has them already."""
+    cameras = logged_poses(scene) if cameras is None else cameras
     if scene.can.wheel is None:
         raise _no_wheels(scene.name)
     return checked_inputs(ClipInputs(scene.name, cameras, scene.can.wheel, scene.can.imu, scene.can.gnss))

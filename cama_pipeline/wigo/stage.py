@@ -46,13 +46,14 @@ def scene_fingerprint(dataset: Dataset, scene: Scene, config: WigoConfig) -> str
 def fuse_scene(scene: Scene, config: WigoConfig) -> FusedPoses:
     """WIGO's poses of one scene: the fusion of its inputs, or for a scene without wheel speeds its logged poses
     passed through (`WigoConfig.without_wheels`; NoWheelSpeeds when that is `refuse`)."""
+    cameras = logged_poses(scene)
     try:
-        inputs = clip_inputs(scene)
+        inputs = clip_inputs(scene, cameras)
     except NoWheelSpeeds as error:
         if config.without_wheels == "refuse":
             raise
         logger.warning("%s: passing the logged ego poses through", error)
-        return logged_pose_clip(scene.name, logged_poses(scene), config)
+        return logged_pose_clip(scene.name, cameras, config)
     return fuse_clip(inputs, config)
 
 
