@@ -17,7 +17,9 @@ SRE at 960x540, the simulated annotator), and beyond it:
     it: the spread of the clips' offsets is how far apart in height the clips were left.
 Then the differences, no-logged-height minus logged-height.
 
-Usage: .venv/bin/python bench/logged_height.py --site SITE [--planar-site SITE-no-logged-height]
+`--measure-only` skips `cama run` and measures the two workspaces as the last run left them (no stage seconds).
+
+Usage: .venv/bin/python bench/logged_height.py --site SITE [--planar-site SITE-no-logged-height] [--measure-only]
        [--out bench/results/logged_height.json]
 """
 
@@ -142,6 +144,7 @@ def main() -> None:
     parser.add_argument("--planar-site", type=Path, default=None, help="default: SITE-no-logged-height")
     parser.add_argument("--site-id", default="site-001")
     parser.add_argument("--out", type=Path, default=RESULTS / "logged_height.json")
+    parser.add_argument("--measure-only", action="store_true", help="the workspaces as they are, no `cama run`")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site = args.site
@@ -152,9 +155,10 @@ def main() -> None:
         ensure_segmenter_unseen(load_segmenter(None), each)
     runs = {}
     for name, each in (("logged_height", site), ("no_logged_height", planar)):
-        _, seconds = pipeline_run(each, "auto", WORKSPACE)
+        seconds = {} if args.measure_only else pipeline_run(each, "auto", WORKSPACE)[1]
         runs[name] = run_figures_with_heights(each, seconds, args.site_id)
     results = {
+        "measure_only": args.measure_only,
         "sites": {"logged_height": str(site), "no_logged_height": str(planar)},
         "runs": runs,
         "no_logged_minus_logged": differences(runs["logged_height"], runs["no_logged_height"]),

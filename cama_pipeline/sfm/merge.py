@@ -57,6 +57,15 @@ class MergeConfig:
     num_threads: int = 2
     """Solver threads of the merged BA: it runs alone once the clips are done (COLMAP uses one thread
     below 50k residuals whatever this says)."""
+    height_ties: bool = True
+    """Give the clips that no point joins and whose heights nothing measured (2D logged poses, no GNSS) the
+    height of the road the other clips drove (`cama_pipeline.sfm.height_ties`)."""
+    height_tie_radius_m: float = 8.0
+    """A keyframe this close (horizontally) to another clip's track is taken to stand on the same road: the
+    opposite carriageway of a four-lane road is about 7 m away (the tiny synthetic site's two drives: 7.3 m)."""
+    height_tie_min_pairs: int = 2
+    """Keyframes near the other group's track needed to tie a clip's height (two drives that cross meet at
+    one or two keyframes each)."""
 
     def __post_init__(self) -> None:
         if self.num_threads < 1:
@@ -65,13 +74,23 @@ class MergeConfig:
             raise ValueError(
                 f"MergeConfig.global_max_iterations must be >= 1, got {self.global_max_iterations}"
             )
+        if self.height_tie_min_pairs < 1:
+            raise ValueError(
+                f"MergeConfig.height_tie_min_pairs must be >= 1, got {self.height_tie_min_pairs}"
+            )
         if self.min_correspondences < 3:
             raise ValueError(f"MergeConfig.min_correspondences must be >= 3, got {self.min_correspondences}")
         if not 0 <= self.global_function_tolerance < 1:
             raise ValueError(
                 f"MergeConfig.global_function_tolerance must be in [0, 1), got {self.global_function_tolerance}"
             )
-        for name in ("max_error_m", "max_shift_m", "max_rotation_deg", "max_scale_change"):
+        for name in (
+            "max_error_m",
+            "max_shift_m",
+            "max_rotation_deg",
+            "max_scale_change",
+            "height_tie_radius_m",
+        ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"MergeConfig.{name} must be > 0, got {getattr(self, name)}")
 

@@ -11,7 +11,7 @@ import shutil
 import sqlite3
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Sequence
 from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -29,6 +29,7 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import Executor, make_executor
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views, refined_views
+from cama_pipeline.sfm.height_ties import HeightTie, tie_heights
 from cama_pipeline.sfm.io import (
     PoseEntry,
     read_model,
@@ -49,6 +50,8 @@ from cama_pipeline.sfm.merge import (
 )
 from cama_pipeline.sfm.triangulate import model_seeds
 from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
+from cama_pipeline.wigo.fusion import height_is_free
+from cama_pipeline.wigo.io import read_wigo
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -204,9 +207,11 @@ def merge_site(
     config: SfmConfig,
     merge_config: MergeConfig,
     progress: StageProgress | None = None,
+    free_height: Collection[str] = (),
 ) -> tuple[GuidedResult, list[CameraView], dict[str, Any]]:
-    """Align the successful clips, then re-triangulate and adjust their union as one model: (its result,
-    the aligned views that went in, the merge report). SfmError when every clip failed."""
+    """Align the successful clips (the heights of `free_height` scenes not joined by points tied to the
+    others', `height_ties`), then re-triangulate and adjust their union as one model: (its result, the aligned
+    views that went in, the merge report). SfmError when every clip failed."""
     task_of = {task.scene: task for task in tasks}
     models = [ClipModel(o.scene, read_model(task_of[o.scene].model_dir), o.views) for o in outcomes if o.ok]
     if not models:
@@ -214,6 +219,15 @@ def merge_site(
         raise SfmError(f"every clip failed ({reasons})")
     database, image_dir = tasks[0].database, tasks[0].image_dir
     alignments = align_clips(models, cross_clip_matches(database), merge_config)
+    ties: dict[str, HeightTie] = {}
+    if merge_config.height_ties:
+        alignments, ties = tie_heights(
+            models,
+            alignments,
+            free_height,
+            radius_m=merge_config.height_tie_radius_m,
+            min_pairs=merge_config.height_tie_min_pairs,
+        )
     union = [
         v for m, a in zip(models, alignments, strict=True) for v in aligned_views(m.views, a.world_from_clip)
     ]
@@ -238,7 +252,11 @@ def merge_site(
         odometry=odometry,
         seeds=seeds,
     )
-    merge = {"groups": merge_groups(alignments), "alignments": {a.scene: a.to_json() for a in alignments}}
+    merge = {
+        "groups": merge_groups(alignments),
+        "alignments": {a.scene: a.to_json() for a in alignments},
+        "height_ties": {scene: tie.to_json() for scene, tie in ties.items()},
+    }
     return result, union, merge
 
 
@@ -263,13 +281,17 @@ def reconstruct_site(
     executor: Executor,
     merge_config: MergeConfig | None = None,
     progress: StageProgress | None = None,
+    free_height: Collection[str] = (),
 ) -> SiteReconstruction:
-    """Parallel per-clip reconstruction, then the merge (clip models are kept in `clips_dir/<scene>/`)."""
+    """Parallel per-clip reconstruction, then the merge (clip models are kept in `clips_dir/<scene>/`);
+    `free_height`: the scenes whose heights WIGO left free (`merge_site`)."""
     started = time.perf_counter()
     tasks = _clip_tasks(clips, database, image_dir, config, clips_dir)
     outcomes = run_clips(tasks, executor, progress)
     clipped = time.perf_counter()
-    result, union, merge = merge_site(outcomes, tasks, config, merge_config or MergeConfig(), progress)
+    result, union, merge = merge_site(
+        outcomes, tasks, config, merge_config or MergeConfig(), progress, free_height
+    )
     ended = time.perf_counter()
     report = {
         "executor": executor.name,
@@ -316,6 +338,17 @@ def write_site(
     write_points(workspace.sfm_points(site_id), sparse_points(site.reconstruction, read_mask))
     report = {"site_id": site_id, "fingerprint": digest, **extra, **site.report}
     return write_report(workspace.sfm_report(site_id), report)
+
+
+def free_height_scenes(workspace: Workspace, scenes: Sequence[str]) -> frozenset[str]:
+    """The scenes whose WIGO poses left the height free (2D logged poses, no GNSS; a scene without a WIGO file
+    counts as measured)."""
+    free = set()
+    for scene in scenes:
+        path = workspace.wigo(scene)
+        if path.is_file() and height_is_free(read_wigo(path).report):
+            free.add(scene)
+    return frozenset(free)
 
 
 def run_site(
@@ -366,6 +399,7 @@ def run_site(
             executor=executor,
             merge_config=merge_config,
             progress=progress,
+            free_height=free_height_scenes(workspace, [scene["scene"] for scene in manifest["scenes"]]),
         )
     extra = {"config": asdict(config), "merge_config": asdict(merge_config)}
     report = write_site(workspace, site_id, digest, site, dataset_masks(dataset, views), extra)

@@ -17,6 +17,7 @@ of GNSS fixes within `margin_s`), solved all the same.
 
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +49,15 @@ it fixes the gauge the free heights leave open, so that the marginal covariances
 
 
 FREE_HEIGHT = "free: every logged z is 0 (a 2D localization)"
+
+
+def height_is_free(report: Mapping[str, Any]) -> bool:
+    """Whether nothing measured a fused clip's height (its report says so): 2D logged poses and no GNSS fix, so
+    its height is only where the gauge held it."""
+    constraint = str(report.get("global_constraint", ""))
+    return report.get("logged_pose_height") == FREE_HEIGHT and "gnss" not in constraint
+
+
 """The report's `logged_pose_height` of a clip whose logged poses carry no height."""
 
 

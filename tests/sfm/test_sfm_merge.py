@@ -6,7 +6,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cama_pipeline.cameras import CameraView
+from cama_pipeline.sfm.height_ties import tie_heights
 from cama_pipeline.sfm.merge import (
+    Alignment,
     ClipModel,
     MergeConfig,
     align_clips,
@@ -119,3 +121,55 @@ def test_aligned_views_move_the_ego_poses_rigidly() -> None:
     rotation = moved.world_from_ego[:3, :3]
     np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
     assert np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0])) == pytest.approx(10.0)
+
+
+def _drive(scene: str, xs: np.ndarray, y: float, lift: float) -> ClipModel:
+    """A clip of one view per ego position along y = const on a road rising 2 % in x, `lift` metres too high."""
+    views = []
+    for k, x in enumerate(xs):
+        pose = np.eye(4)
+        pose[:3, 3] = (float(x), y, 0.02 * float(x) + lift)
+        name = f"{scene}-{k}"
+        views.append(CameraView(name, name, scene, "CAM_FRONT", k, k, pose, np.eye(4), np.eye(3), 40, 30))
+    return ClipModel(scene, pycolmap.Reconstruction(), tuple(views))
+
+
+def _heights(clip: ClipModel, alignment: object) -> np.ndarray:
+    similarity = alignment.world_from_clip  # type: ignore[attr-defined]
+    return np.array([v.world_from_ego[:3, 3] for v in clip.views]) @ similarity[2, :3] + similarity[2, 3]
+
+
+def test_free_heights_of_unjoined_clips_are_tied_to_the_road_the_others_drove() -> None:
+    """Three clips no point joins: the measured one stays, the free one 2.6 m too high on the lane beside it is
+    brought down onto its road, the free one far away keeps its height and is reported untied; with nothing
+    free, nothing moves."""
+    measured = _drive("a", np.arange(0.0, 60.0, 1.0), 0.0, 0.0)
+    beside = _drive("b", np.arange(10.0, 50.0, 1.5), 3.5, 2.6)
+    far = _drive("c", np.arange(500.0, 540.0, 1.0), 0.0, -1.0)
+    clips = [measured, beside, far]
+    alignments = [Alignment(c.scene, None, "poses", 0, np.eye(4)) for c in clips]
+    tied, ties = tie_heights(clips, alignments, {"b", "c"}, radius_m=4.0, min_pairs=2)
+    assert set(ties) == {"b", "c"} and ties["b"].tied and not ties["c"].tied
+    assert ties["b"].offset_m == pytest.approx(-2.6, abs=1e-9) and ties["b"].pairs > len(beside.views)
+    np.testing.assert_allclose(_heights(beside, tied[1]), 0.02 * np.arange(10.0, 50.0, 1.5), atol=1e-9)
+    np.testing.assert_array_equal(tied[0].world_from_clip, np.eye(4))
+    np.testing.assert_array_equal(tied[2].world_from_clip, np.eye(4))
+    untouched, none = tie_heights(clips, alignments, set(), radius_m=4.0, min_pairs=2)
+    assert none == {} and all(np.array_equal(a.world_from_clip, np.eye(4)) for a in untouched)
+
+
+def test_with_every_height_free_the_largest_group_sets_it() -> None:
+    """No clip measured: the clip with the most views keeps its height and the other is tied to it."""
+    long = _drive("long", np.arange(0.0, 80.0, 1.0), 0.0, 1.0)
+    short = _drive("short", np.arange(20.0, 40.0, 1.0), 0.0, -0.5)
+    alignments = [Alignment(c.scene, None, "poses", 0, np.eye(4)) for c in (long, short)]
+    tied, ties = tie_heights([long, short], alignments, {"long", "short"}, radius_m=4.0, min_pairs=2)
+    assert set(ties) == {"short"} and ties["short"].offset_m == pytest.approx(1.5, abs=1e-9)
+    np.testing.assert_array_equal(tied[0].world_from_clip, np.eye(4))
+
+
+def test_merge_config_refuses_a_bad_height_tie() -> None:
+    with pytest.raises(ValueError, match="height_tie_radius_m must be > 0"):
+        MergeConfig(height_tie_radius_m=0.0)
+    with pytest.raises(ValueError, match="height_tie_min_pairs must be >= 1"):
+        MergeConfig(height_tie_min_pairs=0)
