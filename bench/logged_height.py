@@ -144,7 +144,9 @@ def main() -> None:
     parser.add_argument("--planar-site", type=Path, default=None, help="default: SITE-no-logged-height")
     parser.add_argument("--site-id", default="site-001")
     parser.add_argument("--out", type=Path, default=RESULTS / "logged_height.json")
-    parser.add_argument("--measure-only", action="store_true", help="the workspaces as they are, no `cama run`")
+    parser.add_argument(
+        "--measure-only", action="store_true", help="the workspaces as they are, no `cama run`"
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site = args.site
