@@ -116,9 +116,11 @@ def wigo_height_modes(workspace: Workspace) -> dict[str, str]:
     }
 
 
-def run_figures_with_heights(site: Path, seconds: dict[str, float], site_id: str) -> dict[str, Any]:
-    """`bench/segment.py`'s figures of the run in `<site>/workspace-logged-height`, and the height figures."""
-    workspace = Workspace(site / WORKSPACE)
+def run_figures_with_heights(
+    site: Path, seconds: dict[str, float], site_id: str, workspace_name: str = WORKSPACE
+) -> dict[str, Any]:
+    """`bench/segment.py`'s figures of the run in `<site>/<workspace_name>`, and the height figures."""
+    workspace = Workspace(site / workspace_name)
     figures = run_figures(site, workspace, site_id, seconds)
     figures["wigo_logged_pose_height"] = wigo_height_modes(workspace)
     figures["elevation_relative"] = relative_elevation(site, workspace, site_id)

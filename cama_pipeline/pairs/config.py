@@ -22,6 +22,10 @@ class PairsConfig:
     strongly co-visible pairs, 40 m misses 0.1 % (50 m adds nothing)."""
     max_dz_m: float = 3.0
     """Largest height difference of two camera centres (the paper's Δz): other levels, other roads."""
+    level_free_heights: bool = True
+    """Before the height rule, move the clips whose heights WIGO left free (2D logged poses, no GNSS: their
+    offsets are the gauge's, metres apart, not the road's) to the road the other clips drove
+    (`cama_pipeline.site.heights`); else the rule drops every pair between clips more than `max_dz_m` apart."""
     face_to_face_angle_deg: float = 150.0
     """Optical axes at least this far apart, each camera in front of the other: facing each other."""
     face_to_face_max_distance_m: float = 12.0

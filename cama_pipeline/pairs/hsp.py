@@ -1,6 +1,7 @@
 """Homography-guided spatial pairs: KNN over camera centres, then the HSP rules, then ground-footprint overlap."""
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,13 +48,21 @@ def knn_candidates(views: list[CameraView], config: PairsConfig, exclude: set[Pa
     return sorted(found - exclude)
 
 
-def rule_verdicts(views: list[CameraView], candidates: list[Pair], config: PairsConfig) -> np.ndarray:
+def rule_verdicts(
+    views: list[CameraView],
+    candidates: list[Pair],
+    config: PairsConfig,
+    height_offsets: Mapping[str, float] | None = None,
+) -> np.ndarray:
     """(N,) the name of the first rule that rejects each candidate ("height", "view_cone", "face_to_face"),
-    or "" for the ones that pass; all candidates at once."""
+    or "" for the ones that pass; all candidates at once. `height_offsets`: metres added to the camera heights
+    of a scene's views (`free_height_offsets`)."""
     verdicts = np.full(len(candidates), "", dtype=object)
     if not candidates:
         return verdicts
     centers = np.array([view.center for view in views])
+    if height_offsets:
+        centers[:, 2] += [height_offsets.get(view.scene, 0.0) for view in views]
     axes = np.array([view.axis for view in views])
     first, second = np.array(candidates).T
     ca, cb, aa, ab = centers[first], centers[second], axes[first], axes[second]
@@ -86,15 +95,19 @@ def footprint_overlaps(views: list[CameraView], pairs: list[Pair], config: Pairs
 
 
 def spatial_pairs(
-    views: list[CameraView], config: PairsConfig, exclude: set[Pair], skip: set[int] | None = None
+    views: list[CameraView],
+    config: PairsConfig,
+    exclude: set[Pair],
+    skip: set[int] | None = None,
+    height_offsets: Mapping[str, float] | None = None,
 ) -> tuple[dict[Pair, str], HspStats]:
     """HSP pairs not already in `exclude` and not involving a view of `skip`, with the funnel of what each
-    rule removed."""
+    rule removed; `height_offsets` as `rule_verdicts` takes them."""
     stats = HspStats()
     candidates = knn_candidates(views, config, exclude)
     if skip:
         candidates = [(i, j) for i, j in candidates if i not in skip and j not in skip]
-    verdicts = rule_verdicts(views, candidates, config)
+    verdicts = rule_verdicts(views, candidates, config, height_offsets)
     stats.candidates = len(candidates)
     for rule in ("height", "view_cone", "face_to_face"):
         stats.dropped[rule] = int((verdicts == rule).sum())

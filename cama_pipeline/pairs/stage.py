@@ -2,6 +2,7 @@
 
 import logging
 import time
+from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
 
@@ -15,7 +16,9 @@ from cama_pipeline.pairs.io import PAIR_REASONS, read_pairs, write_pairs
 from cama_pipeline.pairs.repeats import repeat_pairs, repeated_views
 from cama_pipeline.pairs.sequential import Pair, sequential_pairs
 from cama_pipeline.results import ItemResult, StageResult
+from cama_pipeline.site.heights import keyframe_track, level_groups
 from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
+from cama_pipeline.wigo.stage import free_height_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -23,16 +26,36 @@ REPORT_FIELDS = ("images", "counts", "hsp_funnel")
 """The parts of pairs.json a run reports per site (all but the pairs themselves)."""
 
 
-def select_pairs(views: list[CameraView], config: PairsConfig) -> tuple[dict[Pair, str], dict[str, object]]:
+def select_pairs(
+    views: list[CameraView], config: PairsConfig, height_offsets: Mapping[str, float] | None = None
+) -> tuple[dict[Pair, str], dict[str, object]]:
     """Sequential pairs, each repeated view with the one it repeats, then HSP pairs among the rest of the
-    views that repeat nothing; the HSP funnel (with the number of repeated views) for the report."""
+    views that repeat nothing (the height rule on the heights moved by `height_offsets`, metres per scene); the
+    HSP funnel (with the number of repeated views and the offsets) for the report."""
     pairs = sequential_pairs(views, config)
     repeats = repeated_views(views, config)
     for pair, reason in repeat_pairs(repeats).items():
         pairs.setdefault(pair, reason)
-    spatial, stats = spatial_pairs(views, config, exclude=set(pairs), skip=set(repeats))
+    spatial, stats = spatial_pairs(
+        views, config, exclude=set(pairs), skip=set(repeats), height_offsets=height_offsets
+    )
     pairs.update(spatial)
-    return pairs, {**asdict(stats), "repeated_views": len(repeats)}
+    offsets = dict(height_offsets or {})
+    return pairs, {**asdict(stats), "repeated_views": len(repeats), "free_height_offsets_m": offsets}
+
+
+def free_height_offsets(
+    workspace: Workspace, views: list[CameraView], config: PairsConfig
+) -> dict[str, float]:
+    """Per scene whose heights WIGO left free and that could be tied, the metres that bring it to the road the
+    other scenes drove (`cama_pipeline.site.heights`); none when `config.level_free_heights` is off."""
+    scenes = sorted({view.scene for view in views})
+    free = free_height_scenes(workspace, scenes) if config.level_free_heights else frozenset()
+    if not free:
+        return {}
+    tracks = {scene: keyframe_track([v for v in views if v.scene == scene]) for scene in scenes}
+    ties = level_groups([[scene] for scene in scenes], tracks, free)
+    return {scene: tie.offset_m for scene, tie in ties.items() if tie.tied}
 
 
 def _counts(pairs: dict[Pair, str], n_images: int) -> dict[str, int]:
@@ -69,7 +92,7 @@ def run(
                 Path(dataset_root), check_files=False, scenes=read_site_scenes(ws.sites_index())
             )
         views = site_views(dataset, read_site_manifest(manifest_path))
-        pairs, funnel = select_pairs(views, config)
+        pairs, funnel = select_pairs(views, config, free_height_offsets(ws, views, config))
         rows = [(views[i].name, views[j].name, reason) for (i, j), reason in sorted(pairs.items())]
         counts = _counts(pairs, len(views))
         write_pairs(

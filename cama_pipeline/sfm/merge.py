@@ -19,6 +19,7 @@ import pycolmap
 from scipy.spatial.transform import Rotation
 
 from cama_pipeline.cameras import CameraView
+from cama_pipeline.site.heights import TIE_MIN_PAIRS, TIE_RADIUS_M
 
 logger = logging.getLogger(__name__)
 
@@ -60,12 +61,10 @@ class MergeConfig:
     height_ties: bool = True
     """Give the clips that no point joins and whose heights nothing measured (2D logged poses, no GNSS) the
     height of the road the other clips drove (`cama_pipeline.sfm.height_ties`)."""
-    height_tie_radius_m: float = 8.0
-    """A keyframe this close (horizontally) to another clip's track is taken to stand on the same road: the
-    opposite carriageway of a four-lane road is about 7 m away (the tiny synthetic site's two drives: 7.3 m)."""
-    height_tie_min_pairs: int = 2
-    """Keyframes near the other group's track needed to tie a clip's height (two drives that cross meet at
-    one or two keyframes each)."""
+    height_tie_radius_m: float = TIE_RADIUS_M
+    """A keyframe this close (horizontally) to another clip's track is taken to stand on the same road."""
+    height_tie_min_pairs: int = TIE_MIN_PAIRS
+    """Keyframes near the other group's track needed to tie a clip's height."""
 
     def __post_init__(self) -> None:
         if self.num_threads < 1:

@@ -11,7 +11,7 @@ import shutil
 import sqlite3
 import tempfile
 import time
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection
 from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -50,8 +50,7 @@ from cama_pipeline.sfm.merge import (
 )
 from cama_pipeline.sfm.triangulate import model_seeds
 from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
-from cama_pipeline.wigo.fusion import height_is_free
-from cama_pipeline.wigo.io import read_wigo
+from cama_pipeline.wigo.stage import free_height_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -338,17 +337,6 @@ def write_site(
     write_points(workspace.sfm_points(site_id), sparse_points(site.reconstruction, read_mask))
     report = {"site_id": site_id, "fingerprint": digest, **extra, **site.report}
     return write_report(workspace.sfm_report(site_id), report)
-
-
-def free_height_scenes(workspace: Workspace, scenes: Sequence[str]) -> frozenset[str]:
-    """The scenes whose WIGO poses left the height free (2D logged poses, no GNSS; a scene without a WIGO file
-    counts as measured)."""
-    free = set()
-    for scene in scenes:
-        path = workspace.wigo(scene)
-        if path.is_file() and height_is_free(read_wigo(path).report):
-            free.add(scene)
-    return frozenset(free)
 
 
 def run_site(

@@ -14,7 +14,7 @@ from cama_pipeline.fingerprints import file_stats, fingerprint, is_up_to_date
 from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.wigo.config import WigoConfig
-from cama_pipeline.wigo.fusion import FusedPoses, fuse_clip
+from cama_pipeline.wigo.fusion import FusedPoses, fuse_clip, height_is_free
 from cama_pipeline.wigo.inputs import NoWheelSpeeds, clip_inputs, logged_poses
 from cama_pipeline.wigo.io import PoseRecord, WigoFile, read_wigo, write_wigo
 from cama_pipeline.wigo.logged_only import logged_pose_clip
@@ -107,3 +107,14 @@ def run(
                 items.append(ItemResult(scene.name, path, wigo.report, skipped=False))
             progress.advance(bar)
     return StageResult("wigo", ws, tuple(items), time.perf_counter() - started)
+
+
+def free_height_scenes(workspace: Workspace, scenes: Sequence[str]) -> frozenset[str]:
+    """The scenes whose WIGO poses left the height free (2D logged poses, no GNSS; a scene without a WIGO file
+    counts as measured)."""
+    free = set()
+    for scene in scenes:
+        path = workspace.wigo(scene)
+        if path.is_file() and height_is_free(read_wigo(path).report):
+            free.add(scene)
+    return frozenset(free)

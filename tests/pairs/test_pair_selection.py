@@ -1,6 +1,8 @@
 """Sequential pairs within a clip and HSP pairs across clips, on hand-made drives."""
 
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -9,7 +11,10 @@ from cama_pipeline.pairs.config import PairsConfig
 from cama_pipeline.pairs.hsp import knn_candidates, spatial_pairs
 from cama_pipeline.pairs.repeats import repeated_views
 from cama_pipeline.pairs.sequential import overlapping_channels, sequential_pairs
-from cama_pipeline.pairs.stage import select_pairs
+from cama_pipeline.pairs.stage import free_height_offsets, select_pairs
+from cama_pipeline.wigo.fusion import FREE_HEIGHT
+from cama_pipeline.wigo.io import WigoFile, write_wigo
+from cama_pipeline.workspace import Workspace
 from tests.pairs.pair_views import view
 
 RIG = {"CAM_FRONT": 0.0, "CAM_FRONT_LEFT": 55.0, "CAM_BACK": 180.0}
@@ -80,6 +85,41 @@ def test_hsp_finds_the_cross_clip_pairs_at_an_intersection() -> None:
         assert a.center[0] <= 1.5 and b.center[1] <= 1.5
     assert stats.candidates == stats.kept + sum(stats.dropped.values())
     assert stats.dropped["view_cone"] > 0 and stats.dropped["footprint"] > 0
+
+
+def _lifted(views: list[CameraView], dz: float) -> list[CameraView]:
+    """The views with their ego poses `dz` metres higher (a clip WIGO left at another height)."""
+    out = []
+    for v in views:
+        pose = v.world_from_ego.copy()
+        pose[2, 3] += dz
+        out.append(replace(v, world_from_ego=pose))
+    return out
+
+
+def test_a_free_height_clip_is_paired_once_its_height_is_tied(tmp_path: Path) -> None:
+    """The north drive 4 m too high (2D logged poses: WIGO's gauge, not the road): the height rule drops every
+    pair across the two drives; tied to the east drive's road by `free_height_offsets` (its WIGO report says its
+    height is free), the junction's cross pairs come back, as many as on level drives."""
+    east, north = drive("east", (-40, 0), 0, 21), drive("north", (0, -40), 90, 21)
+    workspace = Workspace(tmp_path / "workspace")
+    for scene, report in (
+        ("east", {"logged_pose_height": "fused"}),
+        ("north", {"logged_pose_height": FREE_HEIGHT}),
+    ):
+        report = {**report, "global_constraint": "logged_pose"}
+        write_wigo(workspace.wigo(scene), WigoFile(scene, scene, "x", {}, report, [], ()))
+    level, lifted = east + north, east + _lifted(north, 4.0)
+
+    def cross(views: list[CameraView], offsets: dict[str, float] | None) -> int:
+        pairs, _ = select_pairs(views, PairsConfig(), offsets)
+        return sum(1 for i, j in pairs if views[i].scene != views[j].scene)
+
+    offsets = free_height_offsets(workspace, lifted, PairsConfig())
+    assert offsets == {"north": pytest.approx(-4.0, abs=1e-9)}
+    assert cross(lifted, None) == 0 < cross(level, None) == cross(lifted, offsets)
+    assert free_height_offsets(workspace, lifted, PairsConfig(level_free_heights=False)) == {}
+    assert select_pairs(lifted, PairsConfig(), offsets)[1]["free_height_offsets_m"] == offsets
 
 
 def test_hsp_drops_other_road_levels_and_facing_cameras() -> None:
