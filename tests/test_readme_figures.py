@@ -3435,3 +3435,28 @@ def test_without_wheels_table() -> None:
             label = f"{site}, {key.replace('_', ' ')}"
             for cell, values in zip(row(t, label)[1:], expected, strict=True):
                 assert_shows(cell, values, f"without wheels table, {label}")
+
+
+def test_unjoined_clips_table() -> None:
+    t = table("default site, z = 0, clips", "Clips no point joins")
+    assert_names_source(t, "unjoined_clips.json", "bench/unjoined_clips.py")
+    labels = {
+        "joined": "joined by their points",
+        "unjoined_tied": "no shared point, heights tied",
+        "unjoined_untied": "no shared point, untied",
+    }
+    for key, prefix in labels.items():
+        run = results("unjoined_clips.json")["runs"][key]
+        bev = run["bev_iou_in_reconstruction_frame"]
+        expected: list[list[Expected]] = [
+            [run["poses"]["sfm"]["gauge_free_position_cm"]],
+            [run["clip_heights"]["sfm"]["offset_spread_cm"]],
+            [run["elevation_relative"]["rmse_about_offset_cm"]],
+            [run["proposals_ap"]["observed_truth"]["mean_ap"]],
+            [run["sre"]["sre_ref_px"]],
+            [run["annotator_speed_up_in_reconstruction_frame"]],
+            [bev[c] for c in ("road", "curb", "lane_marking", "crosswalk")],
+        ]
+        label, cells = row_starting(t, prefix)
+        for cell, values in zip(cells[1:], expected, strict=True):
+            assert_shows(cell, values, f"unjoined clips table, {label}")
