@@ -5,7 +5,8 @@ writes them.
     <workspace>/pairs/<site_id>/pairs.json   schema "cama.pairs/1":
         {"schema", "site_id", "fingerprint", "config": {...}, "images": int,
          "counts": {"exhaustive", "temporal", "rig", "repeat", "hsp", "total"},
-         "hsp_funnel": {"candidates", "dropped": {rule: n}, "kept", "repeated_views"},
+         "hsp_funnel": {"candidates", "dropped": {rule: n}, "kept", "repeated_views",
+                        "free_height_offsets_m": {scene: metres}},
          "pairs": [[nameA, nameB, reason]]}     reason: "temporal" | "rig" | "repeat" | "hsp"
 Image names are paths relative to the data set root.
 """

@@ -49,6 +49,7 @@ it fixes the gauge the free heights leave open, so that the marginal covariances
 
 
 FREE_HEIGHT = "free: every logged z is 0 (a 2D localization)"
+"""The report's `logged_pose_height` of a clip whose logged poses carry no height."""
 
 
 def height_is_free(report: Mapping[str, Any]) -> bool:
@@ -56,9 +57,6 @@ def height_is_free(report: Mapping[str, Any]) -> bool:
     its height is only where the gauge held it."""
     constraint = str(report.get("global_constraint", ""))
     return report.get("logged_pose_height") == FREE_HEIGHT and "gnss" not in constraint
-
-
-"""The report's `logged_pose_height` of a clip whose logged poses carry no height."""
 
 
 def logged_pose_sigmas(cameras: LoggedPoses, config: WigoConfig) -> tuple[np.ndarray, bool]:
