@@ -30,16 +30,31 @@ Every way (and the crosswalk relation) carries `cama:id` (the element id); ways 
 
 Coordinates. `origin_lat_lon` is the geographic position of the (0, 0) of the site's global frame (the frame
 of `site_origin_xy`: global = site + site_origin_xy, z global); a point more than `MAX_FROM_ORIGIN_M` from
-that (0, 0) is refused (ValueError), since the frame is then not one anchored at the origin. Each node has:
+that (0, 0) is refused (ValueError), since the frame is then not one anchored at the origin. `projection` says
+how the frame's x, y lie on the Earth (`MapProjection`):
+
+- `local`: a local tangent plane at the origin, x east, y north (`lanelet2.projection.LocalCartesianProjector`, on
+  the WGS84 ellipsoid): the frame of a map made in local metres around a reference point, as nuScenes' maps are
+  (`cama_pipeline.data.map_origins` holds their origins). The nuScenes devkit derives its poses' latitude and
+  longitude from the same origins on a sphere of the equatorial radius; this frame differs from that derivation
+  by up to 0.22 % of the distance from the origin at boston-seaport (1.5 m east, 2.2 m north per km) and 0.67 %
+  in Singapore (6.7 m north per km), the sphere's error, not this frame's.
+- `utm`: the UTM grid's easting and northing at the origin (`lanelet2.projection.UtmProjector`): the frame of a
+  map made in UTM coordinates less the origin's. Grid north differs from true north by the meridian convergence
+  (about 1.4 degrees at boston-seaport: 24 m at 1 km if a local frame were written this way); the grid's scale is
+  within 0.04 % of true.
+
+Each node has:
 
 - `local_x`, `local_y` tags: the point's global-frame x, y in metres (site x, y + `site_origin_xy`), i.e. metres
   from the origin along the frame's axes. These are not Autoware's MGRS-grid coordinates.
-- `lat`, `lon`: `lanelet2.projection.UtmProjector(lanelet2.io.Origin(lat, lon)).reverse((local_x, local_y, z))`
-  written with 12 decimals (about 0.1 um), so `lanelet2.io.load(path, <that projector>)` gives back local_x,
-  local_y. The frame's x, y axes are thereby taken as the UTM grid's easting and northing at the origin (grid
-  north differs from true north by the meridian convergence; the grid's scale is within 0.04 % of true); a
-  reader with another projector (e.g. LocalCartesianProjector) gets points within that difference.
-- `ele`: the point's lifted z (global metres, unchanged by the UTM projector). An element without 3D points
+- `lat`, `lon`: the projection's `reverse((local_x, local_y, z))` written with 12 decimals (about 0.1 um), so
+  `lanelet2.io.load(path, <that projector at the origin>)` gives back local_x, local_y; a reader with the other
+  projector gets points off by the difference above.
+- `ele`: the point's lifted z (global metres): the map's height, as a site frame built from odometry and images
+  is level along the Earth's surface. `UtmProjector` reads it back unchanged; `LocalCartesianProjector`, a
+  Euclidean tangent frame, reads it as the altitude and gives z less the Earth's curvature drop, d^2 / 2R at
+  distance d from the origin (8 cm at 1 km). An element without 3D points
   (`points_3d` None, e.g. proposals not lifted) is written at ele 0 from its 2D points with `cama:lifted=no` on
   its way and listed in `Lanelet2Result.unlifted` (and a warning is logged); `require_lifted=True` refuses such
   a set instead (ValueError naming the elements). Lifted elements take x, y, z from `points_3d`.
@@ -54,6 +69,7 @@ import xml.etree.ElementTree as ET
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Literal
 
@@ -109,6 +125,15 @@ MAX_FROM_ORIGIN_M = 100_000.0
 the origin (e.g. UTM coordinates given with a site's origin), and the projection would be meaningless."""
 
 
+class MapProjection(StrEnum):
+    """How the site's global frame lies on the Earth around the origin (the module docstring's Coordinates)."""
+
+    local = "local"
+    """A local tangent plane at the origin, x east, y north (nuScenes' maps)."""
+    utm = "utm"
+    """The UTM grid at the origin: easting, northing less the origin's."""
+
+
 @dataclass(frozen=True)
 class Lanelet2Result:
     """What `export_lanelet2` wrote."""
@@ -124,10 +149,15 @@ class Lanelet2Result:
     """Ids of the elements without 3D points, written at ele 0 (`cama:lifted=no`)."""
     kerbs: dict[str, int] = field(default_factory=dict)
     """Boundaries per `cama:kerb` value: observed (curbstone), none (road_border), assumed (curbstone)."""
+    projection: MapProjection = MapProjection.utm
+    """The projection the nodes' lat / lon were written with."""
 
 
-def origin_projector(origin_lat_lon: tuple[float, float]) -> lanelet2.projection.UtmProjector:
-    """Lanelet2's UTM projector at the geographic origin; ValueError naming `origin_lat_lon` when it is bad."""
+def origin_projector(
+    origin_lat_lon: tuple[float, float], projection: MapProjection = MapProjection.utm
+) -> lanelet2.projection.Projector:
+    """Lanelet2's projector of `projection` at the geographic origin; ValueError naming `origin_lat_lon` or
+    `projection` when it is bad."""
     try:
         lat, lon = (float(value) for value in origin_lat_lon)
     except (TypeError, ValueError) as error:
@@ -137,7 +167,18 @@ def origin_projector(origin_lat_lon: tuple[float, float]) -> lanelet2.projection
     if not (math.isfinite(lon) and -180.0 <= lon <= 180.0):
         raise ValueError(f"origin_lat_lon: longitude {lon} is not in [-180, 180] degrees")
     try:
-        return lanelet2.projection.UtmProjector(lanelet2.io.Origin(lat, lon))
+        kind = MapProjection(projection)
+    except ValueError:
+        raise ValueError(
+            f"projection: {projection!r} is not one of {[choice.value for choice in MapProjection]}"
+        ) from None
+    projector = (
+        lanelet2.projection.LocalCartesianProjector
+        if kind is MapProjection.local
+        else lanelet2.projection.UtmProjector
+    )
+    try:
+        return projector(lanelet2.io.Origin(lat, lon))
     except RuntimeError as error:  # GeographicLib's own checks
         raise ValueError(f"origin_lat_lon: ({lat}, {lon}) cannot be projected: {error}") from error
 
@@ -172,7 +213,7 @@ def _tags(parent: ET.Element, tags: dict[str, str]) -> None:
 class _OsmBuilder:
     """Collects nodes, ways and relations with ids in file order (nodes, then ways, then relations)."""
 
-    def __init__(self, projector: lanelet2.projection.UtmProjector) -> None:
+    def __init__(self, projector: lanelet2.projection.Projector) -> None:
         self.projector = projector
         self.nodes: list[ET.Element] = []
         self.ways: list[tuple[list[int], dict[str, str]]] = []
@@ -256,13 +297,14 @@ def lanelet2_osm_bytes(
     annotations: AnnotationSet,
     *,
     origin_lat_lon: tuple[float, float],
+    projection: MapProjection = MapProjection.utm,
     kerbs: Mapping[str, KerbVerdict] | None = None,
 ) -> tuple[bytes, Lanelet2Result]:
-    """The OSM XML of the set (UTF-8, indented) and its counts (`path` left empty for the caller); `kerbs` as
-    in `export_lanelet2`."""
+    """The OSM XML of the set (UTF-8, indented) and its counts (`path` left empty for the caller); `projection`
+    and `kerbs` as in `export_lanelet2`."""
     kerbs = kerbs or {}
     _check_kerbs(annotations, kerbs)
-    builder = _OsmBuilder(origin_projector(origin_lat_lon))
+    builder = _OsmBuilder(origin_projector(origin_lat_lon, projection))
     site_origin_xy = annotations.georeference.site_origin_xy
     counts: Counter[str] = Counter({tag: 0 for tag in LANELET2_TAGS})
     kerb_counts: Counter[str] = Counter({kerb: 0 for kerb in KERB_TAGS})
@@ -285,6 +327,7 @@ def lanelet2_osm_bytes(
         len(builder.nodes),
         tuple(unlifted),
         dict(kerb_counts),
+        MapProjection(projection),
     )
     return data, result
 
@@ -294,13 +337,15 @@ def export_lanelet2(
     out: Path,
     *,
     origin_lat_lon: tuple[float, float],
+    projection: MapProjection = MapProjection.utm,
     require_lifted: bool = False,
     kerbs: Mapping[str, KerbVerdict] | None = None,
 ) -> Lanelet2Result:
     """Write the set as a Lanelet2 OSM file at `out` (atomically; its folder must exist).
 
     `origin_lat_lon` is the latitude, longitude of the site's global frame's (0, 0) (ValueError when out of
-    range). Elements without 3D points are written at ele 0 and tagged `cama:lifted=no`, or refused with a
+    range), `projection` how that frame lies on the Earth around it (local: a tangent plane, as nuScenes' maps;
+    utm: the UTM grid). Elements without 3D points are written at ele 0 and tagged `cama:lifted=no`, or refused with a
     ValueError naming them when `require_lifted`. `kerbs` (boundary id -> verdict, `kerb_evidence.kerb_evidence`)
     decides each boundary's type; a boundary without one, or with no mapping at all, is an assumed kerb.
     """
@@ -310,9 +355,11 @@ def export_lanelet2(
         shown = ", ".join(repr(element_id) for element_id in missing[:5])
         more = f" and {len(missing) - 5} more" if len(missing) > 5 else ""
         raise ValueError(f"{len(missing)} elements have no 3D points (not lifted): {shown}{more}")
-    data, result = lanelet2_osm_bytes(annotations, origin_lat_lon=origin_lat_lon, kerbs=kerbs)
+    data, result = lanelet2_osm_bytes(
+        annotations, origin_lat_lon=origin_lat_lon, projection=projection, kerbs=kerbs
+    )
     if missing:
         logger.warning("%d elements have no 3D points: written at ele 0 with cama:lifted=no", len(missing))
     atomic_write_bytes(out, data)
     logger.info("wrote %d elements (%s) to %s", len(annotations.elements), result.counts, out)
-    return Lanelet2Result(out, result.counts, result.nodes, result.unlifted, result.kerbs)
+    return Lanelet2Result(out, result.counts, result.nodes, result.unlifted, result.kerbs, result.projection)

@@ -22,12 +22,14 @@ from annotations import cama_format
 from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.cama_format import DEFAULT_RELEASE_RESOLUTION_M, CamaMapLabels, import_cama
 from annotations.kerb_evidence import check_semantic
+from annotations.lanelet2_format import MapProjection
 from annotations.maptr_format import MaptrFile, import_maptr
 from annotations.schema import AnnotationSet, Georeference
 from cama_pipeline.bev import is_raster_folder, read_bev
 from cama_pipeline.cli_options import MasksOpt
 from cama_pipeline.console import bad_input
 from cama_pipeline.data import DatasetError
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS
 from cama_pipeline.data.masks import parse_mask_choice
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, PoseChoice, export
 from cama_pipeline.export.poses import export_site_id
@@ -125,15 +127,21 @@ def _semantic(
         return None, f"none ({error})"
 
 
-def _origin(text: str | None) -> tuple[float, float] | None:
-    """`LAT,LON` in degrees; ValueError naming the option when malformed."""
+def parse_origin(text: str | None) -> tuple[tuple[float, float] | None, str | None]:
+    """`--origin`: `LAT,LON` in degrees, or a nuScenes location's name; (lat_lon, location), one of them set,
+    or (None, None) when not given. ValueError naming the option when it is neither."""
     if text is None:
-        return None
+        return None, None
+    if text.strip() in NUSCENES_MAP_ORIGINS:
+        return None, text.strip()
     try:
         lat, lon = (float(part) for part in text.split(","))
     except ValueError:
-        raise ValueError(f"--origin {text!r}: expected LAT,LON in degrees, e.g. 1.2990,103.7880") from None
-    return lat, lon
+        raise ValueError(
+            f"--origin {text!r}: expected LAT,LON in degrees (e.g. 1.2990,103.7880) or a nuScenes location "
+            f"({', '.join(NUSCENES_MAP_ORIGINS)})"
+        ) from None
+    return (lat, lon), None
 
 
 def export_command(
@@ -190,12 +198,25 @@ def export_command(
     ] = DEFAULT_OBSERVED_RADIUS_M,
     masks: MasksOpt = "auto",
     origin: Annotated[
-        str | None, typer.Option(help="lanelet2: geographic origin LAT,LON of the site's global frame.")
+        str | None,
+        typer.Option(
+            help="lanelet2: the geographic origin of the site's global frame: LAT,LON, or a nuScenes location "
+            f"({', '.join(NUSCENES_MAP_ORIGINS)}). Default: the origin of the site's location when it is a "
+            "nuScenes one (the workspace's sites index)."
+        ),
+    ] = None,
+    projection: Annotated[
+        MapProjection | None,
+        typer.Option(
+            help="lanelet2: local (a tangent plane at the origin, as nuScenes' maps) or utm (the UTM grid at "
+            "the origin). Default: local for a nuScenes location's origin, utm for LAT,LON."
+        ),
     ] = None,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing export at OUT.")] = False,
 ) -> None:
     """Export an annotation set (refined poses by default); the export appears at OUT only when complete."""
     try:
+        origin_lat_lon, origin_location = parse_origin(origin)
         annotation_set = AnnotationSet.read_json(annotations_json)
         default = default_semantic_folder(workspace, dataset, annotation_set, site_id)
         semantic_raster, semantic_source = _semantic(semantic, format, annotation_set, default)
@@ -215,7 +236,9 @@ def export_command(
             observed_radius_m=observed_radius_m,
             with_clip_data=with_clip_data,
             masks=parse_mask_choice(masks),
-            origin_lat_lon=_origin(origin),
+            origin_lat_lon=origin_lat_lon,
+            origin_location=origin_location,
+            projection=projection,
             overwrite=overwrite,
             show_progress=True,
         )
@@ -229,6 +252,10 @@ def export_command(
     if format is ExportFormat.lanelet2:
         kerbs = result.summary.get("kerbs", {})
         typer.echo(f"boundaries by kerb evidence {kerbs} (semantic raster: {semantic_source})")
+        typer.echo(
+            f"origin {result.summary.get('origin_lat_lon')} ({result.summary.get('origin_source')}), "
+            f"projection {result.summary.get('projection')}"
+        )
 
 
 def import_command(

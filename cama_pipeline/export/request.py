@@ -8,7 +8,9 @@ import numpy as np
 
 from annotations.cama_cut import DEFAULT_OBSERVED_RADIUS_M
 from annotations.kerb_evidence import check_semantic
+from annotations.lanelet2_format import MapProjection
 from annotations.schema import AnnotationSet
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS
 from cama_pipeline.data.masks import MaskChoice
 
 
@@ -86,7 +88,14 @@ class ExportRequest:
     masks: MaskChoice = "auto"
     """Where clip data's lane instance masks come from (`cama_pipeline.data.masks`)."""
     origin_lat_lon: tuple[float, float] | None = None
-    """lanelet2: the geographic origin that the site's global frame is projected from."""
+    """lanelet2: the geographic origin (latitude, longitude) of the site's global frame's (0, 0). None: the origin
+    of `origin_location`, else of the site's own location when it is a nuScenes one (the site manifest's
+    `log.location`, `cama_pipeline.data.map_origins`), else the export is refused."""
+    origin_location: str | None = None
+    """lanelet2: a nuScenes location whose map origin to use (`NUSCENES_MAP_ORIGINS`), instead of a LAT,LON."""
+    projection: MapProjection | None = None
+    """lanelet2: how the global frame lies on the Earth around the origin. None: local (a tangent plane, as
+    nuScenes' maps) for a nuScenes location's origin, utm for an `origin_lat_lon` given."""
     overwrite: bool = False
     """Replace an existing export at `out` (else it is an error)."""
     show_progress: bool = False
@@ -97,8 +106,17 @@ class ExportRequest:
             raise ValueError(f"--format {self.format.value} needs --dataset ROOT (its poses and samples)")
         if self.with_clip_data and self.format is not ExportFormat.cama:
             raise ValueError("--with-clip-data: only for --format cama")
-        if self.format is ExportFormat.lanelet2 and self.origin_lat_lon is None:
-            raise ValueError("--format lanelet2 needs --origin LAT,LON (the geographic origin of the map)")
+        if self.origin_lat_lon is not None and self.origin_location is not None:
+            raise ValueError("--origin: either LAT,LON or a nuScenes location, not both")
+        if self.origin_location is not None and self.origin_location not in NUSCENES_MAP_ORIGINS:
+            raise ValueError(
+                f"--origin {self.origin_location!r}: not LAT,LON nor a nuScenes location "
+                f"({', '.join(NUSCENES_MAP_ORIGINS)})"
+            )
+        if self.format is not ExportFormat.lanelet2 and (
+            self.origin_lat_lon is not None or self.origin_location is not None or self.projection is not None
+        ):
+            raise ValueError("--origin, --projection: only for --format lanelet2")
         if not (np.isfinite(self.observed_radius_m) and self.observed_radius_m > 0):
             raise ValueError(f"--observed-radius-m: expected a value > 0, got {self.observed_radius_m}")
         if self.semantic is not None:

@@ -9,15 +9,16 @@ from pathlib import Path
 from annotations.cama_clip_data import write_clip_data
 from annotations.cama_release import export_cama_release
 from annotations.kerb_evidence import kerb_evidence
-from annotations.lanelet2_format import export_lanelet2
+from annotations.lanelet2_format import MapProjection, export_lanelet2
 from annotations.maptr_format import build_maptr, write_maptr
 from annotations.nuscenes_cama_format import export_nuscenes_cama
 from cama_pipeline.data import Dataset, load_dataset
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS, location_origin
 from cama_pipeline.data.masks import mask_roots
-from cama_pipeline.export.poses import ExportPoses, export_poses
+from cama_pipeline.export.poses import ExportPoses, export_poses, export_site_id
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET, ExportFormat, ExportRequest, ExportResult
 from cama_pipeline.export.staging import staged_output
-from cama_pipeline.site.io import read_site_scenes
+from cama_pipeline.site.io import read_site_location, read_site_scenes
 from cama_pipeline.workspace import Workspace
 
 logger = logging.getLogger(__name__)
@@ -98,20 +99,75 @@ def _write_maptr(inputs: ExportInputs, staging: Path) -> dict[str, object]:
     return {"scenes": list(scenes), "pose_sources": dict(sources)}
 
 
+@dataclass(frozen=True)
+class MapPlacement:
+    """Where a lanelet2 export puts the site's global frame on the Earth, and what said so."""
+
+    origin_lat_lon: tuple[float, float]
+    projection: MapProjection
+    source: str
+    """`--origin`, `--origin LOCATION` or the site's location (its id and name)."""
+
+
+def site_location(workspace: Workspace, annotation_site_id: str, site_id: str | None) -> tuple[str, str]:
+    """The site the export's poses would come from (`export_site_id`) and its `log.location` from the sites
+    index; FileNotFoundError / ValueError as `export_site_id`."""
+    site = export_site_id(workspace, annotation_site_id, site_id)
+    return site, read_site_location(workspace.sites_index(), site)
+
+
+def map_placement(request: ExportRequest) -> MapPlacement:
+    """The request's origin and projection (`ExportRequest.origin_lat_lon`'s defaults); ValueError naming what to
+    pass when neither the request nor the site's location gives an origin."""
+    if request.origin_lat_lon is not None:
+        return MapPlacement(request.origin_lat_lon, request.projection or MapProjection.utm, "--origin")
+    if request.origin_location is not None:
+        origin = NUSCENES_MAP_ORIGINS[request.origin_location]
+        return MapPlacement(
+            origin, request.projection or MapProjection.local, f"--origin {request.origin_location}"
+        )
+    needed = (
+        f"--format lanelet2 needs --origin LAT,LON or a nuScenes location ({', '.join(NUSCENES_MAP_ORIGINS)})"
+    )
+    if request.workspace is not None:
+        workspace = Workspace(request.workspace)
+    elif request.dataset_root is not None:
+        workspace = Workspace.for_dataset(request.dataset_root)
+    else:
+        raise ValueError(f"{needed}, or the --dataset / --workspace of the site's reconstruction")
+    if not workspace.sites_index().is_file():
+        raise ValueError(f"{needed}; no reconstruction ({workspace.sites_index()}) gives the site's location")
+    try:
+        site, location = site_location(workspace, request.annotations.site_id, request.site_id)
+    except (FileNotFoundError, ValueError) as error:
+        raise ValueError(f"{needed}; the site's location is unknown: {error}") from error
+    site_origin = location_origin(location)
+    if site_origin is None:
+        raise ValueError(f"{needed}; site {site!r} lies at {location!r}, whose map origin is not known")
+    return MapPlacement(site_origin, request.projection or MapProjection.local, f"site {site} at {location}")
+
+
 def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:
-    origin = inputs.request.origin_lat_lon
-    if origin is None:  # the request refuses lanelet2 without an origin; this keeps the type checker honest
-        raise ValueError("--format lanelet2 needs --origin LAT,LON")
     request = inputs.request
+    placement = map_placement(request)
     kerbs = (
         None if request.semantic is None else kerb_evidence(request.annotations, request.semantic).verdicts
     )
-    result = export_lanelet2(request.annotations, staging, origin_lat_lon=origin, kerbs=kerbs)
+    result = export_lanelet2(
+        request.annotations,
+        staging,
+        origin_lat_lon=placement.origin_lat_lon,
+        projection=placement.projection,
+        kerbs=kerbs,
+    )
     return {
         "tags": result.counts,
         "kerbs": result.kerbs,
         "nodes": result.nodes,
         "unlifted": len(result.unlifted),
+        "origin_lat_lon": list(placement.origin_lat_lon),
+        "projection": placement.projection.value,
+        "origin_source": placement.source,
     }
 
 

@@ -65,6 +65,14 @@ def read_site_scenes(path: Path) -> list[str]:
     return list(names)
 
 
+def read_site_location(path: Path, site_id: str) -> str:
+    """The `log.location` of a site of `sites/index.json`; ValueError naming the index when it has no such site."""
+    for entry in read_sites_index(path)["sites"]:
+        if entry["site_id"] == site_id:
+            return str(entry.get("location", ""))
+    raise ValueError(f"{path}: no site {site_id!r}")
+
+
 def manifest_scenes(manifest: dict[str, Any]) -> list[str]:
     """The scene names of a site manifest (`read_site_manifest`), in its order."""
     return [str(entry["scene"]) for entry in manifest["scenes"]]

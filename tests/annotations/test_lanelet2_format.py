@@ -15,7 +15,7 @@ import pytest
 
 from annotations import AnnotationSet, Georeference, MapElement
 from annotations.kerb_evidence import kerb_evidence
-from annotations.lanelet2_format import Lanelet2Result, export_lanelet2, origin_projector
+from annotations.lanelet2_format import Lanelet2Result, MapProjection, export_lanelet2, origin_projector
 from tests.annotations.annotation_helpers import SITE_ORIGIN_XY, SQUARE, element_kwargs
 from tests.annotations.kerb_helpers import kerb_raster, kerb_set
 
@@ -64,9 +64,11 @@ def global_xyz(element: MapElement) -> np.ndarray:
     return xyz + np.array([*SITE_ORIGIN_XY, 0.0])
 
 
-def load(path: Path, origin: tuple[float, float]) -> lanelet2.core.LaneletMap:
+def load(
+    path: Path, origin: tuple[float, float], projection: MapProjection = MapProjection.utm
+) -> lanelet2.core.LaneletMap:
     """The file loaded by lanelet2 with the export's projector; no load errors."""
-    lanelet_map, errors = lanelet2.io.loadRobust(str(path), origin_projector(origin))
+    lanelet_map, errors = lanelet2.io.loadRobust(str(path), origin_projector(origin, projection))
     assert errors == []
     return lanelet_map
 
@@ -268,3 +270,61 @@ def test_bad_kerb_verdicts_are_refused_naming_them(
     with pytest.raises(ValueError, match=f"kerbs: element .*{message}"):
         export_lanelet2(kerb_set(), tmp_path / "map.osm", origin_lat_lon=BOSTON, kerbs=kerbs)
     assert list(tmp_path.iterdir()) == []
+
+
+def sphere_lat_lon(origin: tuple[float, float], east_m: float, north_m: float) -> tuple[float, float]:
+    """The nuScenes devkit's derivation of a map point's latitude, longitude: the great-circle destination from
+    the location's origin, bearing atan2(east, north) and distance |(east, north)|, on a sphere of the WGS84
+    equatorial radius (written here from the spherical destination formula)."""
+    radius_m = 6_378_137.0
+    lat0, lon0 = np.radians(origin)
+    bearing, angle = np.arctan2(east_m, north_m), np.hypot(east_m, north_m) / radius_m
+    lat = np.arcsin(np.sin(lat0) * np.cos(angle) + np.cos(lat0) * np.sin(angle) * np.cos(bearing))
+    lon = lon0 + np.arctan2(
+        np.sin(bearing) * np.sin(angle) * np.cos(lat0), np.cos(angle) - np.sin(lat0) * np.sin(lat)
+    )
+    return float(np.degrees(lat)), float(np.degrees(lon))
+
+
+def far_set(georef: Georeference, east_m: float, north_m: float) -> AnnotationSet:
+    """One lifted divider from the global frame's (0, 0) to (east_m, north_m)."""
+    site_xy = [
+        [-SITE_ORIGIN_XY[0], -SITE_ORIGIN_XY[1]],
+        [east_m - SITE_ORIGIN_XY[0], north_m - SITE_ORIGIN_XY[1]],
+    ]
+    element = MapElement(**element_kwargs(id="far", points_2d=site_xy, points_3d=lifted(site_xy, 0.0)))
+    return AnnotationSet(site_id="s", georeference=georef, elements=[element])
+
+
+@pytest.mark.parametrize("origin", [BOSTON, SINGAPORE])
+def test_a_local_projection_keeps_the_frames_north_where_utm_turns_it(
+    georef: Georeference, tmp_path: Path, origin: tuple[float, float]
+) -> None:
+    """A point 1 km east of a nuScenes origin: in the local frame it stays on the origin's parallel (within the
+    Earth's curvature, 8 cm) and lies where the devkit's sphere puts it within its 0.67 % radius error; the UTM
+    grid puts it 24 m north at Boston (meridian convergence), 0.5 m in Singapore."""
+    east = far_set(georef, 1000.0, 0.0)
+    local, utm = tmp_path / "local.osm", tmp_path / "utm.osm"
+    result = export_lanelet2(east, local, origin_lat_lon=origin, projection=MapProjection.local)
+    assert result.projection is MapProjection.local
+    export_lanelet2(east, utm, origin_lat_lon=origin)
+    metres_per_degree = 111_132.0
+    (lat0, lon0, *_), (lat_local, lon_local, *_) = node_table(local).values()
+    assert (float(lat0), float(lon0)) == pytest.approx(origin, abs=1e-9)
+    assert abs(float(lat_local) - origin[0]) * metres_per_degree < 0.1
+    sphere_lat, sphere_lon = sphere_lat_lon(origin, 1000.0, 0.0)
+    east_error_m = (float(lon_local) - sphere_lon) * metres_per_degree * np.cos(np.radians(origin[0]))
+    assert abs(float(lat_local) - sphere_lat) * metres_per_degree < 0.1 and abs(east_error_m) < 6.7
+    lat_utm = float(list(node_table(utm).values())[1][0])
+    expected_turn_m = 24.0 if origin == BOSTON else 0.5
+    assert abs(lat_utm - origin[0]) * metres_per_degree == pytest.approx(expected_turn_m, rel=0.05)
+    points = xyz_of(linestrings(load(local, origin, MapProjection.local))["far"])
+    written = global_xyz(east.by_id("far"))
+    np.testing.assert_allclose(points[:, :2], written[:, :2], atol=TOLERANCE_M)
+    curvature_drop_m = np.hypot(*written[:, :2].T) ** 2 / (2 * 6_371_000.0)  # `ele` is the map's height
+    np.testing.assert_allclose(points[:, 2], written[:, 2] - curvature_drop_m, atol=0.005)
+
+
+def test_an_unknown_projection_is_refused_naming_it() -> None:
+    with pytest.raises(ValueError, match="projection: 'mercator' is not one of"):
+        origin_projector(BOSTON, "mercator")  # type: ignore[arg-type]

@@ -3,6 +3,7 @@ request is a 4xx at submission naming the field (a refined-pose export of a site
 them), an export that needs neither data set nor poses runs, and a failing export leaves nothing behind."""
 
 import io
+import re
 import shutil
 import time
 import zipfile
@@ -14,11 +15,14 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS
 from cama_pipeline.export import CamaMode, ExportFormat, PoseChoice
 from cama_pipeline.export import run as export_run
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
 from cama_pipeline.export.run import ExportInputs
 from cama_pipeline.semantics import Semantic
+from cama_pipeline.site.io import write_sites_index
+from cama_pipeline.workspace import Workspace
 from tests.backend.backend_helpers import crosswalk, divider, register_site
 
 Headers = dict[str, dict[str, str]]
@@ -61,6 +65,7 @@ def test_every_format_and_option_is_offered(client: TestClient, headers: Headers
     assert enum_of(schema, "poses") == {choice.value for choice in PoseChoice}
     assert enum_of(schema, "mode") == {choice.value for choice in CamaMode}
     assert {"with_clip_data", "origin_lat_lon", "dataset_root", "scenes"} <= set(schema["properties"])
+    assert {"origin_location", "projection"} <= set(schema["properties"])
     assert schema["properties"]["poses"]["default"] == "refined"
     assert client.get("/api/job-kinds").status_code == 401
 
@@ -73,7 +78,19 @@ def test_every_format_and_option_is_offered(client: TestClient, headers: Headers
         ({"format": "maptr"}, "dataset_root", "required for format 'maptr'"),
         ({"format": "cama"}, "dataset_root", "required for format 'cama'"),
         ({"format": "nuscenes-cama"}, "dataset_root", "required for format 'nuscenes-cama'"),
-        ({"format": "lanelet2"}, "origin_lat_lon", "required for format 'lanelet2'"),
+        ({"format": "lanelet2"}, "origin_lat_lon", "site 's1' has no reconstruction whose location"),
+        ({"format": "lanelet2", "origin_location": "mars"}, "origin_location", "one of ['boston-seaport'"),
+        (
+            {"format": "lanelet2", "origin_lat_lon": ORIGIN, "origin_location": "boston-seaport"},
+            "origin_location",
+            "one or",
+        ),
+        ({"format": "lanelet2", "projection": "mercator"}, "projection", "'local' or 'utm'"),
+        (
+            {"format": "maptr", "projection": "utm"},
+            "projection",
+            "only for format 'lanelet2'",
+        ),
         ({"format": "lanelet2", "origin_lat_lon": [91.0, 0.0]}, "origin_lat_lon", "lat in [-90, 90]"),
         ({"format": "lanelet2", "origin_lat_lon": [1.0]}, "origin_lat_lon", "at least 2 items"),
         ({"format": "lanelet2", "origin_lat_lon": ["1", "2"]}, "origin_lat_lon.0", "valid number"),
@@ -144,6 +161,41 @@ def test_lanelet2_export_zips_one_osm_file(
     assert all(f'k="cama:id" v="{element["id"]}"' in osm for element in made)
     workdir = client.app.state.jobs.workdir(done["id"])  # type: ignore[attr-defined]
     assert sorted(path.name for path in workdir.iterdir()) == ["export.zip"]
+
+
+def test_lanelet2_without_an_origin_takes_the_reconstructions_nuscenes_location(
+    client: TestClient, headers: Headers, raster_dir: Path, tmp_path: Path
+) -> None:
+    """A site whose reconstruction lies at a nuScenes location exports at that location's origin with the local
+    projection; at a location without a known origin it is refused at submission, naming the location."""
+    workspace = Workspace(tmp_path / "ws")
+    shutil.copytree(raster_dir, workspace.surface_bev("site-001"))
+    index = {"sites": [{"site_id": "site-001", "location": "synthetic-default", "scenes": []}], "dropped": []}
+    write_sites_index(workspace.sites_index(), index)
+    site_id = register_site(client, headers["lead"], workspace.surface_bev("site-001"), "seaport")
+    refused = post_export(client, headers, site_id, format="lanelet2")
+    assert refused.status_code == 422, refused.text
+    assert "site 'seaport' lies at 'synthetic-default', whose map origin is not known" in refused.text
+    assert str(tmp_path) not in refused.text
+    index["sites"][0]["location"] = "boston-seaport"
+    write_sites_index(workspace.sites_index(), index)
+    element = client.post(f"/api/sites/{site_id}/elements", json=divider(), headers=headers["annotator"])
+    assert element.status_code == 201, element.text
+    response = post_export(client, headers, site_id, format="lanelet2")
+    assert response.status_code == 202, response.text
+    done = wait_done(client, headers, response.json()["id"])
+    assert done["state"] == "succeeded", done["message"]
+    boston = NUSCENES_MAP_ORIGINS["boston-seaport"]
+    assert (
+        "origin_lat_lon 2, projection local, origin_source site site-001 at boston-seaport" in done["message"]
+    )
+    archive = client.get(done["download_url"], headers=headers["lead"])
+    with zipfile.ZipFile(io.BytesIO(archive.content)) as bundle:
+        osm = bundle.read("map.osm").decode()
+    node = re.search(r'lat="([-.0-9]+)" lon="([-.0-9]+)"', osm)
+    assert node is not None, osm
+    lat, lon = (float(value) for value in node.groups())
+    assert abs(lat - boston[0]) < 0.05 and abs(lon - boston[1]) < 0.05  # the test site lies 2 km from (0, 0)
 
 
 def _exported_osm(client: TestClient, headers: Headers, site_id: int) -> tuple[str, str]:

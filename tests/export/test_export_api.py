@@ -2,6 +2,7 @@
 leaves nothing, and the Lanelet2 format (no data set needed) goes through the whole path."""
 
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import cv2
@@ -11,7 +12,9 @@ import typer
 from typer.testing import CliRunner
 
 from annotations import AnnotationSet, Georeference, MapElement
+from annotations.lanelet2_format import MapProjection
 from cama_pipeline.bev import BevRasters, write_bev
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS
 from cama_pipeline.export import ExportFormat, ExportRequest, export
 from cama_pipeline.export import run as export_run
 from cama_pipeline.site.io import write_sites_index
@@ -163,4 +166,69 @@ def test_a_semantic_raster_is_only_for_lanelet2_and_of_the_set_shape(tmp_path: P
             format=ExportFormat.lanelet2,
             origin_lat_lon=(1.0, 2.0),
             semantic=np.zeros((3, 3), dtype=np.uint8),
+        )
+
+
+def _first_node_lat_lon(path: Path) -> tuple[float, float]:
+    node = next(ET.parse(path).getroot().iter("node"))
+    return float(node.get("lat", "nan")), float(node.get("lon", "nan"))
+
+
+def _workspace_at(tmp_path: Path, location: str) -> Workspace:
+    """A workspace whose only site, the annotation set's, lies at `location`."""
+    workspace = Workspace(tmp_path / "ws")
+    sites = [{"site_id": "site-a", "location": location, "scenes": ["scene-0001"]}]
+    write_sites_index(workspace.sites_index(), {"sites": sites, "dropped": []})
+    return workspace
+
+
+def test_lanelet2_places_a_nuscenes_site_at_its_locations_origin(tmp_path: Path) -> None:
+    source = _set_file(tmp_path)
+    workspace = _workspace_at(tmp_path, "boston-seaport")
+    out = tmp_path / "map.osm"
+    base = ["export", str(source), str(out), "--format", "lanelet2", "--workspace", str(workspace.root)]
+    result = runner.invoke(app, base)
+    assert result.exit_code == 0, result.output
+    boston = NUSCENES_MAP_ORIGINS["boston-seaport"]
+    assert f"origin {list(boston)} (site site-a at boston-seaport), projection local" in result.output
+    lat, lon = _first_node_lat_lon(out)  # global (101, 201): 101 m east, 201 m north of the origin
+    assert abs(lat - boston[0]) < 0.01 and abs(lon - boston[1]) < 0.01
+    named = runner.invoke(
+        app, [*base, "--origin", "singapore-onenorth", "--projection", "utm", "--overwrite"]
+    )
+    assert named.exit_code == 0, named.output
+    assert "(--origin singapore-onenorth), projection utm" in named.output
+    assert abs(_first_node_lat_lon(out)[0] - NUSCENES_MAP_ORIGINS["singapore-onenorth"][0]) < 0.01
+
+
+@pytest.mark.parametrize(
+    ("location", "extra", "message"),
+    [
+        ("synthetic-default", [], "site 'site-a' lies at 'synthetic-default', whose map origin is not known"),
+        ("boston-seaport", ["--site-id", "site-b"], "the site's location is unknown: --site-id 'site-b'"),
+        ("boston-seaport", ["--origin", "boston"], "--origin 'boston': expected LAT,LON"),
+        ("boston-seaport", ["--projection", "mercator"], "mercator"),
+    ],
+)
+def test_lanelet2_without_a_known_origin_is_refused_naming_why(
+    tmp_path: Path, location: str, extra: list[str], message: str
+) -> None:
+    source, workspace = _set_file(tmp_path), _workspace_at(tmp_path, location)
+    args = ["export", str(source), str(tmp_path / "map.osm"), "--format", "lanelet2"]
+    result = runner.invoke(app, [*args, "--workspace", str(workspace.root), *extra])
+    assert result.exit_code == 2, result.output
+    assert message in " ".join(result.output.split())
+    assert not (tmp_path / "map.osm").exists()
+
+
+def test_origin_options_are_checked_by_the_request(tmp_path: Path) -> None:
+    annotations = AnnotationSet.read_json(_set_file(tmp_path))
+    lanelet2 = {"out": tmp_path / "map.osm", "format": ExportFormat.lanelet2}
+    with pytest.raises(ValueError, match="either LAT,LON or a nuScenes location"):
+        ExportRequest(annotations, **lanelet2, origin_lat_lon=(1.0, 2.0), origin_location="boston-seaport")
+    with pytest.raises(ValueError, match="'mars': not LAT,LON nor a nuScenes location"):
+        ExportRequest(annotations, **lanelet2, origin_location="mars")
+    with pytest.raises(ValueError, match="only for --format lanelet2"):
+        ExportRequest(
+            annotations, tmp_path / "m.json", ExportFormat.maptr, tmp_path, projection=MapProjection.local
         )

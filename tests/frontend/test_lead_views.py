@@ -72,7 +72,8 @@ def test_approve_return_and_open_in_editor(page: Page, seeded: SeededServer) -> 
 
 def export_a_lanelet2_map(page: Page, seeded: SeededServer) -> None:
     """Every export format is offered; a refined-pose MapTR export of the painted site (no reconstruction) is
-    refused with the reason shown; a Lanelet2 export (no poses, an origin) is queued."""
+    refused with the reason shown; a malformed origin is refused before submission; a Lanelet2 export at a nuScenes
+    location's origin (no poses) is queued with the origin and the projection chosen."""
     offered = page.locator("#export-format option").evaluate_all("options => options.map(o => o.value)")
     assert offered == [choice.value for choice in ExportFormat]
     page.select_option("#export-format", "maptr")
@@ -86,8 +87,16 @@ def export_a_lanelet2_map(page: Page, seeded: SeededServer) -> None:
     page.select_option("#export-format", "lanelet2")
     expect(page.locator("#export-poses")).to_be_hidden()
     expect(page.locator("#export-dataset")).to_be_hidden()
-    page.fill("#export-origin", "1.299, 103.788")
+    page.fill("#export-origin", "1.299, 103.788, 7")
     page.click("#launch-export")
+    expect(message).to_have_class("job-message error")
+    expect(message).to_contain_text("origin: expected lat, lon in degrees")
+    page.fill("#export-origin", "boston-seaport")
+    page.select_option("#export-projection", "local")
+    with page.expect_request(lambda r: r.url.endswith("/jobs") and r.method == "POST") as submitted:
+        page.click("#launch-export")
+    params = submitted.value.post_data_json["params"]
+    assert params == {"format": "lanelet2", "origin_location": "boston-seaport", "projection": "local"}
     expect(message).to_have_class("job-message")
     expect(message).to_contain_text("export job #")
 

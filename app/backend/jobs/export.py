@@ -25,6 +25,7 @@ from pydantic import AfterValidator, BaseModel, Field, model_validator
 from sqlalchemy.orm import Session
 
 from annotations.kerb_evidence import check_semantic
+from annotations.lanelet2_format import MapProjection
 from annotations.schema import AnnotationSet, Georeference
 from app.backend.data_roots import data_folder_validator
 from app.backend.jobs.kinds import lift_elements, read_elevation, site_annotations
@@ -33,9 +34,10 @@ from app.backend.models import Site
 from app.backend.schemas import STRICT
 from cama_pipeline.bev import layer_path, read_layer
 from cama_pipeline.data import DatasetError
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS, location_origin
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
-from cama_pipeline.export.run import WRITERS
+from cama_pipeline.export.run import WRITERS, site_location
 from cama_pipeline.progress import ProgressObserver, observed_progress
 from cama_pipeline.workspace import SiteLocation, Workspace
 
@@ -76,7 +78,14 @@ class ExportParams(BaseModel):
     with_clip_data: bool = False
     """cama: also write each scene's images, lane masks (CAMA's ids) and attribute.json."""
     origin_lat_lon: list[float] | None = Field(default=None, min_length=2, max_length=2)
-    """lanelet2 (required there): the geographic origin [lat, lon] in degrees of the site's global frame."""
+    """lanelet2: the geographic origin [lat, lon] in degrees of the site's global frame. Without it (and without
+    `origin_location`), the origin of the site's reconstruction's location when that is a nuScenes one; else the
+    job fails saying so."""
+    origin_location: str | None = Field(default=None, max_length=64)
+    """lanelet2: a nuScenes location whose map origin to use instead of `origin_lat_lon`."""
+    projection: Annotated[MapProjection | None, Field(strict=False)] = None
+    """lanelet2: local (a tangent plane at the origin, as nuScenes' maps) or utm (the UTM grid there); default
+    local for a nuScenes location's origin, utm for `origin_lat_lon`."""
     dataset_root: Annotated[str | None, AfterValidator(data_folder_validator)] = Field(
         default=None, max_length=4096
     )
@@ -87,14 +96,17 @@ class ExportParams(BaseModel):
 
     @model_validator(mode="after")
     def _what_the_format_needs(self) -> Self:
+        lanelet2 = (self.origin_lat_lon, self.origin_location, self.projection)
+        if self.format is not ExportFormat.lanelet2 and any(value is not None for value in lanelet2):
+            raise ValueError("origin_lat_lon, origin_location, projection: only for format 'lanelet2'")
         if self.format in FORMATS_NEEDING_DATASET and not self.dataset_root:
             raise ValueError(
                 f"dataset_root: required for format {self.format.value!r} (its poses and samples)"
             )
-        if self.format is ExportFormat.lanelet2 and self.origin_lat_lon is None:
-            raise ValueError(
-                "origin_lat_lon: required for format 'lanelet2' ([lat, lon] of the map's origin)"
-            )
+        if self.origin_lat_lon is not None and self.origin_location is not None:
+            raise ValueError("origin_lat_lon, origin_location: one or the other")
+        if self.origin_location is not None and self.origin_location not in NUSCENES_MAP_ORIGINS:
+            raise ValueError(f"origin_location: one of {list(NUSCENES_MAP_ORIGINS)}")
         if self.origin_lat_lon is not None:
             lat, lon = self.origin_lat_lon
             if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
@@ -144,11 +156,33 @@ def check_export(session: Session, site_id: int, params: ExportParams) -> None:
         raise ValueError(
             f"format: {params.format.value!r} is not available in this build (available: {available})"
         )
+    needs_site_origin = params.format is ExportFormat.lanelet2 and (
+        params.origin_lat_lon is None and params.origin_location is None
+    )
+    if not (params.needs_reconstruction or needs_site_origin):
+        return
+    site = session.get(Site, site_id)
+    if site is None:
+        raise ValueError(f"site {site_id}: not found")
     if params.needs_reconstruction:
-        site = session.get(Site, site_id)
-        if site is None:
-            raise ValueError(f"site {site_id}: not found")
         reconstruction(Path(site.raster_dir), site.name)
+    if needs_site_origin:
+        check_site_origin(Path(site.raster_dir), site.name)
+
+
+def check_site_origin(raster_dir: Path, name: str) -> None:
+    """A lanelet2 export without an origin takes its site's location's (`ExportRequest.origin_lat_lon`); ValueError
+    naming `origin_lat_lon` when the site has no reconstruction or its location has no known origin."""
+    needed = f"origin_lat_lon: required for format 'lanelet2' (or origin_location: one of {list(NUSCENES_MAP_ORIGINS)})"
+    location = locate_reconstruction(raster_dir)
+    if location is None or not location.workspace.sites_index().is_file():
+        raise ValueError(f"{needed}: site {name!r} has no reconstruction whose location would give it")
+    try:
+        _site, place = site_location(location.workspace, location.site_id, location.site_id)
+    except (FileNotFoundError, ValueError):
+        raise ValueError(f"{needed}: site {name!r}'s reconstruction does not list it") from None
+    if location_origin(place) is None:
+        raise ValueError(f"{needed}: site {name!r} lies at {place!r}, whose map origin is not known")
 
 
 def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray | None:
@@ -222,6 +256,8 @@ def export_job(context: JobContext, params: ExportParams) -> ExportJob:
         cama_mode=params.mode,
         with_clip_data=params.with_clip_data,
         origin_lat_lon=(origin[0], origin[1]) if origin else None,
+        origin_location=params.origin_location,
+        projection=params.projection,
     )
     hidden = {context.workdir: "<job>", raster_dir: "<rasters>"}
     if dataset_root is not None:
@@ -363,7 +399,7 @@ EXPORT_JOB_KINDS: dict[str, JobKind] = {
         ExportParams,
         run_export,
         "Export the live elements: cama, maptr, nuscenes-cama (with the data set) or lanelet2 (with an "
-        "origin); refined poses from the site's reconstruction, or coarse ones when asked for.",
+        "origin, or at its nuScenes location's); refined poses from the site's reconstruction, or coarse ones when asked for.",
         cleanup=clean_export,
         check=check_export,
     ),

@@ -49,10 +49,21 @@ export class JobsCard {
       mode: h("select#export-mode", { title: "CAMA map mode" }, option("clip", "clip maps (300 m)"), option("site", "site map (600 m)")),
       clipData: h("input#export-clip-data", { type: "checkbox" }),
       dataset: h("input#export-dataset", { placeholder: "data set folder on the server", size: 28 }),
-      origin: h("input#export-origin", { placeholder: "origin lat, lon", size: 18 }),
+      origin: h("input#export-origin", {
+        placeholder: "origin lat, lon or nuScenes location",
+        title: "Lanelet2: the map origin as lat, lon or a nuScenes location (e.g. boston-seaport); blank: the site's location",
+        size: 24,
+      }),
+      projection: h(
+        "select#export-projection",
+        { title: "Lanelet2: how the site's frame lies on the Earth around the origin" },
+        option("", "projection by origin"),
+        option("local", "local tangent plane"),
+        option("utm", "UTM grid"),
+      ),
     };
     form.clipLabel = h("label.inline.small", { title: "Images, lane masks and attribute.json for CAMA's tools" }, form.clipData, "clip data");
-    form.row = h("div.row.export-options#export-options", {}, form.poses, form.mode, form.clipLabel, form.dataset, form.origin);
+    form.row = h("div.row.export-options#export-options", {}, form.poses, form.mode, form.clipLabel, form.dataset, form.origin, form.projection);
     this.exportForm = form;
     this.showExportOptions();
     return form;
@@ -66,6 +77,7 @@ export class JobsCard {
     form.mode.hidden = !chosen.cama;
     form.clipLabel.hidden = !chosen.cama;
     form.origin.hidden = !chosen.origin;
+    form.projection.hidden = !chosen.origin;
   }
 
   /** The export job's params from the visible options; null (with the message shown) when the origin is unreadable. */
@@ -78,14 +90,19 @@ export class JobsCard {
       if (form.dataset.value.trim()) params.dataset_root = form.dataset.value.trim();
     }
     if (chosen.cama) Object.assign(params, { mode: form.mode.value, with_clip_data: form.clipData.checked });
-    if (chosen.origin && form.origin.value.trim()) {
-      const parts = form.origin.value.split(",").map((part) => Number(part.trim()));
-      if (parts.length !== 2 || parts.some((value) => !Number.isFinite(value))) {
-        this.message.className = "job-message error";
-        this.message.textContent = "export: origin: expected lat, lon in degrees, e.g. 1.2990, 103.7880";
-        return null;
+    if (chosen.origin) {
+      const origin = form.origin.value.trim();
+      if (/^[a-z][a-z-]*$/.test(origin)) params.origin_location = origin;
+      else if (origin) {
+        const parts = origin.split(",").map((part) => Number(part.trim()));
+        if (parts.length !== 2 || parts.some((value) => !Number.isFinite(value))) {
+          this.message.className = "job-message error";
+          this.message.textContent = "export: origin: expected lat, lon in degrees (e.g. 1.2990, 103.7880) or a nuScenes location";
+          return null;
+        }
+        params.origin_lat_lon = parts;
       }
-      params.origin_lat_lon = parts;
+      if (form.projection.value) params.projection = form.projection.value;
     }
     return params;
   }
