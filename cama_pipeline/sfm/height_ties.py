@@ -1,6 +1,13 @@
-"""The merge's use of `cama_pipeline.site.heights`: clips no point joins and whose heights nothing measured
-(2D logged poses, no GNSS) are moved, before the merged BA, to the height of the road the other clips drove. The
-merged BA keeps the move: its absolute priors are the aligned poses."""
+"""The merge's use of `cama_pipeline.site.heights`: clips whose heights nothing measured (2D logged poses, no
+GNSS) are moved to the height of the road the other clips drove, twice:
+
+- before the point alignment (`heights_before_alignment`), each clip on its own: WIGO leaves such a clip at its
+  first pose's logged height, metres from the others' on a hilly site, and the alignment's plausibility check
+  (`MergeConfig.max_shift_m`) would refuse a similarity that has to move it that far; tied first, the points
+  only have to correct the tie's own error (the road's cross-fall, centimetres);
+- after it (`tie_heights`), the groups no point joins, as groups.
+
+The merged BA keeps the moves: its absolute priors are the aligned poses."""
 
 from collections.abc import Collection, Sequence
 from dataclasses import replace
@@ -32,3 +39,13 @@ def tie_heights(
         lift[2, 3] = ties[alignment.scene].offset_m if alignment.scene in ties else 0.0
         moved.append(replace(alignment, world_from_clip=lift @ alignment.world_from_clip))
     return moved, ties
+
+
+def heights_before_alignment(
+    clips: Sequence[ClipModel], free_height: Collection[str], *, radius_m: float, min_pairs: int
+) -> tuple[list[np.ndarray], dict[str, HeightTie]]:
+    """Per clip (clip order) the vertical move (4x4 world_from_clip) that ties its height to the clips placed
+    before it, each clip on its own (no alignment yet), and the ties of the free-height scenes."""
+    unaligned = [Alignment(clip.scene, None, "poses", 0, np.eye(4)) for clip in clips]
+    tied, ties = tie_heights(clips, unaligned, free_height, radius_m=radius_m, min_pairs=min_pairs)
+    return [alignment.world_from_clip for alignment in tied], ties

@@ -24,7 +24,11 @@
                        loop ended), "flagged", "seconds"}},
      "merge": {"groups": [[scene]] (clips joined by shared points),
                "alignments": {scene: {"reference": scene | null, "method": "points" | "poses",
-                                      "correspondences", "scale", "rotation_deg", "shift_m"}}},
+                                      "correspondences", "scale", "rotation_deg", "shift_m"}},
+               "height_ties_before_alignment": {scene: {"offset_m", "pairs", "tied"}} (free-height clips,
+                                      each moved on its own before the alignment),
+               "height_ties": {scene: {"offset_m", "pairs", "tied"}} (free-height groups no point joins,
+                                      moved after it)},
      "merged": {"images", "registered_images", "points", "reprojection_error_px", "iterations", "stop",
                 "flagged", "seconds"},
      "seconds": {"clips", "merge", "total"}}

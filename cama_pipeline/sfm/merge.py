@@ -118,7 +118,7 @@ class Alignment:
     correspondences: int
     world_from_clip: np.ndarray
     shift_m: float = 0.0
-    """How far the alignment moved the centre of the clip's shared points."""
+    """How far the alignment moved the centre of the clip's shared points (from where its prior put them)."""
 
     @property
     def scale(self) -> float:
@@ -249,13 +249,14 @@ def _pairwise(
 
 
 def _to_aligned(
-    k: int, aligned: dict[int, Alignment], pairs: dict[tuple[int, int], Correspondences]
+    k: int, aligned: dict[int, Alignment], pairs: dict[tuple[int, int], Correspondences], prior: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, int | None]:
-    """Clip k's points and the aligned clips' points (in the merged frame) they match; the main partner."""
+    """Clip k's points (moved by its `prior`) and the aligned clips' points (in the merged frame) they match;
+    the main partner."""
     sources, targets, best, best_n = [], [], None, 0
     for j, alignment in aligned.items():
         xyz_k, xyz_j = pairs[(k, j)]
-        sources.append(xyz_k)
+        sources.append(_apply(prior, xyz_k))
         targets.append(_apply(alignment.world_from_clip, xyz_j))
         if len(xyz_k) > best_n:
             best, best_n = j, len(xyz_k)
@@ -263,51 +264,69 @@ def _to_aligned(
 
 
 def _align_to(
-    scene: str, source: np.ndarray, target: np.ndarray, reference: str | None, config: MergeConfig
+    scene: str,
+    source: np.ndarray,
+    target: np.ndarray,
+    reference: str | None,
+    config: MergeConfig,
+    prior: np.ndarray,
 ) -> Alignment:
-    """The clip's alignment to the already aligned clips: by their shared points, else its own poses."""
+    """The clip's alignment to the already aligned clips (`source`: its points moved by `prior`): by their
+    shared points, else its own poses moved by `prior`."""
     estimate = estimate_similarity(source, target, config)
     if estimate is None:
-        return Alignment(scene, reference, "poses", len(source), np.eye(4))
+        return Alignment(scene, reference, "poses", len(source), prior)
     similarity, inliers = estimate
     centre = source.mean(axis=0)
     shift = float(np.linalg.norm(_apply(similarity, centre[None])[0] - centre))
-    return Alignment(scene, reference, "points", inliers, similarity, shift)
+    return Alignment(scene, reference, "points", inliers, similarity @ prior, shift)
 
 
 def align_clips(
-    clips: Sequence[ClipModel], matches: Sequence[tuple[str, str, np.ndarray]], config: MergeConfig
+    clips: Sequence[ClipModel],
+    matches: Sequence[tuple[str, str, np.ndarray]],
+    config: MergeConfig,
+    priors: Sequence[np.ndarray] | None = None,
 ) -> list[Alignment]:
     """One alignment per clip (clip order): clips tied by shared points are aligned, most overlap first, to
-    the clip with the most registered images; the others keep their odometry frame."""
+    the clip with the most registered images; the others keep their odometry frame. `priors` (clip order,
+    4x4 world_from_clip; identity by default) move the clips before that: the similarity's plausibility
+    (`max_shift_m`, ...) is judged from there, and a clip aligned by poses keeps its prior."""
+    priors = [np.eye(4)] * len(clips) if priors is None else list(priors)
+    if len(priors) != len(clips):
+        raise ValueError(f"align_clips: {len(priors)} priors for {len(clips)} clips")
     pairs = _pairwise(clips, matches)
     aligned: dict[int, Alignment] = {}
     remaining = sorted(range(len(clips)), key=lambda i: -clips[i].reconstruction.num_reg_images())
     while remaining:
-        gathered = {k: _to_aligned(k, aligned, pairs) for k in remaining} if aligned else {}
+        gathered = {k: _to_aligned(k, aligned, pairs, priors[k]) for k in remaining} if aligned else {}
         k = max(remaining, key=lambda i: len(gathered[i][0])) if gathered else remaining[0]
         if not gathered or len(gathered[k][0]) == 0:
             k = remaining[0]
-            aligned[k] = Alignment(clips[k].scene, None, "poses", 0, np.eye(4))
+            aligned[k] = Alignment(clips[k].scene, None, "poses", 0, priors[k])
         else:
             source, target, partner = gathered[k]
             reference = clips[partner].scene if partner is not None else None
-            aligned[k] = _align_to(clips[k].scene, source, target, reference, config)
+            aligned[k] = _align_to(clips[k].scene, source, target, reference, config, priors[k])
         remaining.remove(k)
         logger.info("clip %s: aligned by %s to %s", clips[k].scene, aligned[k].method, aligned[k].reference)
-    return recentre_groups(clips, [aligned[i] for i in range(len(clips))])
+    return recentre_groups(clips, [aligned[i] for i in range(len(clips))], priors)
 
 
-def _group_correction(members: list[tuple[ClipModel, Alignment]]) -> np.ndarray:
+def _group_correction(members: list[tuple[ClipModel, Alignment, np.ndarray]]) -> np.ndarray:
     """4x4 rigid correction of a group: undoes the image-weighted mean rotation of its alignments (about the
-    group's centre), then the mean shift of its cameras, so the group keeps its clips' mean placement."""
-    weights = np.array([len(clip.views) for clip, _ in members], dtype=np.float64)
+    group's centre), then the mean shift of its cameras, so the group keeps its clips' mean placement (each
+    clip where its prior put it)."""
+    weights = np.array([len(clip.views) for clip, _, _ in members], dtype=np.float64)
     rotvecs = np.array(
-        [Rotation.from_matrix(a.world_from_clip[:3, :3] / a.scale).as_rotvec() for _, a in members]
+        [
+            Rotation.from_matrix((a.world_from_clip @ np.linalg.inv(prior))[:3, :3] / a.scale).as_rotvec()
+            for _, a, prior in members
+        ]
     )
     unrotate = Rotation.from_rotvec(-(weights[:, None] * rotvecs).sum(axis=0) / weights.sum()).as_matrix()
-    own = np.concatenate([own_of(clip) for clip, _ in members])
-    moved = np.concatenate([_apply(a.world_from_clip, own_of(clip)) for clip, a in members])
+    own = np.concatenate([_apply(prior, own_of(clip)) for clip, _, prior in members])
+    moved = np.concatenate([_apply(a.world_from_clip, own_of(clip)) for clip, a, _ in members])
     centre = moved.mean(axis=0)
     correction = np.eye(4)
     correction[:3, :3] = unrotate
@@ -315,11 +334,16 @@ def _group_correction(members: list[tuple[ClipModel, Alignment]]) -> np.ndarray:
     return correction
 
 
-def recentre_groups(clips: Sequence[ClipModel], alignments: list[Alignment]) -> list[Alignment]:
-    """Each merged group moved as a whole so that it keeps its clips' mean placement: relative placement
-    from the shared points, mean rotation and position from the clips themselves (odometry-anchored), rather
-    than all inherited from the reference clip."""
-    by_scene = {clip.scene: (clip, alignment) for clip, alignment in zip(clips, alignments, strict=True)}
+def recentre_groups(
+    clips: Sequence[ClipModel], alignments: list[Alignment], priors: Sequence[np.ndarray]
+) -> list[Alignment]:
+    """Each merged group moved as a whole so that it keeps its clips' mean placement (each moved by its
+    prior): relative placement from the shared points, mean rotation and position from the clips themselves
+    (odometry-anchored), rather than all inherited from the reference clip."""
+    by_scene = {
+        clip.scene: (clip, alignment, prior)
+        for clip, alignment, prior in zip(clips, alignments, priors, strict=True)
+    }
     recentred = {a.scene: a for a in alignments}
     for group in merge_groups(alignments):
         if len(group) < 2:

@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pycolmap
 
 from cama_pipeline.cameras import CameraView, site_views
@@ -29,7 +30,7 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import Executor, make_executor
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views, refined_views
-from cama_pipeline.sfm.height_ties import HeightTie, tie_heights
+from cama_pipeline.sfm.height_ties import HeightTie, heights_before_alignment, tie_heights
 from cama_pipeline.sfm.io import (
     PoseEntry,
     read_model,
@@ -217,8 +218,17 @@ def merge_site(
         reasons = "; ".join(f"{o.scene}: {o.error}" for o in outcomes)
         raise SfmError(f"every clip failed ({reasons})")
     database, image_dir = tasks[0].database, tasks[0].image_dir
-    alignments = align_clips(models, cross_clip_matches(database), merge_config)
+    priors: list[np.ndarray] | None = None
+    first_ties: dict[str, HeightTie] = {}
     ties: dict[str, HeightTie] = {}
+    if merge_config.height_ties and free_height:
+        priors, first_ties = heights_before_alignment(
+            models,
+            free_height,
+            radius_m=merge_config.height_tie_radius_m,
+            min_pairs=merge_config.height_tie_min_pairs,
+        )
+    alignments = align_clips(models, cross_clip_matches(database), merge_config, priors)
     if merge_config.height_ties:
         alignments, ties = tie_heights(
             models,
@@ -254,6 +264,7 @@ def merge_site(
     merge = {
         "groups": merge_groups(alignments),
         "alignments": {a.scene: a.to_json() for a in alignments},
+        "height_ties_before_alignment": {scene: tie.to_json() for scene, tie in first_ties.items()},
         "height_ties": {scene: tie.to_json() for scene, tie in ties.items()},
     }
     return result, union, merge

@@ -9,7 +9,7 @@ import pytest
 
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import reconstruct_views, refined_views
-from cama_pipeline.sfm.height_ties import tie_heights
+from cama_pipeline.sfm.height_ties import heights_before_alignment, tie_heights
 from cama_pipeline.sfm.merge import ClipModel, MergeConfig, align_clips, aligned_views, cross_clip_matches
 from cama_pipeline.sfm.stage import site_clips
 from cama_pipeline.site.io import read_site_manifest
@@ -100,3 +100,35 @@ def test_unjoined_clips_with_free_heights_meet_on_the_road(
     tied_z = (relative(tied) @ lift @ np.append(centre, 1.0))[2]
     assert abs(tied_z - natural_z) < 0.1
     assert abs((relative(unjoined) @ lift @ np.append(centre, 1.0))[2] - natural_z) > 2.0
+
+
+def test_a_free_clip_metres_too_high_is_tied_then_aligned_by_its_points(
+    sfm_inputs: object, clips: list[ClipModel]
+) -> None:
+    """The second drive lifted 8 m, beyond the similarity's `max_shift_m` (5 m): aligned as it stands, its
+    points are refused and it keeps its height; tied first (`heights_before_alignment`), its points align it to
+    within 2 cm of where they put the unlifted drive. Had its height been measured, the other drive would have
+    risen to it instead."""
+    matches = cross_clip_matches(Path(sfm_inputs.database))  # type: ignore[attr-defined]
+    natural = align_clips(clips, matches, MergeConfig())
+    lift = np.eye(4)
+    lift[2, 3] = 8.0
+    lifted = [clips[0], offset_clip(clips[1], lift)]
+    config = MergeConfig()
+    untied = align_clips(lifted, matches, config)
+    assert [a.method for a in untied] == ["poses", "poses"]
+    scenes = {clip.scene for clip in clips}
+    priors, ties = heights_before_alignment(
+        lifted, scenes, radius_m=config.height_tie_radius_m, min_pairs=config.height_tie_min_pairs
+    )
+    assert sum(tie.tied for tie in ties.values()) == 1
+    aligned = align_clips(lifted, matches, config, priors)
+    assert sorted(a.method for a in aligned) == ["points", "poses"]
+    centre = np.mean([v.center for v in clips[1].views], axis=0)
+    natural_z = (relative(natural) @ np.append(centre, 1.0))[2]
+    assert abs((relative(aligned) @ lift @ np.append(centre, 1.0))[2] - natural_z) < 0.02
+    measured, _ = heights_before_alignment(
+        lifted, {clips[0].scene}, radius_m=config.height_tie_radius_m, min_pairs=config.height_tie_min_pairs
+    )
+    assert np.array_equal(measured[1], np.eye(4))  # the lifted drive's height was measured: it stays
+    assert measured[0][2, 3] == pytest.approx(8.0, abs=0.1)  # and the free one rises to meet it
