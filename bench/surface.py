@@ -263,8 +263,10 @@ def ego_frame_figures(
         figures[f"heights_{name}"] = errors.summary()
     observed = semantic != int(Semantic.UNOBSERVED)
     points = np.column_stack([centres[observed.ravel()], ours.require("elevation")[observed]])
-    classes = {name: int(cls) for name, cls in IOU_CLASSES.items()}
-    figures["iou"] = ego_class_iou(points, semantic[observed], ours_poses, true_poses, ground.label, classes)
+    iou_classes = {name: int(cls) for name, cls in IOU_CLASSES.items()}
+    figures["iou"] = ego_class_iou(
+        points, semantic[observed], ours_poses, true_poses, ground.label, iou_classes
+    )
     return figures
 
 

@@ -11,6 +11,7 @@ side's correction is held when it lies within `max_gap_us`; with none near, the 
 """
 
 import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -102,11 +103,17 @@ def _required(path: Path) -> Path:
 
 
 def refined_poses(
-    dataset: Dataset, workspace: Workspace, site_id: str, *, max_gap_us: int = MAX_GAP_US
+    dataset: Dataset,
+    workspace: Workspace,
+    site_id: str,
+    *,
+    max_gap_us: int = MAX_GAP_US,
+    scenes: Sequence[str] | None = None,
 ) -> dict[str, RefinedPose]:
     """sample_data token -> refined global_from_ego for every camera image of the site's scenes (see the module
-    docstring); FileNotFoundError naming the first missing input (site manifest, SfM poses, WIGO file)."""
-    scenes = site_scenes(workspace, site_id)
+    docstring; `scenes`: the site's as `site_scenes` read them, when the caller has); FileNotFoundError naming
+    the first missing input (site manifest, SfM poses, WIGO file)."""
+    scenes = site_scenes(workspace, site_id) if scenes is None else scenes
     sfm = read_refined_poses(_required(workspace.sfm_poses(site_id)))
     by_name = {scene.name: scene for scene in dataset.scenes}
     out: dict[str, RefinedPose] = {}

@@ -112,11 +112,12 @@ def level_groups(
     """The tie of every scene of the groups whose scenes all have free heights (module docstring); `groups`:
     scenes whose relative heights are already known (joined by points, or each scene alone), `tracks`: each
     scene's `keyframe_track`."""
-    sizes = {tuple(g): sum(len(tracks[s]) for s in g) for g in groups}
-    free_groups = [list(g) for g in groups if all(scene in free_height for scene in g)]
-    placed = [list(g) for g in groups if not all(scene in free_height for scene in g)]
+    free_groups: list[list[str]] = []
+    placed: list[list[str]] = []
+    for g in groups:
+        (free_groups if all(scene in free_height for scene in g) else placed).append(list(g))
     if not placed and free_groups:  # nothing measured: the largest group sets the height
-        largest = max(free_groups, key=lambda g: sizes[tuple(g)])
+        largest = max(free_groups, key=lambda g: sum(len(tracks[s]) for s in g))
         free_groups.remove(largest)
         placed.append(largest)
     placed_tracks = [tracks[s] for g in placed for s in g]

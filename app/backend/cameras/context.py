@@ -192,20 +192,21 @@ def _reconstruction_scenes(sources: SiteSources) -> list[str] | None:
         return None
     try:
         return site_scenes(Workspace(sources.workspace_dir), sources.recon_site_id) or None
-    except (FileNotFoundError, ValueError, KeyError):
+    except (FileNotFoundError, ValueError, KeyError) as error:
+        logger.info("site %d: no reconstruction for the camera panel: %s", sources.site_id, error)
         return None
 
 
 def _reconstruction(
-    sources: SiteSources, dataset: Dataset
+    sources: SiteSources, dataset: Dataset, scenes: list[str] | None
 ) -> tuple[dict[str, RefinedPose], list[str], str | None]:
-    """Refined poses, the reconstruction's scenes and a notice when there is no reconstruction."""
-    if sources.workspace_dir is None or sources.recon_site_id is None:
+    """Refined poses, the reconstruction's scenes (`_reconstruction_scenes`) and a notice when there is no
+    reconstruction."""
+    if sources.workspace_dir is None or sources.recon_site_id is None or scenes is None:
         return {}, [], NO_RECONSTRUCTION
     workspace = Workspace(sources.workspace_dir)
     try:
-        poses = refined_poses(dataset, workspace, sources.recon_site_id)
-        scenes = site_scenes(workspace, sources.recon_site_id)
+        poses = refined_poses(dataset, workspace, sources.recon_site_id, scenes=scenes)
     except (FileNotFoundError, ValueError, KeyError) as error:
         logger.info("site %d: no reconstruction for the camera panel: %s", sources.site_id, error)
         return {}, [], NO_RECONSTRUCTION
@@ -223,15 +224,14 @@ def load_context(sources: SiteSources) -> CameraContext:
     if sources.dataset_root is None:
         return _without_images(sources, elevation, NO_DATASET)
     root = sources.dataset_root
+    scenes_read = _reconstruction_scenes(sources)
     try:
         roots, mask_source = _mask_roots(sources, root)
-        dataset = load_dataset(
-            root, check_files=False, mask_roots=roots, scenes=_reconstruction_scenes(sources)
-        )
+        dataset = load_dataset(root, check_files=False, mask_roots=roots, scenes=scenes_read)
     except (OSError, ValueError) as error:
         logger.warning("site %d: data set %s unreadable: %s", sources.site_id, root, error)
         return _without_images(sources, elevation, UNREADABLE_DATASET)
-    poses, scenes, notice = _reconstruction(sources, dataset)
+    poses, scenes, notice = _reconstruction(sources, dataset, scenes_read)
     views = _posed_views(dataset, poses, scenes)
     if notice is None and not views:
         notice = NO_SFM_IMAGES
