@@ -31,6 +31,7 @@ bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|masks|rule]
        [--checkpoint REGISTRY_OR_VERSION]
        [--masks auto|dataset|predicted|DIR] [--out bench/results/end_to_end.json] [--measure-only]
+       [--workspace DIR (default: the data set's)]
 """
 
 import argparse
@@ -377,6 +378,12 @@ def main() -> None:
         action="store_true",
         help="measure the workspace as it is, without running the pipeline (its proposals must exist)",
     )
+    parser.add_argument(
+        "--workspace",
+        type=Path,
+        default=None,
+        help="the workspace to run into and measure (default: the data set's, SITE/workspace)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     site, site_id = args.site, args.site_id
@@ -384,7 +391,7 @@ def main() -> None:
         ensure_unseen(load_checkpoint(resolve_checkpoint(args.checkpoint)), site)
     if args.proposer == "masks":  # the same for the element-mask network
         ensure_unseen(load_mask_checkpoint(resolve_checkpoint(args.checkpoint, SHIPPED_MASK_REGISTRY)), site)
-    workspace = Workspace.for_dataset(site / "nuscenes")
+    workspace = Workspace.resolve(args.workspace, site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:
         features = (
