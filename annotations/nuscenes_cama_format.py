@@ -45,18 +45,19 @@ from annotations.nuscenes_cama_poses import (
     EGO_POSE,
     MAX_BORROW_GAP_US,
     EgoPoseEntry,
-    ego_pose_json,
     logged_pose,
-    pose_sources_json,
+    pose_sources_chunks,
+    pose_sources_header,
     refined_ego_poses,
     sensor_channels,
     source_tables,
+    write_ego_pose_json,
 )
 from annotations.poses import PoseLookup, PoseSource
 from annotations.schema import AnnotationSet
 from cama_pipeline.data import Dataset, Frame, Pose
 from cama_pipeline.data.tables import Table
-from cama_pipeline.io import atomic_write_bytes, atomic_write_json
+from cama_pipeline.io import atomic_write_bytes, atomic_write_chunks
 from cama_pipeline.progress import StageProgress
 
 logger = logging.getLogger(__name__)
@@ -231,7 +232,6 @@ def export_nuscenes_cama(
     source_dir = dataset_root / dataset.version
     tables = source_tables(dataset_root, dataset.version)
     entries = refined_ego_poses(dataset, tables, poses, source_dir, max_borrow_gap_us=max_borrow_gap_us)
-    ego_pose = ego_pose_json(source_dir, tables[EGO_POSE], entries)
     frame_pose = reference_poses(entries, tables, poses, source_dir)
     with StageProgress("cama export", logger=logger, enabled=show_progress) as progress:
         total = sum(len(scene.frames) for scene in dataset.scenes if scene.name in exported)
@@ -247,21 +247,21 @@ def export_nuscenes_cama(
             scenes=exported,
         )
     version = cama_version(dataset.version)
-    sources = pose_sources_json(
+    header = pose_sources_header(
         entries, version=version, source_version=dataset.version, max_borrow_gap_us=max_borrow_gap_us
     )
     version_dir = out / version
     version_dir.mkdir(parents=True, exist_ok=True)
     linked, copied = _place_version_files(source_dir, version_dir, link=link_tables)
-    atomic_write_bytes(version_dir / f"{EGO_POSE}.json", ego_pose)
+    write_ego_pose_json(version_dir / f"{EGO_POSE}.json", source_dir, tables[EGO_POSE], entries)
     atomic_write_bytes(version_dir / MAP_VECTORS, vectors.model_dump_json(by_alias=True, indent=1).encode())
-    atomic_write_json(version_dir / POSE_SOURCES_FILE, sources, indent=1)
+    atomic_write_chunks(version_dir / POSE_SOURCES_FILE, pose_sources_chunks(header, entries))
     entries_linked = _link_root_entries(dataset_root, out)
     result = NuscenesCamaResult(
         root=out,
         version=version,
         source_version=dataset.version,
-        counts=dict(sources["counts"]),
+        counts=dict(header["counts"]),
         camera_records=sum(1 for entry in entries.values() if entry.camera),
         borrowed_records=sum(1 for entry in entries.values() if entry.correction_from is not None),
         kept_records=sum(1 for entry in entries.values() if entry.global_from_ego is None),

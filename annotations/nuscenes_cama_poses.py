@@ -21,8 +21,11 @@ where the record was kept as it was read.
 """
 
 import bisect
+import itertools
 import json
+import os
 from collections import Counter
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -32,9 +35,20 @@ from cama_pipeline.data import Dataset, Pose
 from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.data.schema import CAMERA_MODALITY
 from cama_pipeline.data.tables import Table, read_table, table_path
+from cama_pipeline.io import atomic_write_chunks
 
 EGO_POSE = "ego_pose"
 POSE_SOURCES_FORMAT: Literal["cama-studio-nuscenes-pose-sources"] = "cama-studio-nuscenes-pose-sources"
+SAMPLE_DATA_FIELDS = (
+    "token",
+    "sample_token",
+    "ego_pose_token",
+    "calibrated_sensor_token",
+    "timestamp",
+    "is_key_frame",
+)
+"""The fields of sample_data the export reads; the others (file names, sizes, links) are dropped as the table is
+parsed: on nuScenes trainval that halves the memory its 2.6 million records take."""
 MAX_BORROW_GAP_US = 500_000
 """How far in time (microseconds) a non-camera record may borrow a camera image's correction."""
 
@@ -75,8 +89,10 @@ def source_tables(dataset_root: Path, version: str) -> dict[str, Table]:
         raise DatasetError(
             f"no version folder {version!r} with scene.json; folders found: {found}", path=version_dir
         )
-    names = ("scene", "sample", "sample_data", EGO_POSE, "calibrated_sensor", "sensor")
-    return {name: read_table(version_dir, name) for name in names}
+    names = ("scene", "sample", EGO_POSE, "calibrated_sensor", "sensor")
+    tables = {name: read_table(version_dir, name) for name in names}
+    tables["sample_data"] = read_table(version_dir, "sample_data", keep=SAMPLE_DATA_FIELDS)
+    return tables
 
 
 def sensor_channels(tables: dict[str, Table], version_dir: Path) -> dict[str, tuple[str, str]]:
@@ -225,38 +241,70 @@ def refined_ego_poses(
     return entries
 
 
-def _json_indent(text: str) -> int | None:
-    """The indentation `json.dumps` wrote a list of records with: None for one line, else the second line's
-    leading spaces (0 for nuScenes' own files)."""
-    lines = text.split("\n", 2)
-    if len(lines) < 2:
-        return None
-    return len(lines[1]) - len(lines[1].lstrip(" "))
+def json_layout(path: Path) -> tuple[int | None, bool]:
+    """(indent, trailing newline) of a JSON list of records as `json.dumps` wrote it, read from the file's head and
+    its last byte (not the whole file: ego_pose.json is 0.4 GB on nuScenes trainval). Indent None: one line; else
+    the second line's leading spaces (0 for nuScenes' own files)."""
+    with open(path, "rb") as handle:
+        head = handle.read(1 << 16)
+        size = handle.seek(0, os.SEEK_END)
+        handle.seek(max(size - 1, 0))
+        newline_at_end = handle.read(1) == b"\n"
+    first_newline = head.find(b"\n")
+    if first_newline < 0 or first_newline == size - 1:
+        return None, newline_at_end
+    second = head[first_newline + 1 :]
+    return len(second) - len(second.lstrip(b" ")), newline_at_end
 
 
-def ego_pose_json(version_dir: Path, table: Table, entries: dict[str, EgoPoseEntry]) -> bytes:
-    """The source's ego_pose.json with refined translation and rotation: same records, order, fields and
-    indentation; records kept as logged come out as they were read."""
-    text = table_path(version_dir, EGO_POSE).read_text(encoding="utf-8")
-    records = []
+def json_list_chunks(records: Iterable[Any], indent: int | None, *, batch: int = 4096) -> Iterator[str]:
+    """The text `json.dumps(list(records), indent=indent)` would give, in pieces of `batch` records: a list of
+    millions of records is written without holding it, or its text, whole."""
+    separator = ", " if indent is None else ",\n"
+    pad = "" if indent is None else " " * indent
+    pending: list[str] = []
+    started = False
+    for record in records:
+        text = json.dumps(record, indent=indent)
+        pending.append(text if indent is None else pad + text.replace("\n", "\n" + pad))
+        if len(pending) >= batch:
+            yield ("[" if indent is None else "[\n") if not started else separator
+            yield separator.join(pending)
+            started, pending = True, []
+    if pending:
+        yield ("[" if indent is None else "[\n") if not started else separator
+        yield separator.join(pending)
+        started = True
+    yield ("]" if indent is None else "\n]") if started else "[]"
+
+
+def refined_records(table: Table, entries: dict[str, EgoPoseEntry]) -> Iterator[dict[str, Any]]:
+    """The ego_pose records in table order, with the refined translation and rotation where there is one;
+    records kept as logged are the records as read."""
     for token, record in table.items():
         pose = entries[token].global_from_ego
         if pose is None:
-            records.append(record)
+            yield record
             continue
         refined = dict(record)
         refined["translation"] = [float(v) for v in pose.translation]
         refined["rotation"] = [float(v) for v in pose.rotation]
-        records.append(refined)
-    out = json.dumps(records, indent=_json_indent(text))
-    return (out + "\n" if text.endswith("\n") else out).encode("utf-8")
+        yield refined
 
 
-def pose_sources_json(
+def write_ego_pose_json(out: Path, version_dir: Path, table: Table, entries: dict[str, EgoPoseEntry]) -> None:
+    """Write the source's ego_pose.json with refined translation and rotation to `out` (atomically, streamed):
+    same records, order, fields and indentation as the source; records kept as logged come out as they were
+    read."""
+    indent, newline = json_layout(table_path(version_dir, EGO_POSE))
+    chunks = json_list_chunks(refined_records(table, entries), indent)
+    atomic_write_chunks(out, itertools.chain(chunks, ["\n"] if newline else []))
+
+
+def pose_sources_header(
     entries: dict[str, EgoPoseEntry], *, version: str, source_version: str, max_borrow_gap_us: int
 ) -> dict[str, Any]:
-    """pose_sources.json: counts per source and, per ego_pose token, its source, sample_data, channel, the
-    camera image a non-camera record took its correction from, and whether the logged value was kept."""
+    """pose_sources.json without its `ego_poses`: the format, the versions, the rule and the counts per source."""
     counts = Counter(entry.source for entry in entries.values())
     return {
         "format": POSE_SOURCES_FORMAT,
@@ -267,14 +315,29 @@ def pose_sources_json(
         "(same scene, within max_borrow_gap_us); none near: logged",
         "max_borrow_gap_us": max_borrow_gap_us,
         "counts": {source: counts.get(source, 0) for source in POSE_SOURCES},
-        "ego_poses": {
-            token: {
-                "source": entry.source,
-                "sample_data": entry.sample_data,
-                "channel": entry.channel,
-                "correction_from": entry.correction_from,
-                "logged": entry.global_from_ego is None,
-            }
-            for token, entry in entries.items()
-        },
     }
+
+
+def pose_source_record(entry: EgoPoseEntry) -> dict[str, Any]:
+    """One ego_pose record's entry in pose_sources.json: its source, sample_data, channel, the camera image a
+    non-camera record took its correction from, and whether the logged value was kept."""
+    return {
+        "source": entry.source,
+        "sample_data": entry.sample_data,
+        "channel": entry.channel,
+        "correction_from": entry.correction_from,
+        "logged": entry.global_from_ego is None,
+    }
+
+
+def pose_sources_chunks(header: dict[str, Any], entries: dict[str, EgoPoseEntry]) -> Iterator[str]:
+    """The text of `json.dumps({**header, "ego_poses": {token: pose_source_record(entry)}}, indent=1)`, produced
+    record by record (2.6 million on nuScenes trainval)."""
+    head = json.dumps(header, indent=1)
+    yield head[:-2] + ',\n "ego_poses": {' if header else '{\n "ego_poses": {'
+    first = True
+    for token, entry in entries.items():
+        value = json.dumps(pose_source_record(entry), indent=1).replace("\n", "\n  ")
+        yield ("\n  " if first else ",\n  ") + json.dumps(token) + ": " + value
+        first = False
+    yield "\n }\n}" if not first else "}\n}"

@@ -1,8 +1,9 @@
 """Reading the JSON tables of a nuScenes-layout data set: existence, JSON syntax, fields, unique tokens."""
 
+import itertools
 import json
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +23,12 @@ def table_path(version_dir: Path, name: str) -> Path:
     return Path(version_dir) / f"{name}.json"
 
 
-def read_json(path: Path) -> Any:
-    """Parse a JSON file; any failure becomes a DatasetError naming the file (and line/column for syntax)."""
+def read_json(path: Path, object_hook: Callable[[dict[str, Any]], Any] | None = None) -> Any:
+    """Parse a JSON file (each object through `object_hook` when given, as `json.load` does); any failure becomes
+    a DatasetError naming the file (and line/column for syntax)."""
     try:
         with open(path, encoding="utf-8") as handle:
-            return json.load(handle)
+            return json.load(handle, object_hook=object_hook)
     except FileNotFoundError:
         raise DatasetError("file not found", path=path) from None
     except json.JSONDecodeError as exc:
@@ -39,12 +41,16 @@ def read_json(path: Path) -> Any:
         raise DatasetError(f"cannot read: {exc.strerror or exc}", path=path) from None
 
 
-def read_records(path: Path, fields: Iterable[str]) -> list[Record]:
-    """Read a JSON list of dicts and check each has `fields`; errors name the record (token or index)."""
-    data = read_json(path)
+def read_records(path: Path, fields: Iterable[str], keep: Iterable[str] | None = None) -> list[Record]:
+    """Read a JSON list of dicts and check each has `fields`; errors name the record (token or index).
+    `keep`: only these fields of each record are kept, the others dropped as the file is parsed (for a flat
+    table read whole, e.g. nuScenes trainval's 1.3 GB sample_data.json, of which a reader needs a few fields)."""
+    required = frozenset(fields)
+    data = read_json(path, None if keep is None else _projection(path, required, tuple(keep)))
     if not isinstance(data, list):
         raise DatasetError(f"expected a JSON list of records, got {type(data).__name__}", path=path)
-    required = frozenset(fields)
+    if keep is not None:
+        required = required & frozenset(keep)  # the rest was checked before it was dropped
     for index, record in enumerate(data):
         if not isinstance(record, dict):
             raise DatasetError(
@@ -52,6 +58,18 @@ def read_records(path: Path, fields: Iterable[str]) -> list[Record]:
             )
         check_fields(path, record, required, record_label(record, index))
     return data
+
+
+def _projection(path: Path, required: frozenset[str], keep: tuple[str, ...]) -> Callable[[Record], Record]:
+    """A `json.load` object hook that checks each object (a record of a flat table: objects come in file order)
+    has `required` and keeps only the fields in `keep`."""
+    index = itertools.count()
+
+    def project(record: Record) -> Record:
+        check_fields(path, record, required, record_label(record, next(index)))
+        return {name: record[name] for name in keep if name in record}
+
+    return project
 
 
 def check_fields(path: Path, record: Record, required: frozenset[str], label: str) -> None:
@@ -97,8 +115,9 @@ def index_by_token(path: Path, records: list[Record]) -> Table:
     return table
 
 
-def read_table(version_dir: Path, name: str) -> Table:
-    """Read one table indexed by token; a missing optional table is empty, a missing required one an error."""
+def read_table(version_dir: Path, name: str, keep: Iterable[str] | None = None) -> Table:
+    """Read one table indexed by token; a missing optional table is empty, a missing required one an error.
+    `keep`: only these fields of each record (`read_records`; "token" is always kept)."""
     if name not in REQUIRED_TABLES and name not in OPTIONAL_TABLES:
         raise ValueError(f"unknown table {name!r}; known: {sorted(REQUIRED_TABLES + OPTIONAL_TABLES)}")
     path = table_path(version_dir, name)
@@ -107,7 +126,8 @@ def read_table(version_dir: Path, name: str) -> Table:
             raise DatasetError(f"required table {name!r} is missing", path=path)
         logger.debug("optional table %s absent: treated as empty", path)
         return {}
-    records = read_records(path, TABLE_FIELDS.get(name, ("token",)))
+    kept = None if keep is None else ("token", *(field for field in keep if field != "token"))
+    records = read_records(path, TABLE_FIELDS.get(name, ("token",)), kept)
     table = index_by_token(path, records)
     logger.debug("read %d records from %s", len(table), path)
     return table
