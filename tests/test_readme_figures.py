@@ -3460,3 +3460,21 @@ def test_unjoined_clips_table() -> None:
         label, cells = row_starting(t, prefix)
         for cell, values in zip(cells[1:], expected, strict=True):
             assert_shows(cell, values, f"unjoined clips table, {label}")
+
+
+def test_export_trainval_table() -> None:
+    t = table("nuScenes-CAMAv2 export, trainval-sized tables, a site of ten scenes")
+    assert_names_source(t, "export_trainval.json", "bench/export_trainval.py")
+    runs = results("export_trainval.json")["runs"]
+    labels = {
+        "baseline_export_site": "the export before (996cc4f)",
+        "export_site": "the export now",
+        "whole_parse": "`json.load` of the six tables it reads, alone",
+        "load_site": "loading the site's ten scenes, alone",
+    }
+    for key, label in labels.items():
+        run = runs[key]
+        for cell, value in zip(row(t, label)[1:], (run["seconds"], run["peak_rss_mb"]), strict=True):
+            assert_shows(cell, [value], f"export trainval table, {label}")
+    ratio = runs["baseline_export_site"]["seconds"] / runs["export_site"]["seconds"]
+    assert_shows(row(t, "the export now")[1].split("(")[1], [ratio], "export trainval speed-up")
