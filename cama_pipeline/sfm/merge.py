@@ -249,14 +249,14 @@ def _pairwise(
 
 
 def _to_aligned(
-    k: int, aligned: dict[int, Alignment], pairs: dict[tuple[int, int], Correspondences], prior: np.ndarray
+    k: int, aligned: dict[int, Alignment], pairs: dict[tuple[int, int], Correspondences]
 ) -> tuple[np.ndarray, np.ndarray, int | None]:
-    """Clip k's points (moved by its `prior`) and the aligned clips' points (in the merged frame) they match;
-    the main partner."""
+    """Clip k's points (its own frame) and the aligned clips' points (in the merged frame) they match; the main
+    partner."""
     sources, targets, best, best_n = [], [], None, 0
     for j, alignment in aligned.items():
         xyz_k, xyz_j = pairs[(k, j)]
-        sources.append(_apply(prior, xyz_k))
+        sources.append(xyz_k)
         targets.append(_apply(alignment.world_from_clip, xyz_j))
         if len(xyz_k) > best_n:
             best, best_n = j, len(xyz_k)
@@ -270,16 +270,23 @@ def _align_to(
     reference: str | None,
     config: MergeConfig,
     prior: np.ndarray,
-) -> Alignment:
-    """The clip's alignment to the already aligned clips (`source`: its points moved by `prior`): by their
-    shared points, else its own poses moved by `prior`."""
-    estimate = estimate_similarity(source, target, config)
-    if estimate is None:
-        return Alignment(scene, reference, "poses", len(source), prior)
-    similarity, inliers = estimate
-    centre = source.mean(axis=0)
-    shift = float(np.linalg.norm(_apply(similarity, centre[None])[0] - centre))
-    return Alignment(scene, reference, "points", inliers, similarity @ prior, shift)
+) -> tuple[Alignment, np.ndarray]:
+    """The clip's alignment to the already aligned clips (`source`: its points, in its own frame): by their
+    shared points, judged from where `prior` puts the clip and, when that is refused and the prior moved it, from
+    where the clip stands (a wrong prior, e.g. a height tied to a road under a bridge, must not cost the clip
+    the points that would place it); else its own poses moved by `prior`. Returns the alignment and the start it
+    was judged from (the placement the clip keeps when its group is recentred)."""
+    starts = [prior] if np.array_equal(prior, np.eye(4)) else [prior, np.eye(4)]
+    for start in starts:
+        moved = _apply(start, source)
+        estimate = estimate_similarity(moved, target, config)
+        if estimate is None:
+            continue
+        similarity, inliers = estimate
+        centre = moved.mean(axis=0)
+        shift = float(np.linalg.norm(_apply(similarity, centre[None])[0] - centre))
+        return Alignment(scene, reference, "points", inliers, similarity @ start, shift), start
+    return Alignment(scene, reference, "poses", len(source), prior), prior
 
 
 def align_clips(
@@ -291,7 +298,8 @@ def align_clips(
     """One alignment per clip (clip order): clips tied by shared points are aligned, most overlap first, to
     the clip with the most registered images; the others keep their odometry frame. `priors` (clip order,
     4x4 world_from_clip; identity by default) move the clips before that: the similarity's plausibility
-    (`max_shift_m`, ...) is judged from there, and a clip aligned by poses keeps its prior."""
+    (`max_shift_m`, ...) is judged from there (then, if refused, from the clip's own frame), and a clip aligned by
+    poses keeps its prior."""
     priors = [np.eye(4)] * len(clips) if priors is None else list(priors)
     if len(priors) != len(clips):
         raise ValueError(f"align_clips: {len(priors)} priors for {len(clips)} clips")
@@ -299,7 +307,7 @@ def align_clips(
     aligned: dict[int, Alignment] = {}
     remaining = sorted(range(len(clips)), key=lambda i: -clips[i].reconstruction.num_reg_images())
     while remaining:
-        gathered = {k: _to_aligned(k, aligned, pairs, priors[k]) for k in remaining} if aligned else {}
+        gathered = {k: _to_aligned(k, aligned, pairs) for k in remaining} if aligned else {}
         k = max(remaining, key=lambda i: len(gathered[i][0])) if gathered else remaining[0]
         if not gathered or len(gathered[k][0]) == 0:
             k = remaining[0]
@@ -307,7 +315,7 @@ def align_clips(
         else:
             source, target, partner = gathered[k]
             reference = clips[partner].scene if partner is not None else None
-            aligned[k] = _align_to(clips[k].scene, source, target, reference, config, priors[k])
+            aligned[k], priors[k] = _align_to(clips[k].scene, source, target, reference, config, priors[k])
         remaining.remove(k)
         logger.info("clip %s: aligned by %s to %s", clips[k].scene, aligned[k].method, aligned[k].reference)
     return recentre_groups(clips, [aligned[i] for i in range(len(clips))], priors)

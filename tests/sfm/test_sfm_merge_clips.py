@@ -132,3 +132,17 @@ def test_a_free_clip_metres_too_high_is_tied_then_aligned_by_its_points(
     )
     assert np.array_equal(measured[1], np.eye(4))  # the lifted drive's height was measured: it stays
     assert measured[0][2, 3] == pytest.approx(8.0, abs=0.1)  # and the free one rises to meet it
+
+
+def test_a_wrong_prior_does_not_cost_a_clip_its_points(sfm_inputs: object, clips: list[ClipModel]) -> None:
+    """A prior 8 m off (a height tied to the road under a bridge, say): the points are refused from there, and
+    judged again from where the clip stands they align it as without the prior."""
+    matches = cross_clip_matches(Path(sfm_inputs.database))  # type: ignore[attr-defined]
+    natural = align_clips(clips, matches, MergeConfig())
+    wrong = np.eye(4)
+    wrong[2, 3] = 8.0
+    priors = [np.eye(4), wrong] if natural[1].method == "points" else [wrong, np.eye(4)]
+    aligned = align_clips(clips, matches, MergeConfig(), priors)
+    assert [a.method for a in aligned] == [a.method for a in natural]
+    for ours, theirs in zip(aligned, natural, strict=True):  # the group is placed as without the prior, too
+        np.testing.assert_allclose(ours.world_from_clip, theirs.world_from_clip, atol=1e-6)
