@@ -26,17 +26,19 @@ Usage: .venv/bin/python bench/export_trainval.py [--tables DIR] [--scenes 850] [
 
 import argparse
 import json
-import multiprocessing
 import os
 import platform
 import subprocess
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from loader import VERSION, write_tables  # bench/loader.py: this script's folder is on sys.path
+from loader import (  # bench/loader.py: this script's folder is on sys.path
+    VERSION,
+    ensure_tables,
+    warm_page_cache,
+)
 
 from cama_pipeline.io import atomic_write_json
 
@@ -86,10 +88,7 @@ print(json.dumps({"seconds": seconds, "peak_rss_mb": status["VmHWM"] / 1024, **w
 def measure(mode: str, root: Path, names: list[str], out: Path, code: Path = ROOT) -> dict[str, Any]:
     """One measurement (the module docstring) in a fresh process importing the project from `code`, the tables
     read once before it."""
-    for path in sorted((root / VERSION).glob("*.json")):
-        with open(path, "rb") as handle:
-            while handle.read(1 << 24):
-                pass
+    warm_page_cache(root)
     command = [sys.executable, "-c", MEASURE, mode, str(root), json.dumps(names), VERSION, str(out)]
     environment = {**os.environ, "PYTHONPATH": str(code)}
     done = subprocess.run(command, cwd=code, capture_output=True, text=True, check=False, env=environment)
@@ -109,14 +108,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS / "export_trainval.json")
     args = parser.parse_args()
     root = args.tables or Path(tempfile.mkdtemp(prefix="bench-export-"))
-    version_dir = root / VERSION
-    counts_path = version_dir / "counts.json"
-    if counts_path.is_file() and json.loads(counts_path.read_text())["scenes"] == args.scenes:
-        counts = json.loads(counts_path.read_text())["records"]
-    else:  # in a process of its own, whose memory is returned before the measurements
-        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-            counts = pool.submit(write_tables, version_dir, args.scenes).result()
-        counts_path.write_text(json.dumps({"scenes": args.scenes, "records": counts}))
+    counts = ensure_tables(root, args.scenes)
     print("tables:", counts, flush=True)
     names = [f"scene-{i + 1:04d}" for i in range(args.scenes)]
     site = names[:: max(1, len(names) // args.site_scenes)][: args.site_scenes]

@@ -188,13 +188,32 @@ def _write_scene(
             previous = record
 
 
-def measure(mode: str, root: Path, names: list[str] | None, code: Path) -> dict[str, Any]:
-    """One measurement (see the module docstring) in a fresh process importing the project from `code`, the
-    tables read once before it."""
+def ensure_tables(root: Path, scenes: int) -> dict[str, int]:
+    """The tables of `scenes` scenes in `root`'s version folder: reused when an earlier run wrote that many (its
+    `counts.json`), else written in a process of its own, whose memory is returned before the measurements; the
+    record count per table."""
+    version_dir = root / VERSION
+    counts_path = version_dir / "counts.json"
+    if counts_path.is_file() and json.loads(counts_path.read_text())["scenes"] == scenes:
+        return dict(json.loads(counts_path.read_text())["records"])
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        counts = pool.submit(write_tables, version_dir, scenes).result()
+    counts_path.write_text(json.dumps({"scenes": scenes, "records": counts}))
+    return counts
+
+
+def warm_page_cache(root: Path) -> None:
+    """Read every table once, so that each measurement finds them in the page cache."""
     for path in sorted((root / VERSION).glob("*.json")):
         with open(path, "rb") as handle:
             while handle.read(1 << 24):
                 pass
+
+
+def measure(mode: str, root: Path, names: list[str] | None, code: Path) -> dict[str, Any]:
+    """One measurement (see the module docstring) in a fresh process importing the project from `code`, the
+    tables read once before it."""
+    warm_page_cache(root)
     command = [sys.executable, "-c", MEASURE, mode, str(root), json.dumps(names), VERSION]
     environment = {**os.environ, "PYTHONPATH": str(code)}
     done = subprocess.run(command, cwd=code, capture_output=True, text=True, check=False, env=environment)
@@ -213,13 +232,7 @@ def main() -> None:
     args = parser.parse_args()
     root = args.tables or Path(tempfile.mkdtemp(prefix="bench-loader-"))
     version_dir = root / VERSION
-    counts_path = version_dir / "counts.json"
-    if counts_path.is_file() and json.loads(counts_path.read_text())["scenes"] == args.scenes:
-        counts = json.loads(counts_path.read_text())["records"]
-    else:  # in a process of its own, whose memory is returned before the measurements
-        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-            counts = pool.submit(write_tables, version_dir, args.scenes).result()
-        counts_path.write_text(json.dumps({"scenes": args.scenes, "records": counts}))
+    counts = ensure_tables(root, args.scenes)
     print("tables:", counts, flush=True)
     names = [f"scene-{i + 1:04d}" for i in range(args.scenes)]
     runs: dict[str, Any] = {}
