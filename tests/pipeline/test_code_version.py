@@ -1,10 +1,15 @@
 """The code digest in stage fingerprints: it follows what runs, not comments, docstrings or unrelated modules."""
 
+import os
+import sys
+import time
+import types
 from pathlib import Path
 
 import pytest
 
-from cama_pipeline.code_version import code_version
+from cama_pipeline import code_version as code_version_module
+from cama_pipeline.code_version import CodeChangedError, code_version
 
 
 def _write(root: Path, relative: str, text: str) -> None:
@@ -52,3 +57,27 @@ def test_an_unknown_package_is_named(tmp_path: Path) -> None:
 def test_project_stages_have_distinct_digests() -> None:
     digests = {code_version(f"cama_pipeline.{stage}") for stage in ("wigo", "pairs", "sfm", "surface")}
     assert len(digests) == 4
+
+
+def test_a_file_changed_after_this_process_imported_it_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A stage's digest names the code on disk; once a module this process runs has changed there, the digest
+    would name code that does not run, so it is refused, naming the file. A module imported from elsewhere, or a
+    file unchanged since the process began, is not."""
+    root = _project(tmp_path / "p")
+    helper = root / "cama_pipeline/helper.py"
+    started = code_version_module.PROCESS_STARTED
+    os.utime(helper, (started - 60, started - 60))
+    monkeypatch.setitem(sys.modules, "cama_pipeline.helper", types.SimpleNamespace(__file__=str(helper)))
+    before = code_version("cama_pipeline.stage", root)  # imported, and unchanged since the process began
+    edited = (started + time.time()) / 2  # after the process began, before now
+    os.utime(helper, (edited, edited))
+    with pytest.raises(CodeChangedError, match=r"helper\.py: changed on disk after this process imported it"):
+        code_version.__wrapped__("cama_pipeline.stage", root)
+    ahead = time.time() + 3600  # a copy made under a clock ahead of this one: not an edit
+    os.utime(helper, (ahead, ahead))
+    assert code_version.__wrapped__("cama_pipeline.stage", root) == before
+    elsewhere = types.SimpleNamespace(__file__=str(tmp_path / "other" / "helper.py"))
+    monkeypatch.setitem(sys.modules, "cama_pipeline.helper", elsewhere)
+    assert code_version.__wrapped__("cama_pipeline.stage", root) == before
