@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cama_pipeline.code_version import CodeChangedError
 from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.site.io import read_site_ids
 from cama_pipeline.workspace import Workspace
@@ -48,8 +49,9 @@ class PipelineError(RuntimeError):
 def _is_bad_input(stage: str, err: Exception) -> bool:
     """Whether a stage's error is the caller's input (the data set, a named file or checkpoint), not its work.
 
-    The workspace is the path's own output, so an error about it (WorkspaceError) is a stage failure here."""
-    if isinstance(err, DatasetError | FileNotFoundError):
+    The workspace is the path's own output, so an error about it (WorkspaceError) is a stage failure here; code
+    changed on disk under the running process (CodeChangedError) is the caller's to fix by restarting."""
+    if isinstance(err, DatasetError | FileNotFoundError | CodeChangedError):
         return True
     if stage == "propose":
         from models.vma.checkpoint import CheckpointError  # imported by the propose stage already

@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cama_pipeline.code_version import CodeChangedError
 from cama_pipeline.data import load_dataset
 from cama_pipeline.workspace import Workspace
 from cama_studio.cli import app
@@ -73,3 +74,21 @@ def test_the_whole_path_on_the_tiny_site_ends_with_proposals(whole_path: Pipelin
         assert path == workspace.proposals(site_id) and path.is_file()
         assert (workspace.surface_bev(site_id) / "semantic.png").is_file()
         assert workspace.sfm_points(site_id).is_file()
+
+
+def test_code_changed_under_the_run_stops_it_as_bad_input(
+    site_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A stage whose code digest is refused (a file changed on disk after the process imported it) stops the run
+    with exit 2 naming the file: the fix is the caller's (restart), not the stage's work."""
+    import cama_pipeline.wigo.stage as wigo_stage
+
+    def changed(package: str) -> str:
+        raise CodeChangedError(f"{package}/fusion.py: changed on disk after this process imported it")
+
+    monkeypatch.setattr(wigo_stage, "code_version", changed)
+    result = CliRunner().invoke(
+        app, ["run", str(site_root / "nuscenes"), "--workspace", str(tmp_path / "ws")]
+    )
+    assert result.exit_code == 2, result.output
+    assert "fusion.py: changed on disk after this process imported it" in " ".join(result.output.split())
