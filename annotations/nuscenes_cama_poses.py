@@ -36,6 +36,7 @@ from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.data.schema import CAMERA_MODALITY
 from cama_pipeline.data.tables import Table, read_table, table_path
 from cama_pipeline.io import atomic_write_chunks
+from cama_pipeline.iterables import chunked
 
 EGO_POSE = "ego_pose"
 POSE_SOURCES_FORMAT: Literal["cama-studio-nuscenes-pose-sources"] = "cama-studio-nuscenes-pose-sources"
@@ -257,20 +258,13 @@ def json_layout(path: Path) -> tuple[int | None, bool]:
     return len(second) - len(second.lstrip(b" ")), newline_at_end
 
 
-def _batches(items: Iterable[Any], size: int) -> Iterator[list[Any]]:
-    """Consecutive lists of `size` items (the last one shorter)."""
-    iterator = iter(items)
-    while chunk := list(itertools.islice(iterator, size)):
-        yield chunk
-
-
 def json_list_chunks(records: Iterable[Any], indent: int | None, *, batch: int = 4096) -> Iterator[str]:
     """The text `json.dumps(list(records), indent=indent)` would give, in pieces of `batch` records (each piece
     encoded by one `json.dumps` of the batch, its brackets cut off): a list of millions of records is written
     without holding it, or its text, whole."""
     opening, closing, separator = ("[", "]", ", ") if indent is None else ("[\n", "\n]", ",\n")
     started = False
-    for chunk in _batches(records, batch):
+    for chunk in chunked(records, batch):
         inner = json.dumps(chunk, indent=indent)[len(opening) : -len(closing)]
         yield separator + inner if started else opening + inner
         started = True
@@ -337,7 +331,7 @@ def pose_sources_chunks(
     head = json.dumps(header, indent=1)
     yield head[:-2] + ',\n "ego_poses": {' if header else '{\n "ego_poses": {'
     started = False
-    for chunk in _batches(entries.items(), batch):
+    for chunk in chunked(entries.items(), batch):
         records = {token: pose_source_record(entry) for token, entry in chunk}
         inner = json.dumps(records, indent=1)[2:-2].replace("\n", "\n ")  # one level deeper: one more space
         yield ("," if started else "") + "\n " + inner

@@ -33,6 +33,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "cama_pipeline.fingerprints",
             "cama_pipeline.results",
             "cama_pipeline.site_identity",
+            "cama_pipeline.iterables",
         ),
     ),
     ("annotations", ("annotations",)),

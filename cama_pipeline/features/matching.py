@@ -11,9 +11,7 @@ other jobs (load 13-16, this job got 30 % of them).
 
 import logging
 import tempfile
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +21,7 @@ from threadpoolctl import threadpool_limits
 from cama_pipeline.features.config import FeaturesConfig
 from cama_pipeline.features.database import open_database
 from cama_pipeline.features.sift import verification_options
+from cama_pipeline.iterables import chunked
 from cama_pipeline.progress import StageProgress
 
 logger = logging.getLogger(__name__)
@@ -69,12 +68,6 @@ def mutual_ratio_matches(cosines: np.ndarray, *, max_ratio: float, max_distance:
     col_ok = (col_angle <= max_distance) & (col_angle < max_ratio * col_second)
     keep = row_ok & col_ok[best_col] & (best_row[best_col] == rows)
     return np.stack([rows[keep], best_col[keep]], axis=1).astype(np.uint32)
-
-
-def _chunks(items: list[tuple[int, int]], size: int) -> Iterator[list[tuple[int, int]]]:
-    iterator = iter(items)
-    while chunk := list(islice(iterator, size)):
-        yield chunk
 
 
 class BlasMatcher:
@@ -130,7 +123,7 @@ class BlasMatcher:
             StageProgress("features", logger=logger, transient=True) as progress,
         ):
             task = progress.add_task("matching", total=len(pairs))
-            for chunk in _chunks(pairs, CHUNK_PAIRS):
+            for chunk in chunked(pairs, CHUNK_PAIRS):
                 found = pool.map(lambda p: self._match_one(descriptors[p[0]], descriptors[p[1]]), chunk)
                 with pycolmap.DatabaseTransaction(db):
                     for (first, second), matches in zip(chunk, found, strict=True):
