@@ -81,6 +81,23 @@ def synth(
             "Intrinsics scale with it; render time grows with the pixel count.",
         ),
     ] = None,
+    terrain_rise: Annotated[
+        float | None,
+        typer.Option(
+            metavar="M",
+            help="Total rise in metres of the terrain's ramp along the main road (either sign); the preset's "
+            "when omitted (tiny 2, default 4, large 6). A larger rise starts the drives metres apart in height, "
+            "as on a hilly city's logs.",
+        ),
+    ] = None,
+    ramp_width: Annotated[
+        float | None,
+        typer.Option(
+            metavar="M",
+            help="Width in metres of that ramp (its steepest grade is rise / (2 width), kept within 9 % with "
+            "the cross slope and waves); the preset's when omitted (tiny 25, default 45, large 70).",
+        ),
+    ] = None,
 ) -> None:
     """Generate a synthetic driving site in nuScenes layout, with its ground truth kept beside it."""
     from cama_pipeline.synthetic.generate import run
@@ -95,7 +112,7 @@ def synth(
             "written exact)"
         )
     try:
-        cfg = _synth_config(preset, seed, random_seed, degrade_masks, image_size)
+        cfg = _synth_config(preset, seed, random_seed, degrade_masks, image_size, (terrain_rise, ramp_width))
         result = run(
             cfg,
             out,
@@ -117,11 +134,13 @@ def _synth_config(
     random_seed: int | None,
     degrade_masks: bool | None,
     image_size: str | None,
+    ramp: tuple[float | None, float | None] = (None, None),
 ) -> "SynthConfig":
-    """The config `cama synth`'s options ask for (ValueError for a bad preset, size or value)."""
+    """The config `cama synth`'s options ask for (ValueError for a bad preset, size or value); `ramp`: the
+    terrain ramp's rise and width, None keeping the preset's (or the randomised draw's)."""
     from dataclasses import replace
 
-    from cama_pipeline.synthetic.config import MaskNoiseConfig, parse_image_size
+    from cama_pipeline.synthetic.config import MaskNoiseConfig, parse_image_size, with_ramp
     from cama_pipeline.synthetic.config import preset as make_preset
     from cama_pipeline.synthetic.randomise import randomised_config
 
@@ -137,6 +156,8 @@ def _synth_config(
     if image_size is not None:
         width, height = parse_image_size(image_size)
         cfg = replace(cfg, camera=replace(cfg.camera, width_px=width, height_px=height))
+    if ramp != (None, None):
+        cfg = replace(cfg, terrain=with_ramp(cfg.terrain, *ramp))
     return cfg
 
 

@@ -9,6 +9,8 @@ from cama_pipeline.synthetic.sensors import SensorNoiseConfig
 PresetName = Literal["tiny", "default", "large"]
 MAX_IMAGE_SIDE_PX = 4096
 """Largest image width or height the generator renders."""
+STEEPEST_STREET_GRADE = 0.2
+"""The steepest terrain `with_ramp` builds: 20 %, about the steepest streets vehicles drive."""
 
 
 @dataclass(frozen=True)
@@ -103,10 +105,37 @@ class TerrainConfig:
             raise ValueError(
                 "TerrainConfig: ramp_width_m and wave_length_m must be > 0 and wave_amplitude_m >= 0"
             )
-        steepest = abs(self.rise_m) / (2 * self.ramp_width_m) + abs(self.cross_slope)
-        steepest += 2 * 3.14159 * self.wave_amplitude_m / self.wave_length_m * 1.5
+        steepest = abs(self.rise_m) / (2 * self.ramp_width_m) + self.grade_besides_ramp()
         if steepest > self.max_grade:
             raise ValueError(f"TerrainConfig: grade up to {steepest:.3f} exceeds max_grade {self.max_grade}")
+
+    def grade_besides_ramp(self) -> float:
+        """The bound on the grade the cross slope and the waves add to the ramp's steepest, rise / (2 width)."""
+        return terrain_grade_besides_ramp(self.cross_slope, self.wave_amplitude_m, self.wave_length_m)
+
+
+def terrain_grade_besides_ramp(cross_slope: float, wave_amplitude_m: float, wave_length_m: float) -> float:
+    """The grade bound of a terrain's cross slope and waves (the waves' steepest slope with a 1.5 margin)."""
+    return abs(cross_slope) + 2 * 3.14159 * wave_amplitude_m / wave_length_m * 1.5
+
+
+def with_ramp(terrain: TerrainConfig, rise_m: float | None, ramp_width_m: float | None) -> TerrainConfig:
+    """`terrain` with another ramp (None keeps that field): a hillier site, whose drives start metres apart in
+    height. `max_grade` (the ray marcher's bound) rises with the terrain's steepest grade, up to
+    `STEEPEST_STREET_GRADE`; a steeper ramp is a ValueError naming the narrowest ramp width that stays within it."""
+    rise = terrain.rise_m if rise_m is None else float(rise_m)
+    width = terrain.ramp_width_m if ramp_width_m is None else float(ramp_width_m)
+    if not (math.isfinite(rise) and math.isfinite(width)) or width <= 0:
+        raise ValueError(f"terrain ramp: rise {rise} m and width {width} m must be finite, the width > 0")
+    besides = terrain.grade_besides_ramp()
+    steepest = abs(rise) / (2 * width) + besides
+    if steepest > STEEPEST_STREET_GRADE:
+        raise ValueError(
+            f"terrain ramp: a rise of {rise:g} m over a ramp width of {width:g} m is too steep (grade up to "
+            f"{steepest:.3f} with the cross slope and waves, above {STEEPEST_STREET_GRADE}): widen the ramp to at "
+            f"least {math.ceil(abs(rise) / (2 * (STEEPEST_STREET_GRADE - besides)))} m"
+        )
+    return replace(terrain, rise_m=rise, ramp_width_m=width, max_grade=max(terrain.max_grade, steepest))
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ from cama_pipeline.synthetic.config import (
     SynthConfig,
     TerrainConfig,
     preset,
+    terrain_grade_besides_ramp,
 )
 
 RANDOMISE_STREAM = 23
@@ -108,7 +109,7 @@ def _terrain(base: TerrainConfig, rng: np.random.Generator) -> TerrainConfig:
     cross = _u(rng, -0.02, 0.02, 4)
     amplitude = _u(rng, 0.0, 0.45)
     wave_length = _u(rng, 60.0, 160.0, 1)
-    steepest = abs(rise) / (2 * ramp) + abs(cross) + 2 * 3.14159 * amplitude / wave_length * 1.5
+    steepest = abs(rise) / (2 * ramp) + terrain_grade_besides_ramp(cross, amplitude, wave_length)
     scale = min(1.0, _GRADE_SHARE * base.max_grade / steepest) if steepest > 0 else 1.0
     return replace(
         base,
