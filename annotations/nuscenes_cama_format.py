@@ -37,12 +37,14 @@ import shutil
 import uuid
 from collections.abc import Callable, Collection
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from annotations.geometry import MAPTR_RANGE, Box
 from annotations.maptr_format import POINTS_PER_VECTOR, EgoPose, build_maptr, sample_pose
 from annotations.nuscenes_cama_poses import (
     EGO_POSE,
+    EXPORT_TABLES,
     MAX_BORROW_GAP_US,
     EgoPoseEntry,
     logged_pose,
@@ -114,11 +116,15 @@ def _ego(pose: Pose) -> EgoPose:
 
 
 def reference_poses(
-    entries: dict[str, EgoPoseEntry], tables: dict[str, Table], poses: PoseLookup, version_dir: Path
+    entries: dict[str, EgoPoseEntry],
+    tables: dict[str, Table],
+    poses: PoseLookup,
+    version_dir: Path,
+    channels: dict[str, tuple[str, str]],
 ) -> Callable[[Frame], tuple[EgoPose, PoseSource]]:
     """A sample's reference ego pose for map_vectors.json: its LIDAR_TOP key frame's record as written to
-    ego_pose.json when it has one, else the MapTR export's (CAM_FRONT key-frame image's, from `poses`)."""
-    channels = sensor_channels(tables, version_dir)
+    ego_pose.json when it has one, else the MapTR export's (CAM_FRONT key-frame image's, from `poses`).
+    `channels`: the tables' `sensor_channels`."""
     lidar: dict[str, str] = {}
     for token, record in tables["sample_data"].items():
         if channels[token][0] == LIDAR_REFERENCE and record["is_key_frame"] is True:
@@ -133,6 +139,12 @@ def reference_poses(
         return _ego(pose), entry.source
 
     return frame_pose
+
+
+def _advancer(progress: StageProgress, description: str, total: int) -> Callable[[int], None]:
+    """A new bar of `total` steps, and the function that advances it by n."""
+    task = progress.add_task(description, total=total)
+    return partial(progress.advance, task)
 
 
 def _check_out(out: Path) -> None:
@@ -230,12 +242,22 @@ def export_nuscenes_cama(
         raise ValueError(f"scenes {unknown}: not among the loaded scenes {loaded}")
     exported = loaded if scenes is None else [name for name in loaded if name in scenes]
     source_dir = dataset_root / dataset.version
-    tables = source_tables(dataset_root, dataset.version)
-    entries = refined_ego_poses(dataset, tables, poses, source_dir, max_borrow_gap_us=max_borrow_gap_us)
-    frame_pose = reference_poses(entries, tables, poses, source_dir)
     with StageProgress("cama export", logger=logger, enabled=show_progress) as progress:
+        tables = source_tables(
+            dataset_root, dataset.version, on_table=_advancer(progress, "tables", len(EXPORT_TABLES))
+        )
+        channels = sensor_channels(tables, source_dir)
+        entries = refined_ego_poses(
+            dataset,
+            tables,
+            poses,
+            source_dir,
+            max_borrow_gap_us=max_borrow_gap_us,
+            channels=channels,
+            on_records=_advancer(progress, "ego poses", len(tables["sample_data"])),
+        )
+        frame_pose = reference_poses(entries, tables, poses, source_dir, channels)
         total = sum(len(scene.frames) for scene in dataset.scenes if scene.name in exported)
-        task = progress.add_task("map vectors", total=total)
         vectors = build_maptr(
             annotations,
             dataset,
@@ -243,19 +265,30 @@ def export_nuscenes_cama(
             box=box,
             n_points=n_points,
             frame_pose=frame_pose,
-            on_sample=lambda: progress.advance(task),
+            on_sample=partial(_advancer(progress, "map vectors", total), 1),
             scenes=exported,
         )
-    version = cama_version(dataset.version)
-    header = pose_sources_header(
-        entries, version=version, source_version=dataset.version, max_borrow_gap_us=max_borrow_gap_us
-    )
-    version_dir = out / version
-    version_dir.mkdir(parents=True, exist_ok=True)
-    linked, copied = _place_version_files(source_dir, version_dir, link=link_tables)
-    write_ego_pose_json(version_dir / f"{EGO_POSE}.json", source_dir, tables[EGO_POSE], entries)
-    atomic_write_bytes(version_dir / MAP_VECTORS, vectors.model_dump_json(by_alias=True, indent=1).encode())
-    atomic_write_chunks(version_dir / POSE_SOURCES_FILE, pose_sources_chunks(header, entries))
+        version = cama_version(dataset.version)
+        header = pose_sources_header(
+            entries, version=version, source_version=dataset.version, max_borrow_gap_us=max_borrow_gap_us
+        )
+        version_dir = out / version
+        version_dir.mkdir(parents=True, exist_ok=True)
+        linked, copied = _place_version_files(source_dir, version_dir, link=link_tables)
+        write_ego_pose_json(
+            version_dir / f"{EGO_POSE}.json",
+            source_dir,
+            tables[EGO_POSE],
+            entries,
+            on_records=_advancer(progress, f"{EGO_POSE}.json", len(tables[EGO_POSE])),
+        )
+        atomic_write_bytes(
+            version_dir / MAP_VECTORS, vectors.model_dump_json(by_alias=True, indent=1).encode()
+        )
+        written = _advancer(progress, POSE_SOURCES_FILE, len(entries))
+        atomic_write_chunks(
+            version_dir / POSE_SOURCES_FILE, pose_sources_chunks(header, entries, on_records=written)
+        )
     entries_linked = _link_root_entries(dataset_root, out)
     result = NuscenesCamaResult(
         root=out,

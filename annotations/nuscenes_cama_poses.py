@@ -25,7 +25,7 @@ import itertools
 import json
 import os
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -36,7 +36,7 @@ from cama_pipeline.data.errors import DatasetError
 from cama_pipeline.data.schema import CAMERA_MODALITY
 from cama_pipeline.data.tables import Table, read_table, table_path
 from cama_pipeline.io import atomic_write_chunks
-from cama_pipeline.iterables import chunked
+from cama_pipeline.iterables import chunked, counted
 
 EGO_POSE = "ego_pose"
 POSE_SOURCES_FORMAT: Literal["cama-studio-nuscenes-pose-sources"] = "cama-studio-nuscenes-pose-sources"
@@ -54,9 +54,10 @@ MAX_BORROW_GAP_US = 500_000
 """How far in time (microseconds) a non-camera record may borrow a camera image's correction."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class EgoPoseEntry:
-    """The refined value of one ego_pose record and where it came from."""
+    """The refined value of one ego_pose record and where it came from (slots: nuScenes trainval has 2.6 million
+    of them)."""
 
     source: PoseSource
     global_from_ego: Pose | None
@@ -80,8 +81,15 @@ class _Correction:
     image: str
 
 
-def source_tables(dataset_root: Path, version: str) -> dict[str, Table]:
-    """The tables the export reads, from the source's version folder; DatasetError naming what is missing."""
+EXPORT_TABLES = ("scene", "sample", EGO_POSE, "calibrated_sensor", "sensor", "sample_data")
+"""The tables the export reads, in the order `source_tables` reads them."""
+
+
+def source_tables(
+    dataset_root: Path, version: str, *, on_table: Callable[[int], None] | None = None
+) -> dict[str, Table]:
+    """The tables the export reads (`EXPORT_TABLES`), from the source's version folder; DatasetError naming what
+    is missing. `on_table(1)` after each table (a progress bar: on nuScenes trainval they take about 20 s)."""
     version_dir = Path(dataset_root) / version
     if not Path(dataset_root).is_dir():
         raise DatasetError("data set root is not a folder", path=dataset_root)
@@ -90,9 +98,13 @@ def source_tables(dataset_root: Path, version: str) -> dict[str, Table]:
         raise DatasetError(
             f"no version folder {version!r} with scene.json; folders found: {found}", path=version_dir
         )
-    names = ("scene", "sample", EGO_POSE, "calibrated_sensor", "sensor")
-    tables = {name: read_table(version_dir, name) for name in names}
-    tables["sample_data"] = read_table(version_dir, "sample_data", keep=SAMPLE_DATA_FIELDS)
+    tables = {}
+    for name in EXPORT_TABLES:
+        tables[name] = read_table(
+            version_dir, name, keep=SAMPLE_DATA_FIELDS if name == "sample_data" else None
+        )
+        if on_table is not None:
+            on_table(1)
     return tables
 
 
@@ -210,13 +222,17 @@ def refined_ego_poses(
     version_dir: Path,
     *,
     max_borrow_gap_us: int = MAX_BORROW_GAP_US,
+    channels: dict[str, tuple[str, str]] | None = None,
+    on_records: Callable[[int], None] | None = None,
 ) -> dict[str, EgoPoseEntry]:
-    """ego_pose token -> its refined value and source, for every record (the module docstring's rules)."""
+    """ego_pose token -> its refined value and source, for every record (the module docstring's rules).
+    `channels`: `sensor_channels` of the tables when the caller has them; `on_records(n)` as sample_data records
+    are done (a progress bar)."""
     entries, corrections = _camera_entries(dataset, tables, poses, version_dir)
-    channels = sensor_channels(tables, version_dir)
+    channels = sensor_channels(tables, version_dir) if channels is None else channels
     sample_data_path = table_path(version_dir, "sample_data")
     loaded_scenes = {scene.token for scene in dataset.scenes}
-    for token, record in tables["sample_data"].items():
+    for token, record in counted(tables["sample_data"].items(), on_records):
         channel, modality = channels[token]
         ego_pose_token = record["ego_pose_token"]
         if not isinstance(ego_pose_token, str) or ego_pose_token not in tables[EGO_POSE]:
@@ -271,10 +287,12 @@ def json_list_chunks(records: Iterable[Any], indent: int | None, *, batch: int =
     yield closing if started else "[]"
 
 
-def refined_records(table: Table, entries: dict[str, EgoPoseEntry]) -> Iterator[dict[str, Any]]:
+def refined_records(
+    table: Table, entries: dict[str, EgoPoseEntry], on_records: Callable[[int], None] | None = None
+) -> Iterator[dict[str, Any]]:
     """The ego_pose records in table order, with the refined translation and rotation where there is one;
-    records kept as logged are the records as read."""
-    for token, record in table.items():
+    records kept as logged are the records as read. `on_records(n)` as they are consumed."""
+    for token, record in counted(table.items(), on_records):
         pose = entries[token].global_from_ego
         if pose is None:
             yield record
@@ -285,12 +303,19 @@ def refined_records(table: Table, entries: dict[str, EgoPoseEntry]) -> Iterator[
         yield refined
 
 
-def write_ego_pose_json(out: Path, version_dir: Path, table: Table, entries: dict[str, EgoPoseEntry]) -> None:
+def write_ego_pose_json(
+    out: Path,
+    version_dir: Path,
+    table: Table,
+    entries: dict[str, EgoPoseEntry],
+    *,
+    on_records: Callable[[int], None] | None = None,
+) -> None:
     """Write the source's ego_pose.json with refined translation and rotation to `out` (atomically, streamed):
     same records, order, fields and indentation as the source; records kept as logged come out as they were
-    read."""
+    read. `on_records(n)` as records are encoded."""
     indent, newline = json_layout(table_path(version_dir, EGO_POSE))
-    chunks = json_list_chunks(refined_records(table, entries), indent)
+    chunks = json_list_chunks(refined_records(table, entries, on_records), indent)
     atomic_write_chunks(out, itertools.chain(chunks, ["\n"] if newline else []))
 
 
@@ -324,14 +349,18 @@ def pose_source_record(entry: EgoPoseEntry) -> dict[str, Any]:
 
 
 def pose_sources_chunks(
-    header: dict[str, Any], entries: dict[str, EgoPoseEntry], *, batch: int = 4096
+    header: dict[str, Any],
+    entries: dict[str, EgoPoseEntry],
+    *,
+    batch: int = 4096,
+    on_records: Callable[[int], None] | None = None,
 ) -> Iterator[str]:
     """The text of `json.dumps({**header, "ego_poses": {token: pose_source_record(entry)}}, indent=1)`, produced
-    `batch` records at a time (2.6 million on nuScenes trainval)."""
+    `batch` records at a time (2.6 million on nuScenes trainval); `on_records(n)` as they are encoded."""
     head = json.dumps(header, indent=1)
     yield head[:-2] + ',\n "ego_poses": {' if header else '{\n "ego_poses": {'
     started = False
-    for chunk in chunked(entries.items(), batch):
+    for chunk in chunked(counted(entries.items(), on_records), batch):
         records = {token: pose_source_record(entry) for token, entry in chunk}
         inner = json.dumps(records, indent=1)[2:-2].replace("\n", "\n ")  # one level deeper: one more space
         yield ("," if started else "") + "\n " + inner

@@ -331,3 +331,31 @@ def test_bad_inputs_name_the_file_and_write_nothing(tmp_path: Path, georef: Geor
     with pytest.raises(ValueError, match=f"{dataset.version}: no version folder"):
         export_nuscenes_cama(annotations, root, dataset, out, poses=coarse_pose)
     assert not out.exists()
+
+
+def test_progress_covers_every_long_step(
+    tmp_path: Path, georef: Georeference, caplog: pytest.LogCaptureFixture
+) -> None:
+    """On nuScenes trainval the tables, the 2.6 million ego poses and the two rewritten files take most of the
+    export's time: each has a bar (lines when output is not a terminal), ending at its total."""
+    root, dataset = _fixture_dataset(tmp_path)
+    caplog.set_level("INFO", logger="annotations.nuscenes_cama_format")
+    result = export_nuscenes_cama(
+        AnnotationSet(site_id="s", georeference=georef),
+        root,
+        dataset,
+        tmp_path / "out",
+        poses=shifting_lookup,
+        show_progress=True,
+    )
+    records = len(json.loads((root / dataset.version / "ego_pose.json").read_text()))
+    sample_data = len(json.loads((root / dataset.version / "sample_data.json").read_text()))
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("cama export: ")]
+    finished = {line.split(": ", 1)[1].split(" (")[0] for line in lines if "done in" in line}
+    assert finished == {
+        "tables 6/6",
+        f"ego poses {sample_data}/{sample_data}",
+        f"map vectors {result.samples}/{result.samples}",
+        f"ego_pose.json {records}/{records}",
+        f"pose_sources.json {records}/{records}",
+    }
