@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from cama_pipeline.sfm.merge import Alignment, ClipModel, merge_groups
+from cama_pipeline.sfm.merge import Alignment, ClipModel, MergeConfig, merge_groups
 from cama_pipeline.site.heights import HeightTie, keyframe_track, level_groups
 
 
@@ -49,3 +49,16 @@ def heights_before_alignment(
     unaligned = [Alignment(clip.scene, None, "poses", 0, np.eye(4)) for clip in clips]
     tied, ties = tie_heights(clips, unaligned, free_height, radius_m=radius_m, min_pairs=min_pairs)
     return [alignment.world_from_clip for alignment in tied], ties
+
+
+def alignment_priors(
+    clips: Sequence[ClipModel], free_height: Collection[str], config: MergeConfig
+) -> tuple[list[np.ndarray] | None, dict[str, HeightTie]]:
+    """Where `align_clips` judges each clip from (clip order), and the ties that put it there: the free-height
+    clips tied first (`heights_before_alignment`) when `config.height_ties_before_alignment`; None (each clip
+    where WIGO left it) and no ties when that is off or no clip's height is free."""
+    if not (config.height_ties_before_alignment and free_height):
+        return None, {}
+    return heights_before_alignment(
+        clips, free_height, radius_m=config.height_tie_radius_m, min_pairs=config.height_tie_min_pairs
+    )

@@ -61,6 +61,10 @@ class MergeConfig:
     height_ties: bool = True
     """Give the clips that no point joins and whose heights nothing measured (2D logged poses, no GNSS) the
     height of the road the other clips drove (`cama_pipeline.sfm.height_ties`)."""
+    height_ties_before_alignment: bool = True
+    """Tie each free-height clip's height before the point alignment too, so that a clip WIGO left metres from
+    the others is judged by `max_shift_m` from the road's height (`height_ties.heights_before_alignment`);
+    off: only the tie after it (an ablation)."""
     height_tie_radius_m: float = TIE_RADIUS_M
     """A keyframe this close (horizontally) to another clip's track is taken to stand on the same road."""
     height_tie_min_pairs: int = TIE_MIN_PAIRS

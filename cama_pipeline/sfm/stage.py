@@ -17,7 +17,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pycolmap
 
 from cama_pipeline.cameras import CameraView, site_views
@@ -30,7 +29,7 @@ from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.errors import SfmError
 from cama_pipeline.sfm.executor import Executor, make_executor
 from cama_pipeline.sfm.guided import GuidedResult, reconstruct_views, refined_views
-from cama_pipeline.sfm.height_ties import HeightTie, heights_before_alignment, tie_heights
+from cama_pipeline.sfm.height_ties import HeightTie, alignment_priors, tie_heights
 from cama_pipeline.sfm.io import (
     PoseEntry,
     read_model,
@@ -218,16 +217,8 @@ def merge_site(
         reasons = "; ".join(f"{o.scene}: {o.error}" for o in outcomes)
         raise SfmError(f"every clip failed ({reasons})")
     database, image_dir = tasks[0].database, tasks[0].image_dir
-    priors: list[np.ndarray] | None = None
-    first_ties: dict[str, HeightTie] = {}
+    priors, first_ties = alignment_priors(models, free_height, merge_config)
     ties: dict[str, HeightTie] = {}
-    if merge_config.height_ties and free_height:
-        priors, first_ties = heights_before_alignment(
-            models,
-            free_height,
-            radius_m=merge_config.height_tie_radius_m,
-            min_pairs=merge_config.height_tie_min_pairs,
-        )
     alignments = align_clips(models, cross_clip_matches(database), merge_config, priors)
     if merge_config.height_ties:
         alignments, ties = tie_heights(

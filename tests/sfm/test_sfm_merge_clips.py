@@ -9,7 +9,7 @@ import pytest
 
 from cama_pipeline.sfm.config import SfmConfig
 from cama_pipeline.sfm.guided import reconstruct_views, refined_views
-from cama_pipeline.sfm.height_ties import heights_before_alignment, tie_heights
+from cama_pipeline.sfm.height_ties import alignment_priors, heights_before_alignment, tie_heights
 from cama_pipeline.sfm.merge import ClipModel, MergeConfig, align_clips, aligned_views, cross_clip_matches
 from cama_pipeline.sfm.stage import site_clips
 from cama_pipeline.site.io import read_site_manifest
@@ -132,6 +132,20 @@ def test_a_free_clip_metres_too_high_is_tied_then_aligned_by_its_points(
     )
     assert np.array_equal(measured[1], np.eye(4))  # the lifted drive's height was measured: it stays
     assert measured[0][2, 3] == pytest.approx(8.0, abs=0.1)  # and the free one rises to meet it
+
+
+def test_the_tie_before_the_alignment_can_be_switched_off(clips: list[ClipModel]) -> None:
+    """`height_ties_before_alignment` (on by default) gives the tie's priors; off, or with no free-height clip,
+    `align_clips` judges every clip where WIGO left it (the ablation of the logged-height table's hilly rows)."""
+    lift = np.eye(4)
+    lift[2, 3] = 8.0
+    lifted = [clips[0], offset_clip(clips[1], lift)]
+    scenes = {clip.scene for clip in clips}
+    priors, ties = alignment_priors(lifted, scenes, MergeConfig())
+    assert priors is not None and sum(tie.tied for tie in ties.values()) == 1
+    assert abs(priors[0][2, 3] - priors[1][2, 3]) == pytest.approx(8.0, abs=0.1)
+    assert alignment_priors(lifted, scenes, MergeConfig(height_ties_before_alignment=False)) == (None, {})
+    assert alignment_priors(lifted, (), MergeConfig()) == (None, {})
 
 
 def test_a_wrong_prior_does_not_cost_a_clip_its_points(sfm_inputs: object, clips: list[ClipModel]) -> None:
