@@ -12,8 +12,9 @@ unobserved (no key-frame camera looked, 255) or has no cell, so is the truth on 
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, fields, is_dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -32,7 +33,9 @@ class TruthMismatch(ValueError):
 
 
 def site_config(site: Path) -> SynthConfig:
-    """The generator config of a site from its manifest: its preset and seed, randomised when it was."""
+    """The generator config of a site from its manifest: its preset and seed, randomised when it was, with every
+    part the manifest's config holds otherwise (`cama synth --terrain-rise`, `--image-size`, ...) taken from
+    it. TruthMismatch naming the site and the fields when the config rebuilt is not the one stored."""
     manifest = json.loads((Path(site) / "manifest.json").read_text(encoding="utf-8"))
     stored = manifest["config"]
     base = (
@@ -40,7 +43,34 @@ def site_config(site: Path) -> SynthConfig:
         if manifest.get("random_seed") is not None
         else preset(manifest["preset"], seed=int(manifest["seed"]))
     )
-    return replace(base, ground_texel_m=stored["ground_texel_m"], bev_resolution_m=stored["bev_resolution_m"])
+    try:
+        changed: dict[str, Any] = {
+            name: _as_stored(getattr(base, name), stored[name])
+            for name in (f.name for f in fields(base))
+            if name in stored and _json(getattr(base, name)) != stored[name]
+        }
+        cfg = replace(base, **changed)
+    except (AttributeError, TypeError, ValueError) as error:
+        raise TruthMismatch(f"{site}: its manifest's config cannot be rebuilt: {error}") from None
+    differing = sorted(f.name for f in fields(cfg) if _json(getattr(cfg, f.name)) != stored.get(f.name))
+    if differing:
+        raise TruthMismatch(f"{site}: its manifest's config cannot be rebuilt (fields {differing})")
+    return cfg
+
+
+def _json(value: object) -> object:
+    """A config value as the manifest stores it (dataclasses as dicts, tuples as lists)."""
+    return json.loads(json.dumps(asdict(value) if is_dataclass(value) else value))  # type: ignore[arg-type]
+
+
+def _as_stored(current: object, stored: object) -> object:
+    """The stored form of a config field, typed like `current`: a nested config rebuilt field by field, lists as
+    the configs' tuples."""
+    if is_dataclass(current) and isinstance(stored, dict):
+        return replace(current, **{k: _as_stored(getattr(current, k), v) for k, v in stored.items()})  # type: ignore[type-var]
+    if isinstance(stored, list):
+        return tuple(_as_stored(None, item) for item in stored)
+    return stored
 
 
 def stored_truth(site: Path) -> BevRasters:

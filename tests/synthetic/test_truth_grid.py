@@ -2,6 +2,7 @@
 grids coincide, the ground at each cell's own centre where they do not, unobserved where the stored truth is, and
 refused when the rebuilt world does not give the stored truth."""
 
+import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -12,6 +13,8 @@ import pytest
 from cama_pipeline.bev import RasterGeoreference, write_bev
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.synthetic import ground_truth
+from cama_pipeline.synthetic.config import preset, with_ramp
+from cama_pipeline.synthetic.generate import run
 from cama_pipeline.synthetic.truth_grid import (
     TrueGround,
     TruthMismatch,
@@ -19,6 +22,7 @@ from cama_pipeline.synthetic.truth_grid import (
     centre_labels,
     nearest_stored,
     rebuilt_world,
+    site_config,
     stored_truth,
     truth_on_grid,
 )
@@ -116,6 +120,33 @@ def test_a_site_whose_rebuilt_world_does_not_give_its_truth_is_refused(
     write_bev(site / "ground_truth" / "bev", replace(rasters, semantic=semantic))
     with pytest.raises(TruthMismatch, match=f"{site}: the world rebuilt from its manifest does not give"):
         truth_on_grid(site, _window(rasters.georeference, window))
+
+
+def test_a_site_with_its_own_terrain_is_rebuilt_with_it(tmp_path: Path) -> None:
+    """A site made with `cama synth --terrain-rise/--ramp-width` (a config no preset gives): its truth on its own
+    grid is the stored truth, heights included (rebuilt from the preset, the heights were the preset's terrain's:
+    1.8 m off at the hilly default site's western end)."""
+    site = tmp_path / "hilly"
+    cfg = preset("tiny")
+    run(replace(cfg, terrain=with_ramp(cfg.terrain, 6.0, 20.0)), site, images=False)
+    stored = stored_truth(site)
+    again = truth_on_grid(site, stored.georeference)
+    for layer in ("semantic", "elevation"):
+        assert np.array_equal(again.require(layer), stored.require(layer), equal_nan=True), layer
+    assert site_config(site).terrain.rise_m == 6.0
+
+
+def test_a_manifest_config_that_cannot_be_rebuilt_is_refused(
+    tiny_site: GeneratedSite, tmp_path: Path
+) -> None:
+    for field, value, why in (("rise_m", 100.0, "exceeds max_grade"), ("hill_m", 3.0, "no attribute 'hill_m'")):
+        site = tmp_path / field
+        site.mkdir()
+        manifest = json.loads((tiny_site.result.out_dir / "manifest.json").read_text())
+        manifest["config"]["terrain"][field] = value
+        (site / "manifest.json").write_text(json.dumps(manifest))
+        with pytest.raises(TruthMismatch, match=f"{site}: its manifest's config cannot be rebuilt: .*{why}"):
+            site_config(site)
 
 
 def test_a_reconstruction_frame_moves_where_each_cell_is_read(
