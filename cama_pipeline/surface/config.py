@@ -134,6 +134,11 @@ class SurfaceConfig:
     """Adam steps fitting the elevation MLP to the surface points."""
     refit_iterations: int = 400
     """Adam steps of the second fit, the strip and the gated SfM points, from the first (see `fit`)."""
+    sfm_gate_rounds: int = 1
+    """Fits with gated SfM points: each round gates the points again against the surface the last one fitted
+    and fits again while the inliers grow (see `fit`). One: the points are gated against the strip's surface
+    alone, which beyond the strip continues like a plane, so on a road whose grade changes the points past
+    `sfm_gate_m` of that plane never join."""
     elevation_lr: float = 5e-3
     huber_m: float = 0.05
     """Robust (Huber) loss scale of the elevation fit: residuals beyond it count linearly."""
@@ -213,6 +218,7 @@ class SurfaceConfig:
             "images_per_batch",
             "vertices_per_image",
             "torch_threads",
+            "sfm_gate_rounds",
         )
         require(self, at_least_one, lambda value: value >= 1, ">= 1")
         counts = ("elevation_iterations", "refit_iterations", "epochs")

@@ -3,8 +3,11 @@
 The strip lies under the cameras and is road by construction; SfM road points are sparse and, beyond a
 few metres from the cameras, often triangulated decimetres to metres off. So the strip alone sets the
 road region and is fitted first; then the SfM points inside the region and within `sfm_gate_m` of that
-surface join it for a second, shorter fit warm-started from the first. Without a strip, every point is
-trusted.
+surface join it for a second, shorter fit warm-started from the first. With `sfm_gate_rounds` > 1 the points
+are gated again against each new fit and fitted again while the inliers grow: beyond the strip the first fit
+continues like a plane (the curvature prior), so where the road's grade changes past the trajectory's end the
+points there lie further than the gate from it, and only a surface pulled towards the points nearer in brings
+them within it. Without a strip, every point is trusted.
 """
 
 from collections.abc import Callable
@@ -34,7 +37,7 @@ class FittedSurface:
 
 def fit_steps(points: SurfacePoints, config: SurfaceConfig) -> int:
     """Adam steps `fit_surface` takes (for progress): two fits when SfM points may join the strip."""
-    refit = config.refit_iterations if points.strip_count and points.sfm_count else 0
+    refit = config.refit_iterations * config.sfm_gate_rounds if points.strip_count and points.sfm_count else 0
     return config.elevation_iterations + refit
 
 
@@ -59,10 +62,18 @@ def fit_surface(
     region = torch.as_tensor(grid.vertex_xy(), device=device)
     fitted = torch.as_tensor(trusted, device=device)
     losses = fit_elevation(mlp, fitted, config, on_step, region)
-    kept = 0
+    kept = np.zeros(len(sfm), dtype=bool)
     if len(strip) and len(sfm):
-        inliers = sfm[grid.in_region(sfm[:, :2]) & gate(mlp, sfm, config.sfm_gate_m)]
-        kept = len(inliers)
-        fitted = torch.cat([fitted, torch.as_tensor(inliers, device=device)])
-        losses += fit_elevation(mlp, fitted, config, on_step, region, config.refit_iterations)
-    return FittedSurface(grid, mlp, fitted, kept, losses)
+        in_region = grid.in_region(sfm[:, :2])
+        for fit_round in range(config.sfm_gate_rounds):
+            inliers = in_region & gate(mlp, sfm, config.sfm_gate_m)
+            if fit_round and not (inliers & ~kept).any():  # none joins: the fit would be the last again
+                if on_step is not None:
+                    on_step(config.refit_iterations * (config.sfm_gate_rounds - fit_round), losses[-1])
+                break
+            kept = inliers
+            fitted = torch.cat(
+                [torch.as_tensor(trusted, device=device), torch.as_tensor(sfm[kept], device=device)]
+            )
+            losses += fit_elevation(mlp, fitted, config, on_step, region, config.refit_iterations)
+    return FittedSurface(grid, mlp, fitted, int(kept.sum()), losses)

@@ -112,3 +112,35 @@ def test_every_cell_of_the_grid_is_interpolated_as_its_vertex_is() -> None:
     np.testing.assert_allclose(cells[rows, cols].numpy(), control.at_vertices(control_z).numpy(), atol=1e-6)
     assert (grid.vertex_id < 0).any()  # cells outside the road region are interpolated too
     assert cells[0, 0].item() == pytest.approx(control_z[0, 0].item(), abs=1e-6)
+
+
+def grade_change_fit(rounds: int) -> tuple[float, int]:
+    """A strip on a plane up to x = 130 and SfM points on the road beyond it, whose grade changes there
+    (z rises by 0.003 (x - 130)^2 over the plane: 43 cm 12 m on): the fit's largest error at the points 8-12 m past
+    the strip's end, and how many points it kept."""
+    from cama_pipeline.surface.fit import fit_surface
+    from cama_pipeline.surface.points import SurfacePoints
+
+    strip = sloped_road(0.0)
+    strip = strip[(np.abs(strip[:, 1] - 220.0) <= 2.0) & (strip[:, 0] <= 130.0)]
+    x = np.arange(130.5, 142.01, 0.5)
+    sfm = np.column_stack([x, np.full_like(x, 220.0), 3 + 0.02 * x - 0.01 * 220.0 + 0.003 * (x - 130.0) ** 2])
+    points = SurfacePoints(np.concatenate([strip, sfm]), len(strip), len(sfm))
+    torch.manual_seed(0)
+    config = SurfaceConfig(
+        resolution_m=0.5, elevation_iterations=300, refit_iterations=200, sfm_gate_rounds=rounds
+    )
+    fitted = fit_surface(points, config, torch.device("cpu"))
+    far = sfm[sfm[:, 0] >= 138.0]
+    with torch.no_grad():
+        z = fitted.mlp(torch.as_tensor(far[:, :2])).double().numpy()
+    return float(np.abs(z - far[:, 2]).max()), fitted.sfm_kept
+
+
+def test_points_past_a_grade_change_join_round_by_round() -> None:
+    """Gated once against the strip's surface, which continues like a plane, the points past the grade change stay
+    out and the surface misses the road there by decimetres; gated again against each new fit they join."""
+    once, kept_once = grade_change_fit(1)
+    rounds, kept_rounds = grade_change_fit(8)
+    assert kept_rounds == 24 > kept_once
+    assert once > 0.3 and rounds < 0.06
