@@ -3394,24 +3394,34 @@ def test_wigo_flat_height_table() -> None:
 
 def test_logged_height_whole_path_table() -> None:
     t = table("whole path, site and logged poses", "2D logged poses")
-    files = {"default": "logged_height.json", "9011": "logged_height_9011.json"}
-    for site, name in files.items():
+    files = {
+        "default": "logged_height.json",
+        "9011": "logged_height_9011.json",
+        "hilly": "logged_height_hilly.json",
+    }
+    rows = [
+        (site, name, key, label)
+        for site, name in files.items()
+        for key, label in (("logged_height", "logged heights"), ("no_logged_height", "z = 0"))
+    ]
+    after_only = ("hilly", "logged_height_hilly_after_only.json", "no_logged_height")
+    rows.append((*after_only, "z = 0, tied after the alignment only"))
+    for site, name, key, label in rows:
         assert_names_source(t, name, "bench/logged_height.py")
-        for key, label in (("logged_height", "logged heights"), ("no_logged_height", "z = 0")):
-            run = results(name)["runs"][key]
-            heights, bev = run["clip_heights"], run["bev_iou_in_reconstruction_frame"]
-            expected: list[list[Expected]] = [
-                [run["poses"]["sfm"]["gauge_free_position_cm"]],
-                [heights["wigo"]["offset_spread_cm"], heights["sfm"]["offset_spread_cm"]],
-                [run["elevation_relative"]["rmse_about_offset_cm"]],
-                [run["elevation_relative"]["offset_cm"]],
-                [run["proposals_ap"]["observed_truth"]["mean_ap"]],
-                [run["sre"]["sre_ref_px"]],
-                [run["annotator_speed_up_in_reconstruction_frame"]],
-                [bev[c] for c in ("road", "curb", "lane_marking", "crosswalk")],
-            ]
-            for cell, values in zip(row(t, f"{site}, {label}")[1:], expected, strict=True):
-                assert_shows(cell, values, f"logged height table, {site}, {label}")
+        run = results(name)["runs"][key]
+        heights, bev = run["clip_heights"], run["bev_iou_in_reconstruction_frame"]
+        expected: list[list[Expected]] = [
+            [run["poses"]["sfm"]["gauge_free_position_cm"]],
+            [heights["wigo"]["offset_spread_cm"], heights["sfm"]["offset_spread_cm"]],
+            [run["elevation_relative"]["rmse_about_offset_cm"]],
+            [run["elevation_relative"]["offset_cm"]],
+            [run["proposals_ap"]["observed_truth"]["mean_ap"]],
+            [run["sre"]["sre_ref_px"]],
+            [run["annotator_speed_up_in_reconstruction_frame"]],
+            [bev[c] for c in ("road", "curb", "lane_marking", "crosswalk")],
+        ]
+        for cell, values in zip(row(t, f"{site}, {label}")[1:], expected, strict=True):
+            assert_shows(cell, values, f"logged height table, {site}, {label}")
 
 
 def test_without_wheels_table() -> None:

@@ -124,8 +124,10 @@ class SurfaceConfig:
     """Add the SfM points labelled road/marking/crosswalk when the workspace has them."""
     sfm_max_error_px: float = 2.0
     """SfM points with a larger mean reprojection error are left out."""
-    sfm_gate_m: float = 0.1
-    """SfM points farther than this from the surface fitted to the strip are left out (see `fit`)."""
+    sfm_gate_m: float = 1.0
+    """SfM points farther than this from the surface fitted to the strip (then from each refit) are left out (see
+    `fit`); nearer ones are weighed by the Huber loss. 0.1 m until the hilly twin showed it keeps out the points
+    past a grade change (`bench/surface_gate.py`)."""
     pe_frequencies: int = 4
     """Positional-encoding octaves of the elevation MLP; few octaves keep the surface smooth."""
     mlp_width: int = 64
@@ -134,7 +136,7 @@ class SurfaceConfig:
     """Adam steps fitting the elevation MLP to the surface points."""
     refit_iterations: int = 400
     """Adam steps of the second fit, the strip and the gated SfM points, from the first (see `fit`)."""
-    sfm_gate_rounds: int = 1
+    sfm_gate_rounds: int = 4
     """Fits with gated SfM points: each round gates the points again against the surface the last one fitted
     and fits again while the inliers grow (see `fit`). One: the points are gated against the strip's surface
     alone, which beyond the strip continues like a plane, so on a road whose grade changes the points past
