@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from surface import run_source  # bench/surface.py: this script's folder is on sys.path
 
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.surface import SurfaceConfig
@@ -67,6 +66,10 @@ def figures(run: dict[str, Any]) -> dict[str, Any]:
 
 
 def main() -> None:
+    from surface import (
+        run_source,
+    )  # bench/surface.py, on sys.path when this runs as a script (tests import the rest)
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--site", type=Path, action="append", required=True, help="a site with its SfM run")
     parser.add_argument("--variant", action="append", default=None, help="NAME=GATE_M,ROUNDS (repeatable)")
