@@ -3488,3 +3488,22 @@ def test_export_trainval_table() -> None:
             assert_shows(cell, [value], f"export trainval table, {label}")
     ratio = runs["baseline_export_site"]["seconds"] / runs["export_site"]["seconds"]
     assert_shows(row(t, "the export now")[1].split("(")[1], [ratio], "export trainval speed-up")
+
+
+def test_surface_gate_table() -> None:
+    t = table("SfM gate, SfM poses", "The road's height past a grade change")
+    assert_names_source(t, "surface_gate.json", "bench/surface_gate.py")
+    sites = results("surface_gate.json")["sites"]
+    hilly, default = (sites[name] for name in sorted(sites, key=lambda name: "default" in name))
+    for label in hilly["runs"]:
+        cells = row(t, label)[1:]
+        for i, site in enumerate((hilly, default)):
+            figures = site["runs"][label]
+            bands = figures["elevation_rmse_cm_by_distance_m"]
+            expected = [figures["elevation_rmse_cm"], bands["10-14"], bands["14-100"]]
+            assert_shows(cells[2 * i], expected, f"surface gate table, {label}")
+            own = figures["iou_in_reconstruction_frame"]
+            classes = [own[c] for c in ("road", "curb", "lane_marking", "crosswalk")]
+            assert_shows(cells[2 * i + 1], classes, f"surface gate table, {label}")
+        seconds = [hilly["runs"][label]["seconds"], default["runs"][label]["seconds"]]
+        assert_shows(cells[4], seconds, f"surface gate table, {label}")
