@@ -3406,6 +3406,10 @@ def test_logged_height_whole_path_table() -> None:
     ]
     after_only = ("hilly", "logged_height_hilly_after_only.json", "no_logged_height")
     rows.append((*after_only, "z = 0, tied after the alignment only"))
+    gated = {"default": "logged_height_gate.json", "hilly": "logged_height_hilly_gate.json"}
+    for site, name in gated.items():
+        for key, label in (("logged_height", "logged heights"), ("no_logged_height", "z = 0")):
+            rows.append((site, name, key, f"{label}, SfM gate 1 m over 4 rounds"))
     for site, name, key, label in rows:
         assert_names_source(t, name, "bench/logged_height.py")
         run = results(name)["runs"][key]
