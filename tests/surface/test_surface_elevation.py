@@ -92,7 +92,7 @@ def test_sfm_points_off_the_strip_surface_or_outside_the_region_are_left_out() -
     config = SurfaceConfig(resolution_m=0.5, elevation_iterations=150, refit_iterations=100)
     progress: list[int] = []
     fitted = fit_surface(points, config, torch.device("cpu"), lambda steps, _loss: progress.append(steps))
-    assert sum(progress) == fit_steps(points, config) == 150 + 4 * 100  # the bar ends at its total, not past it
+    assert sum(progress) == fit_steps(points, config) == 150 + 4 * 100  # the bar ends at its total
     assert fitted.sfm_kept == len(on_road)
     assert len(fitted.points) == len(strip) + len(on_road)
     assert not fitted.grid.in_region(far[:, :2]).any() and fitted.grid.in_region(on_road[:, :2]).all()

@@ -83,7 +83,9 @@ def test_cli_writes_the_ramp_into_the_manifest_and_refuses_a_cliff(tmp_path):
     assert (terrain["rise_m"], terrain["ramp_width_m"]) == (5.0, 20.0)
     assert terrain["max_grade"] > preset("tiny").terrain.max_grade
     cliff = tmp_path / "cliff"
-    result = CliRunner().invoke(app, ["synth", "--preset", "tiny", "--terrain-rise", "30", "--out", str(cliff)])
+    result = CliRunner().invoke(
+        app, ["synth", "--preset", "tiny", "--terrain-rise", "30", "--out", str(cliff)]
+    )
     assert result.exit_code == 2
     assert "too steep" in result.output and "widen the ramp to at least" in result.output
     assert not cliff.exists()

@@ -139,7 +139,10 @@ def test_a_site_with_its_own_terrain_is_rebuilt_with_it(tmp_path: Path) -> None:
 def test_a_manifest_config_that_cannot_be_rebuilt_is_refused(
     tiny_site: GeneratedSite, tmp_path: Path
 ) -> None:
-    for field, value, why in (("rise_m", 100.0, "exceeds max_grade"), ("hill_m", 3.0, "no attribute 'hill_m'")):
+    for field, value, why in (
+        ("rise_m", 100.0, "exceeds max_grade"),
+        ("hill_m", 3.0, "no attribute 'hill_m'"),
+    ):
         site = tmp_path / field
         site.mkdir()
         manifest = json.loads((tiny_site.result.out_dir / "manifest.json").read_text())
