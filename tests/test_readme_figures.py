@@ -3511,3 +3511,13 @@ def test_surface_gate_table() -> None:
             assert_shows(cells[2 * i + 1], classes, f"surface gate table, {label}")
         seconds = [hilly["runs"][label]["seconds"], default["runs"][label]["seconds"]]
         assert_shows(cells[4], seconds, f"surface gate table, {label}")
+
+
+def test_segmenter_on_the_hill_table() -> None:
+    _check_segmenter_columns(
+        "class, the twins' images",
+        {
+            "default twin": ("segment_default_twin.json", "gpu-long2"),
+            "hilly twin": ("segment_hilly.json", "gpu-long2"),
+        },
+    )
