@@ -116,6 +116,32 @@ def site_location(workspace: Workspace, annotation_site_id: str, site_id: str | 
     return site, read_site_location(workspace.sites_index(), site)
 
 
+class SiteOriginUnknown(ValueError):
+    """No map origin follows from a site's reconstruction; the message says why, to follow what to pass instead."""
+
+
+def site_map_origin(
+    workspace: Workspace, annotation_site_id: str, site_id: str | None, name: str | None = None
+) -> tuple[tuple[float, float], str]:
+    """The map origin of the `log.location` of the site whose poses an export would take (`site_location`) and
+    where it lies ("site S at LOCATION"); SiteOriginUnknown when the workspace has no reconstruction, its sites do
+    not give the site's location, or that location's origin is not known, naming the site as `name` (None: by
+    the site id asked for or found). One rule for the CLI's and the backend's lanelet2 exports without an origin."""
+    asked = name or site_id or annotation_site_id
+    if not workspace.sites_index().is_file():
+        raise SiteOriginUnknown(
+            f"site {asked!r} has no reconstruction whose location would give it ({workspace.sites_index()} is missing)"
+        )
+    try:
+        site, location = site_location(workspace, annotation_site_id, site_id)
+    except (FileNotFoundError, ValueError) as error:
+        raise SiteOriginUnknown(f"site {asked!r}: the site's location is unknown: {error}") from error
+    origin = location_origin(location)
+    if origin is None:
+        raise SiteOriginUnknown(f"site {name or site!r} lies at {location!r}, whose map origin is not known")
+    return origin, f"site {site} at {location}"
+
+
 def map_placement(request: ExportRequest) -> MapPlacement:
     """The request's origin and projection (`ExportRequest.origin_lat_lon`'s defaults); ValueError naming what to
     pass when neither the request nor the site's location gives an origin."""
@@ -135,16 +161,11 @@ def map_placement(request: ExportRequest) -> MapPlacement:
         workspace = Workspace.for_dataset(request.dataset_root)
     else:
         raise ValueError(f"{needed}, or the --dataset / --workspace of the site's reconstruction")
-    if not workspace.sites_index().is_file():
-        raise ValueError(f"{needed}; no reconstruction ({workspace.sites_index()}) gives the site's location")
     try:
-        site, location = site_location(workspace, request.annotations.site_id, request.site_id)
-    except (FileNotFoundError, ValueError) as error:
-        raise ValueError(f"{needed}; the site's location is unknown: {error}") from error
-    site_origin = location_origin(location)
-    if site_origin is None:
-        raise ValueError(f"{needed}; site {site!r} lies at {location!r}, whose map origin is not known")
-    return MapPlacement(site_origin, request.projection or MapProjection.local, f"site {site} at {location}")
+        origin, source = site_map_origin(workspace, request.annotations.site_id, request.site_id)
+    except SiteOriginUnknown as error:
+        raise ValueError(f"{needed}; {error}") from error
+    return MapPlacement(origin, request.projection or MapProjection.local, source)
 
 
 def _write_lanelet2(inputs: ExportInputs, staging: Path) -> dict[str, object]:

@@ -34,10 +34,10 @@ from app.backend.models import Site
 from app.backend.schemas import STRICT
 from cama_pipeline.bev import layer_path, read_layer
 from cama_pipeline.data import DatasetError
-from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS, location_origin
+from cama_pipeline.data.map_origins import NUSCENES_MAP_ORIGINS
 from cama_pipeline.export import CamaMode, ExportFormat, ExportRequest, ExportResult, PoseChoice, export
 from cama_pipeline.export.request import FORMATS_NEEDING_DATASET
-from cama_pipeline.export.run import WRITERS, site_location
+from cama_pipeline.export.run import WRITERS, SiteOriginUnknown, site_map_origin
 from cama_pipeline.progress import ProgressObserver, observed_progress
 from cama_pipeline.workspace import SiteLocation, Workspace
 
@@ -172,17 +172,15 @@ def check_export(session: Session, site_id: int, params: ExportParams) -> None:
 
 def check_site_origin(raster_dir: Path, name: str) -> None:
     """A lanelet2 export without an origin takes its site's location's (`ExportRequest.origin_lat_lon`); ValueError
-    naming `origin_lat_lon` when the site has no reconstruction or its location has no known origin."""
+    naming `origin_lat_lon` when the site's reconstruction gives none (`site_map_origin`)."""
     needed = f"origin_lat_lon: required for format 'lanelet2' (or origin_location: one of {list(NUSCENES_MAP_ORIGINS)})"
     location = locate_reconstruction(raster_dir)
-    if location is None or not location.workspace.sites_index().is_file():
+    if location is None:
         raise ValueError(f"{needed}: site {name!r} has no reconstruction whose location would give it")
     try:
-        _site, place = site_location(location.workspace, location.site_id, location.site_id)
-    except (FileNotFoundError, ValueError):
-        raise ValueError(f"{needed}: site {name!r}'s reconstruction does not list it") from None
-    if location_origin(place) is None:
-        raise ValueError(f"{needed}: site {name!r} lies at {place!r}, whose map origin is not known")
+        site_map_origin(location.workspace, location.site_id, location.site_id, name)
+    except SiteOriginUnknown as error:
+        raise ValueError(f"{needed}: {error}") from None
 
 
 def _elevation(raster_dir: Path, georef: Georeference, name: str) -> np.ndarray | None:
