@@ -37,9 +37,12 @@ class RefineConfig:
     """Road vertices this close to a vertex that is not road (a kerb, the road region's edge) are left out."""
     semantic_weight: float = 1.0
     """Weight of the class frequencies' variance across views beside the colour variance."""
-    smoothness_weight: float = 1.0
+    smoothness_weight: float = 30.0
     """Weight of the residual's squared second differences against the sweeps' confidence-weighted
-    heights (a unit of confidence is a 100 % drop of a control point's cost at its best height)."""
+    heights (a unit of confidence is a 100 % drop of a control point's cost at its best height). 1 until the
+    mask-free twins showed that a stiffer residual (a smooth correction that no single control point's noisy
+    best height bends) lifts lane marking and curb (`bench/surface_variants.py`, README "How stiff the
+    refinement is")."""
     ridge_weight: float = 0.03
     """Weight of the residual's square: where no paint or edge constrains a control point, it stays at 0."""
 

@@ -1,0 +1,153 @@
+"""The surface stage with its settings changed, each variant against the first, on several sites in one run.
+
+Each variant is the shipped `SurfaceConfig` with some fields set (`NAME=JSON`: its fields, and those of its parts
+as nested objects, e.g. `'smooth 30={"refine": {"smoothness_weight": 30}}'`). Every variant runs the surface stage
+with the site's SfM poses, as the product does (`bench/surface.py`'s `run_source`: a fresh workspace sharing the
+site's sites, SfM and masks), all in one run per site, and is scored as `bench/surface.py` scores a run: the road's
+elevation RMSE (and by distance from the trajectory), the class IoU against the truth in the world's frame and in the
+reconstruction's own, PSNR, seconds. The first variant is the baseline the others are compared with (default: the
+shipped settings, `shipped={}`). `bench/surface_gate.py` runs its SfM gate variants through the same loop.
+
+Usage: .venv/bin/python bench/surface_variants.py --site SITE [--site SITE ...] [--variant NAME=JSON ...]
+       [--threads 2] [--out bench/results/surface_variants.json]
+"""
+
+import argparse
+import json
+import platform
+import shutil
+import sys
+import tempfile
+from dataclasses import fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from cama_pipeline.io import atomic_write_json
+from cama_pipeline.surface import SurfaceConfig
+
+RESULTS = Path(__file__).parent / "results"
+CLASSES = ("road", "curb", "lane_marking", "crosswalk")
+
+
+def with_fields(config: Any, overrides: dict[str, Any], where: str = "SurfaceConfig") -> Any:
+    """`config` (a dataclass) with `overrides` set, nested objects into its dataclass fields; SystemExit naming
+    an unknown field or a value the config refuses."""
+    names = {f.name for f in fields(config)}
+    changes: dict[str, Any] = {}
+    for name, value in overrides.items():
+        if name not in names:
+            raise SystemExit(f"--variant: {where} has no field {name!r} (fields: {', '.join(sorted(names))})")
+        current = getattr(config, name)
+        if is_dataclass(current) and isinstance(value, dict):
+            changes[name] = with_fields(current, value, f"{where}.{name}")
+        elif isinstance(current, tuple) and isinstance(value, list):
+            changes[name] = tuple(tuple(v) if isinstance(v, list) else v for v in value)
+        else:
+            changes[name] = value
+    try:
+        return replace(config, **changes)
+    except (TypeError, ValueError) as error:
+        raise SystemExit(f"--variant: {where}: {error}") from None
+
+
+def parse_variant(text: str, base: SurfaceConfig) -> tuple[str, SurfaceConfig, dict[str, Any]]:
+    """`NAME=JSON` -> (name, `base` with the JSON's fields set, the JSON); SystemExit naming the text when
+    malformed."""
+    name, separator, values = text.partition("=")
+    try:
+        overrides = json.loads(values) if separator else None
+    except json.JSONDecodeError as error:
+        raise SystemExit(f"--variant {text!r}: not NAME=JSON ({error})") from None
+    if not name or not isinstance(overrides, dict):
+        raise SystemExit(
+            f'--variant {text!r}: expected NAME=JSON, e.g. \'smooth={{"refine": {{"smoothness_weight": 30}}}}\''
+        )
+    return name, with_fields(base, overrides), overrides
+
+
+def figures(run: dict[str, Any]) -> dict[str, Any]:
+    """What the comparison reads of a `run_source` result."""
+    return {
+        "elevation_rmse_cm": run["elevation_rmse_m"] * 100,
+        "elevation_rmse_cm_by_distance_m": {
+            span: value * 100 for span, value in run["elevation_rmse_m_by_distance_from_trajectory_m"].items()
+        },
+        "iou": run["iou"],
+        "iou_in_reconstruction_frame": run["in_reconstruction_frame"]["iou"],
+        "psnr_db": run["psnr_db"],
+        "sfm_points_kept": run["points"].get("sfm_kept"),
+        "seconds": run["seconds"]["total"],
+    }
+
+
+def against_baseline(runs: dict[str, Any]) -> dict[str, Any]:
+    """Each run's elevation, own-frame IoU and seconds against the first run's."""
+    baseline = next(iter(runs.values()))
+    return {
+        name: {
+            "elevation_rmse_cm": run["elevation_rmse_cm"] - baseline["elevation_rmse_cm"],
+            "iou_in_reconstruction_frame": {
+                c: v - baseline["iou_in_reconstruction_frame"][c]
+                for c, v in run["iou_in_reconstruction_frame"].items()
+            },
+            "psnr_db": run["psnr_db"] - baseline["psnr_db"],
+            "seconds_ratio": run["seconds"] / max(baseline["seconds"], 1e-9),
+        }
+        for name, run in runs.items()
+    }
+
+
+def run_variants(
+    sites: list[Path], variants: list[tuple[str, SurfaceConfig, dict[str, Any]]]
+) -> dict[str, Any]:
+    """Every variant on every site with SfM poses: {site: {"runs": {name: settings + figures}, "against_baseline"}}."""
+    from surface import run_source  # bench/surface.py, on sys.path when this runs as a script
+
+    results: dict[str, Any] = {}
+    for site in sites:
+        runs: dict[str, Any] = {}
+        for name, config, settings in variants:
+            scratch = Path(tempfile.mkdtemp(prefix="bench-surface-variants-"))
+            try:
+                runs[name] = {**settings, **figures(run_source(site, "sfm", config, scratch))}
+            finally:
+                shutil.rmtree(scratch, ignore_errors=True)
+            own = runs[name]["iou_in_reconstruction_frame"]
+            print(
+                f"{site.name} {name}: elevation {runs[name]['elevation_rmse_cm']:.2f} cm, own frame IoU "
+                + " / ".join(f"{own[c]:.3f}" for c in CLASSES)
+                + f", {runs[name]['seconds']:.0f} s",
+                flush=True,
+            )
+        results[str(site)] = {"runs": runs, "against_baseline": against_baseline(runs)}
+    return results
+
+
+def write_results(path: Path, sites: dict[str, Any], threads: int) -> None:
+    results = {
+        "command": " ".join([sys.executable.split("/")[-1], *sys.argv]),
+        "poses": "sfm",
+        "machine": {"platform": platform.platform(), "torch": torch.__version__, "threads": threads},
+        "sites": sites,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(path, results, indent=1)
+    print(f"wrote {path}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--site", type=Path, action="append", required=True, help="a site with its SfM run")
+    parser.add_argument("--variant", action="append", default=None, help="NAME=JSON (repeatable)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=RESULTS / "surface_variants.json")
+    args = parser.parse_args()
+    base = SurfaceConfig(torch_threads=args.threads)
+    variants = [parse_variant(text, base) for text in (args.variant or ["shipped={}"])]
+    write_results(args.out, run_variants(args.site, variants), args.threads)
+
+
+if __name__ == "__main__":
+    main()

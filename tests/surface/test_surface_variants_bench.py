@@ -1,0 +1,50 @@
+"""`bench/surface_variants.py` reads its variants as NAME=JSON over the shipped `SurfaceConfig`, nested parts
+included, and refuses a malformed one, an unknown field or a value the config refuses, naming it."""
+
+import pytest
+
+from bench.surface_variants import against_baseline, parse_variant
+from cama_pipeline.surface import SurfaceConfig
+
+
+def test_a_variant_sets_fields_and_fields_of_parts() -> None:
+    base = SurfaceConfig()
+    name, config, settings = parse_variant(
+        'smooth 100={"refine": {"smoothness_weight": 100, "sweeps": [[0.06, 0.02]]}, "sfm_gate_m": 0.5}', base
+    )
+    assert name == "smooth 100" and settings["sfm_gate_m"] == 0.5
+    assert config.refine.smoothness_weight == 100 and config.refine.sweeps == ((0.06, 0.02),)
+    assert config.sfm_gate_m == 0.5 and config.refine.ridge_weight == base.refine.ridge_weight
+    assert parse_variant("shipped={}", base)[1] == base
+
+
+@pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("smooth", "expected NAME=JSON"),
+        ("={}", "expected NAME=JSON"),
+        ("smooth=[1]", "expected NAME=JSON"),
+        ("smooth={nope", "not NAME=JSON"),
+        ('smooth={"refine": {"smoothness": 30}}', "SurfaceConfig.refine has no field 'smoothness'"),
+        ('smooth={"refine": {"smoothness_weight": -1}}', "smoothness_weight must be >= 0"),
+    ],
+)
+def test_a_bad_variant_is_refused_naming_what_is_wrong(text: str, named: str) -> None:
+    with pytest.raises(SystemExit, match=named):
+        parse_variant(text, SurfaceConfig())
+
+
+def test_each_run_is_compared_with_the_first() -> None:
+    def run(rmse: float, curb: float, seconds: float) -> dict:
+        return {
+            "elevation_rmse_cm": rmse,
+            "iou_in_reconstruction_frame": {"curb": curb},
+            "psnr_db": 22.0,
+            "seconds": seconds,
+        }
+
+    compared = against_baseline({"base": run(5.0, 0.6, 40.0), "smooth": run(4.5, 0.65, 44.0)})
+    assert compared["base"]["elevation_rmse_cm"] == 0.0
+    assert compared["smooth"]["elevation_rmse_cm"] == pytest.approx(-0.5)
+    assert compared["smooth"]["iou_in_reconstruction_frame"]["curb"] == pytest.approx(0.05)
+    assert compared["smooth"]["seconds_ratio"] == pytest.approx(1.1)
