@@ -3521,3 +3521,44 @@ def test_segmenter_on_the_hill_table() -> None:
             "hilly twin": ("segment_hilly.json", "gpu-long2"),
         },
     )
+
+
+def test_refinement_smoothness_table() -> None:
+    t = table("refinement's smoothness, SfM poses", "How stiff the refinement is")
+    assert_names_source(t, "surface_refine_smoothness.json", "bench/surface_variants.py")
+    sites = results("surface_refine_smoothness.json")["sites"]
+    columns = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"}
+    columns |= {seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")}
+    for column, name in columns.items():
+        (site,) = [figures for path, figures in sites.items() if path.endswith("/" + name)]
+        index = t.header.index(column)
+        for label, run in site["runs"].items():
+            own = run["iou_in_reconstruction_frame"]
+            expected = [run["elevation_rmse_cm"], own["curb"], own["lane_marking"], own["crosswalk"]]
+            assert_shows(row(t, label)[index], expected, f"refinement smoothness table, {label}, {column}")
+
+
+def test_refinement_smoothness_end_to_end_table() -> None:
+    t = table("whole path, smoothness 1 / 30", "End to end, with the element-mask network v0004")
+    twins = {
+        "default twin": ("logged_height_gate.json", "logged_height_smooth.json"),
+        "hilly twin": ("logged_height_hilly_gate.json", "logged_height_hilly_smooth.json"),
+    }
+    for twin, files in twins.items():
+        for suffix, run_name in ((", logged heights", "logged_height"), (", z = 0", "no_logged_height")):
+            cells = row(t, twin + suffix)
+            runs = [results(name)["runs"][run_name] for name in files]
+            for name in files:
+                assert_names_source(t, name, "bench/logged_height.py")
+            maps = [run["proposals_ap"]["observed_truth"]["mean_ap"] for run in runs]
+            assert_shows(cells[1], maps, f"smoothness end to end, {twin}{suffix}")
+            speed_ups = [run["annotator_speed_up_in_reconstruction_frame"] for run in runs]
+            assert_shows(cells[2], speed_ups, f"smoothness end to end, {twin}{suffix}")
+    for seed in ("9301", "9302", "9303"):
+        files = (f"end_to_end_smooth1_{seed}.json", f"end_to_end_smooth30_{seed}.json")
+        runs = [results(name) for name in files]
+        for name in files:
+            assert_names_source(t, name, "bench/end_to_end.py")
+        cells = row(t, seed)
+        assert_shows(cells[1], [r["proposals_ap"]["observed_truth"]["mean_ap"] for r in runs], seed)
+        assert_shows(cells[2], [r["annotator_in_reconstruction_frame"]["speed_up"] for r in runs], seed)
