@@ -14,7 +14,6 @@ Usage: .venv/bin/python bench/surface_gate.py --site SITE [--site SITE ...] [--v
 The first variant is the baseline the others are compared with (default: the shipped `SurfaceConfig`'s gate).
 """
 
-import argparse
 from dataclasses import replace
 from pathlib import Path
 
@@ -44,14 +43,9 @@ def parse_variant(text: str) -> tuple[str, float, int]:
 
 def main() -> None:
     # bench/surface_variants.py, on sys.path when this runs as a script (tests import the rest)
-    from surface_variants import run_variants, write_results
+    from surface_variants import parse_arguments, run_variants, write_results
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--site", type=Path, action="append", required=True, help="a site with its SfM run")
-    parser.add_argument("--variant", action="append", default=None, help="NAME=GATE_M,ROUNDS (repeatable)")
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=RESULTS / "surface_gate.json")
-    args = parser.parse_args()
+    args = parse_arguments(__doc__.splitlines()[0], "NAME=GATE_M,ROUNDS", RESULTS / "surface_gate.json")
     base = SurfaceConfig(torch_threads=args.threads)
     variants = [
         (

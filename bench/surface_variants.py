@@ -137,13 +137,18 @@ def write_results(path: Path, sites: dict[str, Any], threads: int) -> None:
     print(f"wrote {path}")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def parse_arguments(description: str, variant_form: str, out: Path) -> argparse.Namespace:
+    """The command line of a variants bench: --site (repeatable), --variant in `variant_form`, --threads, --out."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--site", type=Path, action="append", required=True, help="a site with its SfM run")
-    parser.add_argument("--variant", action="append", default=None, help="NAME=JSON (repeatable)")
+    parser.add_argument("--variant", action="append", default=None, help=f"{variant_form} (repeatable)")
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--out", type=Path, default=RESULTS / "surface_variants.json")
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=out)
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_arguments(__doc__.splitlines()[0], "NAME=JSON", RESULTS / "surface_variants.json")
     base = SurfaceConfig(torch_threads=args.threads)
     variants = [parse_variant(text, base) for text in (args.variant or ["shipped={}"])]
     write_results(args.out, run_variants(args.site, variants), args.threads)
