@@ -3523,10 +3523,9 @@ def test_segmenter_on_the_hill_table() -> None:
     )
 
 
-def test_refinement_smoothness_table() -> None:
-    t = table("refinement's smoothness, SfM poses", "How stiff the refinement is")
-    assert_names_source(t, "surface_refine_smoothness.json", "bench/surface_variants.py")
-    sites = results("surface_refine_smoothness.json")["sites"]
+def _check_variant_columns(t: MarkdownTable, sites: dict[str, Any], where: str) -> None:
+    """A `bench/surface_variants.py` table over the two twins and the layouts 9301-9303: a row per variant, each
+    cell the road's elevation RMSE and the own-frame curb / lane marking / crosswalk IoU."""
     columns = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"}
     columns |= {seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")}
     for column, name in columns.items():
@@ -3535,7 +3534,15 @@ def test_refinement_smoothness_table() -> None:
         for label, run in site["runs"].items():
             own = run["iou_in_reconstruction_frame"]
             expected = [run["elevation_rmse_cm"], own["curb"], own["lane_marking"], own["crosswalk"]]
-            assert_shows(row(t, label)[index], expected, f"refinement smoothness table, {label}, {column}")
+            assert_shows(row(t, label)[index], expected, f"{where}, {label}, {column}")
+
+
+def test_refinement_smoothness_table() -> None:
+    t = table("refinement's smoothness, SfM poses", "How stiff the refinement is")
+    assert_names_source(t, "surface_refine_smoothness.json", "bench/surface_variants.py")
+    _check_variant_columns(
+        t, results("surface_refine_smoothness.json")["sites"], "refinement smoothness table"
+    )
 
 
 def test_refinement_smoothness_end_to_end_table() -> None:
@@ -3562,3 +3569,12 @@ def test_refinement_smoothness_end_to_end_table() -> None:
         cells = row(t, seed)
         assert_shows(cells[1], [r["proposals_ap"]["observed_truth"]["mean_ap"] for r in runs], seed)
         assert_shows(cells[2], [r["annotator_in_reconstruction_frame"]["speed_up"] for r in runs], seed)
+
+
+def test_refinement_ridge_table() -> None:
+    t = table("refinement's ridge, SfM poses, smoothness 30", "ridge that holds the residual")
+    sites: dict[str, Any] = {}
+    for name in ("surface_refine_ridge_a.json", "surface_refine_ridge_b.json"):
+        assert_names_source(t, name, "bench/surface_variants.py")
+        sites |= results(name)["sites"]
+    _check_variant_columns(t, sites, "refinement ridge table")
