@@ -130,8 +130,18 @@ def reconstruct_site(
         dataset, read_site_manifest(workspace.site_manifest(site_id)), workspace, site_id, poses
     )
     check_masks(dataset, views, site_id)
+    sfm_xyz = sfm_surface_points(workspace, site_id, config)
+    if poses != "sfm" and len(sfm_xyz):
+        logger.warning(
+            "site %s: %d SfM road points join the surface on %s poses where SfM placed them, in the SfM frame, "
+            "which is not those poses' (README: 'Other pose sources take the SfM points as SfM placed them'); "
+            "[surface] use_sfm_points = false leaves them out",
+            site_id,
+            len(sfm_xyz),
+            poses,
+        )
     try:
-        points = surface_points(views, sfm_surface_points(workspace, site_id, config), config)
+        points = surface_points(views, sfm_xyz, config)
     except NoRoadPointsError as err:
         raise NoRoadPointsError(f"site {site_id} ({poses} poses): {err}") from None
     with phases.phase("elevation", fit_steps(points, config)) as advance:
@@ -168,7 +178,12 @@ def reconstruct_site(
         "config": asdict(config),
         "device": str(device),
         "images": len(views),
-        "points": {"strip": points.strip_count, "sfm": points.sfm_count, "sfm_kept": fitted.sfm_kept},
+        "points": {
+            "strip": points.strip_count,
+            "sfm": points.sfm_count,
+            "sfm_kept": fitted.sfm_kept,
+            "sfm_frame_is_the_poses": poses == "sfm" or not points.sfm_count,
+        },
         "vertices": grid.vertex_count,
         "cells_observed": int((rasters.require("observation_count") > 0).sum()),
         "kerb_step": step_summary(rasters.require("semantic"), kerb_step, config.curb_height_m),

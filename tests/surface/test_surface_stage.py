@@ -14,7 +14,8 @@ from cama_pipeline.bev import read_layer
 from cama_pipeline.data import load_dataset
 from cama_pipeline.results import ItemResult
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
-from cama_pipeline.site.io import read_site_manifest
+from cama_pipeline.sfm.io import SparsePoints, write_points
+from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import NoRoadPointsError, ego_poses, trajectory_strip
@@ -87,6 +88,7 @@ def test_mesh_and_report(surface: ItemResult) -> None:
     assert [sweep["step_m"] for sweep in sweeps] == [step for _, step in report["config"]["refine"]["sweeps"]]
     assert all(sweep["control_points_constrained"] > 0 for sweep in sweeps)
     assert report["points"]["strip"] > 0 and report["points"]["sfm"] == 0
+    assert report["points"]["sfm_frame_is_the_poses"] is True  # no SfM points at all
     assert report["losses"]["epochs"] and report["losses"]["elevation"][-1] < report["losses"]["elevation"][0]
     weak = report["weak_observation"]
     count = read_layer(surface.path / "bev", "observation_count")
@@ -162,6 +164,32 @@ def test_no_road_points_is_a_clear_error(dataset_root: Path, tmp_path: Path, wor
     config = SurfaceConfig(use_trajectory_strip=False, resolution_m=0.5)
     with pytest.raises(NoRoadPointsError, match=r"site .*no road surface points"):
         run(config, dataset_root, workspace, poses="ground_truth", show_progress=False)
+
+
+def test_sfm_points_on_other_poses_are_named_as_another_frame(
+    dataset_root: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Built on true poses, a workspace's SfM road points join the fit where SfM placed them: the run says so
+    in a warning and in its report (README, "Other pose sources take the SfM points as SfM placed them")."""
+    workspace = build_site_workspace(dataset_root, tmp_path / "sfm-points-ws")
+    site_id = read_site_ids(Workspace(workspace).sites_index())[0]
+    views = posed_views(
+        load_dataset(dataset_root),
+        read_site_manifest(Workspace(workspace).site_manifest(site_id)),
+        Workspace(workspace),
+        site_id,
+        "ground_truth",
+    )
+    on_road = trajectory_strip(ego_poses(views)[::4], SurfaceConfig())[::7]
+    labels = np.full(len(on_road), int(Semantic.ROAD))
+    path = Workspace(workspace).sfm_points(site_id)
+    path.parent.mkdir(parents=True)
+    write_points(path, SparsePoints(on_road, labels, np.zeros(len(on_road)), np.full(len(on_road), 3)))
+    with caplog.at_level("WARNING"):
+        item = run(FAST, dataset_root, workspace, poses="ground_truth", show_progress=False).items[0]
+    assert item.report["points"]["sfm"] == len(on_road)
+    assert item.report["points"]["sfm_frame_is_the_poses"] is False
+    assert f"{len(on_road)} SfM road points join the surface on ground_truth poses" in caplog.text
 
 
 def test_bad_pose_source_is_a_clear_error(dataset_root: Path, workspace: Path) -> None:
