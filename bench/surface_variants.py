@@ -18,7 +18,6 @@ import platform
 import shutil
 import sys
 import tempfile
-from dataclasses import fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,35 +25,16 @@ import torch
 
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.surface import SurfaceConfig
+from cama_studio.config import ConfigError, from_table
 
 RESULTS = Path(__file__).parent / "results"
 CLASSES = ("road", "curb", "lane_marking", "crosswalk")
 
 
-def with_fields(config: Any, overrides: dict[str, Any], where: str = "SurfaceConfig") -> Any:
-    """`config` (a dataclass) with `overrides` set, nested objects into its dataclass fields; SystemExit naming
-    an unknown field or a value the config refuses."""
-    names = {f.name for f in fields(config)}
-    changes: dict[str, Any] = {}
-    for name, value in overrides.items():
-        if name not in names:
-            raise SystemExit(f"--variant: {where} has no field {name!r} (fields: {', '.join(sorted(names))})")
-        current = getattr(config, name)
-        if is_dataclass(current) and isinstance(value, dict):
-            changes[name] = with_fields(current, value, f"{where}.{name}")
-        elif isinstance(current, tuple) and isinstance(value, list):
-            changes[name] = tuple(tuple(v) if isinstance(v, list) else v for v in value)
-        else:
-            changes[name] = value
-    try:
-        return replace(config, **changes)
-    except (TypeError, ValueError) as error:
-        raise SystemExit(f"--variant: {where}: {error}") from None
-
-
-def parse_variant(text: str, base: SurfaceConfig) -> tuple[str, SurfaceConfig, dict[str, Any]]:
-    """`NAME=JSON` -> (name, `base` with the JSON's fields set, the JSON); SystemExit naming the text when
-    malformed."""
+def parse_variant(text: str, threads: int) -> tuple[str, SurfaceConfig, dict[str, Any]]:
+    """`NAME=JSON` -> (name, the shipped config on `threads` torch threads with the JSON's fields set, as a run
+    configuration's `[surface]` table sets them: `cama_studio.config.from_table`, the JSON); SystemExit naming
+    the text when malformed, or the key the configuration refuses."""
     name, separator, values = text.partition("=")
     try:
         overrides = json.loads(values) if separator else None
@@ -64,7 +44,13 @@ def parse_variant(text: str, base: SurfaceConfig) -> tuple[str, SurfaceConfig, d
         raise SystemExit(
             f'--variant {text!r}: expected NAME=JSON, e.g. \'smooth={{"refine": {{"smoothness_weight": 30}}}}\''
         )
-    return name, with_fields(base, overrides), overrides
+    try:
+        config = from_table(
+            SurfaceConfig, {"torch_threads": threads, **overrides}, source=f"--variant {name!r}"
+        )
+    except ConfigError as error:
+        raise SystemExit(str(error)) from None
+    return name, config, overrides
 
 
 def figures(run: dict[str, Any]) -> dict[str, Any]:
@@ -149,8 +135,7 @@ def parse_arguments(description: str, variant_form: str, out: Path) -> argparse.
 
 def main() -> None:
     args = parse_arguments(__doc__.splitlines()[0], "NAME=JSON", RESULTS / "surface_variants.json")
-    base = SurfaceConfig(torch_threads=args.threads)
-    variants = [parse_variant(text, base) for text in (args.variant or ["shipped={}"])]
+    variants = [parse_variant(text, args.threads) for text in (args.variant or ["shipped={}"])]
     write_results(args.out, run_variants(args.site, variants), args.threads)
 
 

@@ -1,5 +1,6 @@
 """`bench/surface_variants.py` reads its variants as NAME=JSON over the shipped `SurfaceConfig`, nested parts
-included, and refuses a malformed one, an unknown field or a value the config refuses, naming it."""
+included (as a run configuration's `[surface]` table), and refuses a malformed one, an unknown field or a value
+the config refuses, naming it."""
 
 import pytest
 
@@ -8,14 +9,14 @@ from cama_pipeline.surface import SurfaceConfig
 
 
 def test_a_variant_sets_fields_and_fields_of_parts() -> None:
-    base = SurfaceConfig()
+    base = SurfaceConfig(torch_threads=2)
     name, config, settings = parse_variant(
-        'smooth 100={"refine": {"smoothness_weight": 100, "sweeps": [[0.06, 0.02]]}, "sfm_gate_m": 0.5}', base
+        'smooth 100={"refine": {"smoothness_weight": 100, "sweeps": [[0.06, 0.02]]}, "sfm_gate_m": 0.5}', 2
     )
     assert name == "smooth 100" and settings["sfm_gate_m"] == 0.5
     assert config.refine.smoothness_weight == 100 and config.refine.sweeps == ((0.06, 0.02),)
     assert config.sfm_gate_m == 0.5 and config.refine.ridge_weight == base.refine.ridge_weight
-    assert parse_variant("shipped={}", base)[1] == base
+    assert parse_variant("shipped={}", 2)[1] == base
 
 
 @pytest.mark.parametrize(
@@ -25,13 +26,14 @@ def test_a_variant_sets_fields_and_fields_of_parts() -> None:
         ("={}", "expected NAME=JSON"),
         ("smooth=[1]", "expected NAME=JSON"),
         ("smooth={nope", "not NAME=JSON"),
-        ('smooth={"refine": {"smoothness": 30}}', "SurfaceConfig.refine has no field 'smoothness'"),
+        ('smooth={"refine": {"smoothness": 30}}', "unknown key 'refine.smoothness'"),
         ('smooth={"refine": {"smoothness_weight": -1}}', "smoothness_weight must be >= 0"),
+        ('smooth={"refine": {"smoothness_weight": "stiff"}}', "refine.smoothness_weight must be a number"),
     ],
 )
 def test_a_bad_variant_is_refused_naming_what_is_wrong(text: str, named: str) -> None:
     with pytest.raises(SystemExit, match=named):
-        parse_variant(text, SurfaceConfig())
+        parse_variant(text, 1)
 
 
 def test_each_run_is_compared_with_the_first() -> None:
