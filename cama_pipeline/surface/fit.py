@@ -60,7 +60,8 @@ def fit_surface(
     grid = road_grid(trusted[:, :2], config.resolution_m, config.region_radius_m)
     mlp = new_elevation_mlp(grid, trusted[:, 2], config).to(device)
     region = torch.as_tensor(grid.vertex_xy(), device=device)
-    fitted = torch.as_tensor(trusted, device=device)
+    trusted_points = torch.as_tensor(trusted, device=device)
+    fitted = trusted_points
     losses = fit_elevation(mlp, fitted, config, on_step, region)
     kept = np.zeros(len(sfm), dtype=bool)
     if len(strip) and len(sfm):
@@ -72,8 +73,6 @@ def fit_surface(
                     on_step(config.refit_iterations * (config.sfm_gate_rounds - fit_round), losses[-1])
                 break
             kept = inliers
-            fitted = torch.cat(
-                [torch.as_tensor(trusted, device=device), torch.as_tensor(sfm[kept], device=device)]
-            )
+            fitted = torch.cat([trusted_points, torch.as_tensor(sfm[kept], device=device)])
             losses += fit_elevation(mlp, fitted, config, on_step, region, config.refit_iterations)
     return FittedSurface(grid, mlp, fitted, int(kept.sum()), losses)
