@@ -270,8 +270,25 @@ def ego_frame_figures(
     return figures
 
 
-def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> dict[str, Any]:
-    """Run the stage with `poses` in a fresh workspace beside the real one; figures and seconds."""
+def mask_choice(site: Path, masks: str) -> str:
+    """The stage's `--masks` for a bench's `masks`: `generator` is the generator's masks that a mask-free site keeps
+    in its `ground_truth/` (SystemExit naming the folder when it has none); any other value is the stage's own."""
+    if masks != "generator":
+        return masks
+    folder = site / "ground_truth"
+    if not has_masks(folder):
+        raise SystemExit(
+            f"{folder}: no generator masks (semantic/, lane_instance/); a site made with --no-masks has them"
+        )
+    return str(folder)
+
+
+def run_source(
+    site: Path, poses: str, config: SurfaceConfig, scratch: Path, masks: str = "auto"
+) -> dict[str, Any]:
+    """Run the stage with `poses` in a fresh workspace beside the real one, observing through `masks` (a choice of
+    `cama surface --masks`, or `generator`: a mask-free site's generator masks in its `ground_truth/`); figures
+    and seconds."""
     workspace = Workspace(scratch / f"{len(list(scratch.iterdir()))}-{poses}")
     workspace.root.mkdir(parents=True)
     source = Workspace.for_dataset(site / "nuscenes")
@@ -281,7 +298,13 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
             workspace.stage_dir(shared).symlink_to(source.stage_dir(shared).absolute())
     started = time.perf_counter()
     result = run(
-        config, site / "nuscenes", workspace, poses=poses, overwrite=True, show_progress=False
+        config,
+        site / "nuscenes",
+        workspace,
+        poses=poses,
+        masks=mask_choice(site, masks),
+        overwrite=True,
+        show_progress=False,
     ).items[0]
     seconds = time.perf_counter() - started
     manifest = read_site_manifest(workspace.site_manifest(result.name))
@@ -301,7 +324,7 @@ def run_source(site: Path, poses: str, config: SurfaceConfig, scratch: Path) -> 
     report = result.report
     return {
         "poses": poses,
-        "masks": "dataset" if has_masks(site / "nuscenes") else "predicted",
+        "masks": masks if masks != "auto" else "dataset" if has_masks(site / "nuscenes") else "predicted",
         "refine": config.refine.enabled,
         "kerb_step": config.kerb_step.enabled,
         "kerb_band_m": config.kerb_step.kerb_band_m,

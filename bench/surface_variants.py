@@ -6,7 +6,11 @@ with the site's SfM poses, as the product does (`bench/surface.py`'s `run_source
 site's sites, SfM and masks), all in one run per site, and is scored as `bench/surface.py` scores a run: the road's
 elevation RMSE (and by distance from the trajectory), the class IoU against the truth in the world's frame and in the
 reconstruction's own, PSNR, seconds. The first variant is the baseline the others are compared with (default: the
-shipped settings, `shipped={}`). `bench/surface_gate.py` runs its SfM gate variants through the same loop.
+shipped settings, `shipped={}`). A variant's JSON may also name the masks the stage observes through, `"masks"`:
+`auto` (the default: the data set's, else the workspace's), `predicted`, `imported`, `dataset`, or `generator`
+(a mask-free site's generator masks, kept in its `ground_truth/` for evaluation), so the same SfM run with the
+segmenter's masks and with the generator's splits what the masks cost the surface from what the rest does.
+`bench/surface_gate.py` runs its SfM gate variants through the same loop.
 
 Usage: .venv/bin/python bench/surface_variants.py --site SITE [--site SITE ...] [--variant NAME=JSON ...]
        [--threads 2] [--out bench/results/surface_variants.json]
@@ -29,12 +33,15 @@ from cama_studio.config import ConfigError, from_table
 
 RESULTS = Path(__file__).parent / "results"
 CLASSES = ("road", "curb", "lane_marking", "crosswalk")
+MASKS = ("auto", "predicted", "imported", "dataset", "generator")
+"""What a variant's `"masks"` may name (module docstring)."""
 
 
 def parse_variant(text: str, threads: int) -> tuple[str, SurfaceConfig, dict[str, Any]]:
     """`NAME=JSON` -> (name, the shipped config on `threads` torch threads with the JSON's fields set, as a run
-    configuration's `[surface]` table sets them: `cama_studio.config.from_table`, the JSON); SystemExit naming
-    the text when malformed, or the key the configuration refuses."""
+    configuration's `[surface]` table sets them: `cama_studio.config.from_table`, the JSON, whose `"masks"` is
+    not a setting but the masks to observe through, `MASKS`); SystemExit naming the text when malformed, or the
+    key the configuration refuses."""
     name, separator, values = text.partition("=")
     try:
         overrides = json.loads(values) if separator else None
@@ -44,9 +51,13 @@ def parse_variant(text: str, threads: int) -> tuple[str, SurfaceConfig, dict[str
         raise SystemExit(
             f'--variant {text!r}: expected NAME=JSON, e.g. \'smooth={{"refine": {{"smoothness_weight": 30}}}}\''
         )
+    masks = overrides.get("masks", "auto")
+    if masks not in MASKS:
+        raise SystemExit(f"--variant {name!r}: masks {masks!r} is not one of {', '.join(MASKS)}")
+    settings = {key: value for key, value in overrides.items() if key != "masks"}
     try:
         config = from_table(
-            SurfaceConfig, {"torch_threads": threads, **overrides}, source=f"--variant {name!r}"
+            SurfaceConfig, {"torch_threads": threads, **settings}, source=f"--variant {name!r}"
         )
     except ConfigError as error:
         raise SystemExit(str(error)) from None
@@ -97,7 +108,8 @@ def run_variants(
         for name, config, settings in variants:
             scratch = Path(tempfile.mkdtemp(prefix="bench-surface-variants-"))
             try:
-                runs[name] = {**settings, **figures(run_source(site, "sfm", config, scratch))}
+                masks = settings.get("masks", "auto")
+                runs[name] = {**settings, **figures(run_source(site, "sfm", config, scratch, masks))}
             finally:
                 shutil.rmtree(scratch, ignore_errors=True)
             own = runs[name]["iou_in_reconstruction_frame"]

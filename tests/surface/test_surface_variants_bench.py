@@ -2,8 +2,11 @@
 included (as a run configuration's `[surface]` table), and refuses a malformed one, an unknown field or a value
 the config refuses, naming it."""
 
+from pathlib import Path
+
 import pytest
 
+from bench.surface import mask_choice
 from bench.surface_variants import against_baseline, parse_variant
 from cama_pipeline.surface import SurfaceConfig
 
@@ -50,3 +53,21 @@ def test_each_run_is_compared_with_the_first() -> None:
     assert compared["smooth"]["elevation_rmse_cm"] == pytest.approx(-0.5)
     assert compared["smooth"]["iou_in_reconstruction_frame"]["curb"] == pytest.approx(0.05)
     assert compared["smooth"]["seconds_ratio"] == pytest.approx(1.1)
+
+
+def test_a_variant_may_name_the_masks_it_observes_through() -> None:
+    name, config, settings = parse_variant('generator masks={"masks": "generator"}', 2)
+    assert name == "generator masks" and settings == {"masks": "generator"}
+    assert config == SurfaceConfig(torch_threads=2)  # the masks are not a setting of the stage
+    assert parse_variant('smooth={"masks": "predicted", "sfm_gate_m": 0.5}', 2)[1].sfm_gate_m == 0.5
+    with pytest.raises(SystemExit, match="masks 'truth' is not one of auto, predicted"):
+        parse_variant('bad={"masks": "truth"}', 2)
+
+
+def test_generator_masks_are_the_mask_free_sites_ground_truth(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    assert mask_choice(site, "predicted") == "predicted" and mask_choice(site, "auto") == "auto"
+    with pytest.raises(SystemExit, match=f"{site / 'ground_truth'}: no generator masks"):
+        mask_choice(site, "generator")
+    (site / "ground_truth" / "semantic").mkdir(parents=True)
+    assert mask_choice(site, "generator") == str(site / "ground_truth")
