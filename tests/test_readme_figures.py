@@ -3578,3 +3578,13 @@ def test_refinement_ridge_table() -> None:
         assert_names_source(t, name, "bench/surface_variants.py")
         sites |= results(name)["sites"]
     _check_variant_columns(t, sites, "refinement ridge table")
+
+
+def test_masks_split_table() -> None:
+    t = table(
+        "the masks the surface observes through, SfM poses", "What the segmenter's masks cost the surface"
+    )
+    assert_names_source(t, "surface_masks_split.json", "bench/surface_variants.py")
+    sites = results("surface_masks_split.json")["sites"]
+    assert all(site["runs"]["generator masks"]["masks"] == "generator" for site in sites.values())
+    _check_variant_columns(t, sites, "masks split table")
