@@ -3588,3 +3588,26 @@ def test_masks_split_table() -> None:
     sites = results("surface_masks_split.json")["sites"]
     assert all(site["runs"]["generator masks"]["masks"] == "generator" for site in sites.values())
     _check_variant_columns(t, sites, "masks split table")
+
+
+def test_segmenter_calibration_on_fresh_sites_table() -> None:
+    """`gpu-long2` against its calibration on seven sites neither saw; the calibrated runs are of the checkpoint
+    whose record the results keep."""
+    columns = {
+        "default twin gpu-long2": ("segment_default_twin.json", "gpu-long2"),
+        "default twin calibrated": ("segment_calibrated_default_twin.json", "gpu-long2-cal184"),
+        "hilly twin gpu-long2": ("segment_hilly.json", "gpu-long2"),
+        "hilly twin calibrated": ("segment_calibrated_hilly.json", "gpu-long2-cal184"),
+    }
+    for seed in ("9301", "9302", "9303", "9004", "9005"):
+        columns[f"{seed} gpu-long2"] = (f"segment_gpu_long2_{seed}.json", "gpu-long2")
+        columns[f"{seed} calibrated"] = (f"segment_calibrated_{seed}.json", "gpu-long2-cal184")
+    _check_segmenter_columns("class, calibrated on fresh 512x288 sites", columns)
+    record = results("segmenter_calibration_cal184.json")["checkpoints"]["gpu-long2-cal184"]
+    shipped = json.loads((ROOT / "cama_pipeline/segment/shipped/checkpoint.json").read_text(encoding="utf-8"))
+    assert record["calibration"]["parent"]["weights_sha256"] == shipped["weights_sha256"]
+    assert [site["seed"] for site in record["calibration"]["sites"]] == [181, 182, 183, 184]
+    for name, label in columns.values():
+        digest = results(name)["segmentation"]["checkpoint"]["digest"]
+        expected = record["weights_sha256"] if label != "gpu-long2" else shipped["weights_sha256"]
+        assert digest == expected[:16], name
