@@ -61,6 +61,7 @@ from cama_pipeline.data import load_dataset
 from cama_pipeline.data.masks import has_masks
 from cama_pipeline.evaluate.ego_frames import ego_class_iou, ego_height_errors
 from cama_pipeline.evaluate.frame import reconstruction_frame
+from cama_pipeline.evaluate.photometric import affine_fit, psnr
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
@@ -92,21 +93,6 @@ def truth_at(ours: BevRasters, truth: BevRasters) -> tuple[np.ndarray, np.ndarra
     shape = ours.georeference.shape
     inside, true_rows, true_cols = nearest_true_cells(cell_centres(ours.georeference), truth)
     return inside.reshape(shape), true_rows.reshape(shape), true_cols.reshape(shape)
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return float(10 * np.log10(255.0**2 / max(mse, 1e-12)))
-
-
-def affine_fit(ours: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """`ours` (N, 3) mapped per channel by the least-squares gain and offset onto `truth`."""
-    fitted = np.empty_like(ours, dtype=np.float64)
-    for ch in range(3):
-        design = np.column_stack([ours[:, ch], np.ones(len(ours))]).astype(np.float64)
-        coef, *_ = np.linalg.lstsq(design, truth[:, ch].astype(np.float64), rcond=None)
-        fitted[:, ch] = np.clip(design @ coef, 0, 255)
-    return fitted
 
 
 def distance_from_trajectory(ours: BevRasters, trajectory_xy: np.ndarray) -> np.ndarray:
@@ -324,6 +310,7 @@ def run_source(
     report = result.report
     return {
         "poses": poses,
+        "workspace": str(workspace.root),
         "masks": masks if masks != "auto" else "dataset" if has_masks(site / "nuscenes") else "predicted",
         "refine": config.refine.enabled,
         "kerb_step": config.kerb_step.enabled,
