@@ -3611,3 +3611,24 @@ def test_segmenter_calibration_on_fresh_sites_table() -> None:
         digest = results(name)["segmentation"]["checkpoint"]["digest"]
         expected = record["weights_sha256"] if label != "gpu-long2" else shipped["weights_sha256"]
         assert digest == expected[:16], name
+
+
+def test_photometric_split_table() -> None:
+    t = table("site, poses, surface", "Where the photometric error lies")
+    assert_names_source(t, "surface_photometric.json", "bench/surface_photometric.py")
+    sites = results("surface_photometric.json")["sites"]
+    names = {"default twin": "default-nomasks", "9301": "random512-9301-nomasks"}
+    for label, cells in t.rows.items():
+        site_name, poses, surface = label.split(", ")
+        (runs,) = [runs for path, runs in sites.items() if path.endswith("/" + names[site_name])]
+        source = {"true": "ground_truth", "SfM": "sfm"}[poses]
+        run = runs[f"{source}, {surface}"]
+        assert run["refine"] == (surface == "refined"), label
+        scales = [run["by_scale"][f"sigma_{sigma}"] for sigma in ("1", "2", "4")]
+        assert_shows(cells[1], [run["psnr_db"], run["psnr_affine_db"]], label)
+        assert_shows(cells[2], [100 * scale["fine_share"] for scale in scales], label)
+        assert_shows(cells[3], [scale["truth_blurred_psnr_db"] for scale in scales], label)
+        for index, name in enumerate(("road", "lane_marking", "crosswalk", "curb"), start=4):
+            figures = run["by_class"][name]
+            assert_shows(cells[index], [figures["psnr_db"], figures["mean_over_truth"]], f"{label} {name}")
+    assert len(t.rows) == 8
