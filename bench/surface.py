@@ -325,6 +325,7 @@ def run_source(
         "images": report["images"],
         "vertices": report["vertices"],
         "points": report["points"],
+        "extrapolated_heights": report["extrapolated_heights"],
         "losses_last_epoch": report["losses"]["epochs"][-1:] or None,
         "refine_sweeps": report["losses"]["refine"],
     }

@@ -75,6 +75,7 @@ def figures(run: dict[str, Any]) -> dict[str, Any]:
         "iou_in_reconstruction_frame": run["in_reconstruction_frame"]["iou"],
         "psnr_db": run["psnr_db"],
         "sfm_points_kept": run["points"].get("sfm_kept"),
+        "extrapolated_heights": run["extrapolated_heights"],
         "seconds": run["seconds"]["total"],
     }
 

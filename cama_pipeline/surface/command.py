@@ -1,6 +1,6 @@
 """`cama surface`: road surface mesh and BEV rasters of every site (after `cama sites`, ideally `cama sfm`)."""
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.table import Table
@@ -52,7 +52,15 @@ def surface_command(
     except INPUT_ERRORS as err:
         raise bad_input(err) from err
     table = Table(title=f"surface ({poses} poses)")
-    for column in ("site", "images", "vertices", "cells observed", "weakly observed road", "seconds"):
+    columns = (
+        "site",
+        "images",
+        "vertices",
+        "cells observed",
+        "weakly observed road",
+        "extrapolated road heights",
+    )
+    for column in (*columns, "seconds"):
         table.add_column(column)
     for site in result.items:
         report = site.report
@@ -60,8 +68,23 @@ def surface_command(
         seconds = sum(report["seconds"].values())
         weak = report["weak_observation"]
         weak_text = f"{100 * weak['road_weak_share']:.1f} % (< {weak['weak_rays']} rays; {weak['weak_regions']} regions)"
-        values = (report["images"], report["vertices"], report["cells_observed"], weak_text, f"{seconds:.1f}")
+        values = (
+            report["images"],
+            report["vertices"],
+            report["cells_observed"],
+            weak_text,
+            extrapolated_text(report.get("extrapolated_heights")),
+            f"{seconds:.1f}",
+        )
         table.add_row(name, *map(str, values))
     console.print(table)
     for site in result.items:  # paths on their own lines: a long one would crush the table
         console.print(f"  {site.name} -> {site.path}")
+
+
+def extrapolated_text(extrapolated: dict[str, Any] | None) -> str:
+    """The report's `extrapolated_heights` in a table cell ("-" for a report written before it existed)."""
+    if extrapolated is None:
+        return "-"
+    share = 100 * extrapolated["extrapolated_road_share"]
+    return f"{share:.1f} % (> {extrapolated['height_support_m']:g} m from points; up to {extrapolated['farthest_m']:g} m)"

@@ -27,7 +27,7 @@ from cama_pipeline.progress import StageProgress
 from cama_pipeline.results import ItemResult, StageResult
 from cama_pipeline.site.io import read_site_ids, read_site_manifest, read_site_scenes
 from cama_pipeline.surface.config import POSE_SOURCES, SurfaceConfig
-from cama_pipeline.surface.coverage import weak_observation
+from cama_pipeline.surface.coverage import extrapolated_heights, weak_observation
 from cama_pipeline.surface.fit import fit_steps, fit_surface
 from cama_pipeline.surface.joint import render_optimise, road_and_step, vote_config
 from cama_pipeline.surface.optimise import new_mesh, observe, optimise
@@ -188,6 +188,13 @@ def reconstruct_site(
         "cells_observed": int((rasters.require("observation_count") > 0).sum()),
         "kerb_step": step_summary(rasters.require("semantic"), kerb_step, config.curb_height_m),
         "weak_observation": weak_observation(
+            rasters.require("observation_count"),
+            rasters.require("semantic"),
+            rasters.georeference,
+            config.coverage,
+        ),
+        "extrapolated_heights": extrapolated_heights(
+            point_tensor[:, :2].cpu().numpy(),
             rasters.require("observation_count"),
             rasters.require("semantic"),
             rasters.georeference,

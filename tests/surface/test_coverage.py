@@ -5,7 +5,8 @@ import pytest
 
 from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.semantics import Semantic
-from cama_pipeline.surface.coverage import CoverageConfig, weak_observation
+from cama_pipeline.surface.command import extrapolated_text
+from cama_pipeline.surface.coverage import CoverageConfig, extrapolated_heights, weak_observation
 
 GEO = RasterGeoreference(origin_xy=(100.0, 50.0), resolution=0.5, width=20, height=10)
 
@@ -43,3 +44,49 @@ def test_bad_input_is_named() -> None:
         weak_observation(np.zeros((3, 3)), np.zeros((10, 20)), GEO, CoverageConfig())
     with pytest.raises(ValueError, match="weak_rays"):
         CoverageConfig(weak_rays=1)
+
+
+def test_road_cells_far_from_every_fitted_point_have_extrapolated_heights() -> None:
+    count = np.full((10, 20), 9, np.uint16)
+    count[:, 18:] = 0  # never seen: not counted, however far
+    semantic = np.full((10, 20), int(Semantic.ROAD), np.uint8)
+    semantic[0, :] = int(Semantic.BACKGROUND)  # off-road: its height is no road's
+    # points along the raster's row 5 (y = 47.5), columns 0-9 (x 100-104.5): the trajectory strip's kind
+    support = np.column_stack([100.0 + 0.5 * np.arange(10), np.full(10, 47.5)])
+    report = extrapolated_heights(
+        support, count, semantic, GEO, CoverageConfig(height_support_m=2.0, min_region_m2=0)
+    )
+    road = 9 * 18
+    assert report["road_cells"] == road
+    # a road cell is extrapolated when more than 2 m (4 cells) from every point: columns 14-17 of every row, and
+    # none of columns 0-9 (rows 1-9 lie within 2 m of row 5)
+    distance = np.hypot(np.maximum(np.arange(18) - 9, 0)[None, :], np.arange(1, 10)[:, None] - 5) * 0.5
+    assert report["extrapolated_road_cells"] == int((distance > 2.0).sum()) > 0
+    assert report["extrapolated_road_share"] == round(int((distance > 2.0).sum()) / road, 4)
+    assert report["farthest_m"] == round(float(distance.max()), 2)
+    (region,) = report["regions"]
+    assert region["road_share"] == 1.0 and region["median_distance_m"] > 2.0
+    assert region["global_box_m"][2] == 108.75  # the last observed column, 17, ends at x = 108.75
+
+
+def test_points_off_the_grid_support_nothing_and_none_at_all_is_refused() -> None:
+    count = np.full((10, 20), 9, np.uint16)
+    semantic = np.full((10, 20), int(Semantic.ROAD), np.uint8)
+    near = np.array([[100.0, 47.5]])
+    far = np.array([[500.0, 47.5], [100.0, 900.0]])
+    alone = extrapolated_heights(near, count, semantic, GEO, CoverageConfig())
+    assert extrapolated_heights(np.vstack([near, far]), count, semantic, GEO, CoverageConfig()) == alone
+    with pytest.raises(ValueError, match="no support point falls on the grid"):
+        extrapolated_heights(far, count, semantic, GEO, CoverageConfig())
+    with pytest.raises(ValueError, match="height_support_m"):
+        CoverageConfig(height_support_m=0)
+    with pytest.raises(ValueError, match="differ in shape"):
+        extrapolated_heights(near, np.zeros((3, 3)), semantic, GEO, CoverageConfig())
+
+
+def test_the_command_shows_the_extrapolated_share_and_nothing_for_an_older_report() -> None:
+    shown = extrapolated_text(
+        {"extrapolated_road_share": 0.0312, "height_support_m": 2.0, "farthest_m": 7.25}
+    )
+    assert shown == "3.1 % (> 2 m from points; up to 7.25 m)"
+    assert extrapolated_text(None) == "-"  # a report written before the field existed

@@ -95,6 +95,12 @@ def test_mesh_and_report(surface: ItemResult) -> None:
     assert weak["observed_cells"] == report["cells_observed"] == int((count > 0).sum())
     assert weak["weak_cells"] == int(((count > 0) & (count < weak["weak_rays"])).sum())
     assert 0 <= weak["road_weak_share"] <= 1 and weak["weak_regions"] == len(weak["regions"])
+    extrapolated = report[
+        "extrapolated_heights"
+    ]  # the fitted points are the strip's alone here (no SfM points)
+    assert extrapolated["road_cells"] == weak["road_cells"]
+    assert 0 < extrapolated["extrapolated_road_cells"] < extrapolated["road_cells"]
+    assert extrapolated["farthest_m"] > extrapolated["height_support_m"]
 
 
 def test_elevation_matches_the_true_road_under_the_trajectory(
