@@ -87,4 +87,5 @@ def extrapolated_text(extrapolated: dict[str, Any] | None) -> str:
     if extrapolated is None:
         return "-"
     share = 100 * extrapolated["extrapolated_road_share"]
-    return f"{share:.1f} % (> {extrapolated['height_support_m']:g} m from points; up to {extrapolated['farthest_m']:g} m)"
+    support = f"< {extrapolated['support_points']} points within {extrapolated['height_support_m']:g} m"
+    return f"{share:.1f} % ({support}; up to {extrapolated['farthest_m']:g} m)"

@@ -9,9 +9,11 @@ bounding box in global metres, so that a lead knows where the map rests on littl
 Rays say where colour and class come from; heights come from the points the elevation was fitted to (the trajectory
 strip and the SfM road points kept), and beyond them the fit continues like a plane. Past the ends of the drives of
 a hilly site that plane runs centimetres to decimetres off the road (README: "The road's height past a grade
-change"), and a map lifted to 3D there takes its heights from it. So the report also lists the observed road cells
-farther than `height_support_m` from every fitted point (`extrapolated_heights`): their share, the farthest, and
-the largest such regions.
+change"), and a map lifted to 3D there takes its heights from it. A stray point or two near a cell do not hold its
+height (the fit's robust loss and its curvature prior outweigh them), so a cell counts as supported only when
+`support_points` fitted points lie within `height_support_m` of it, and the report lists the observed road cells that
+are not (`extrapolated_heights`): their share, the farthest such cell's distance to its `support_points`-th nearest
+point, and the largest such regions.
 """
 
 from dataclasses import dataclass
@@ -19,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from cama_pipeline.bev import RasterGeoreference
 from cama_pipeline.semantics import ROAD_SURFACE_IDS
@@ -35,7 +38,9 @@ class CoverageConfig:
     max_regions: int = 20
     """The largest weak regions listed, at most."""
     height_support_m: float = 2.0
-    """Road cells farther than this from every point the elevation was fitted to have extrapolated heights."""
+    """Road cells with fewer than `support_points` fitted points within this distance have extrapolated heights."""
+    support_points: int = 5
+    """How many fitted points within `height_support_m` support a cell's height."""
 
     def __post_init__(self) -> None:
         if self.weak_rays < 2:
@@ -46,6 +51,8 @@ class CoverageConfig:
             raise ValueError(f"CoverageConfig.max_regions must be >= 0, got {self.max_regions}")
         if self.height_support_m <= 0:
             raise ValueError(f"CoverageConfig.height_support_m must be > 0, got {self.height_support_m}")
+        if self.support_points < 1:
+            raise ValueError(f"CoverageConfig.support_points must be >= 1, got {self.support_points}")
 
 
 def _check_shapes(georeference: RasterGeoreference, **layers: np.ndarray) -> None:
@@ -122,28 +129,31 @@ def extrapolated_heights(
     georeference: RasterGeoreference,
     config: CoverageConfig,
 ) -> dict[str, Any]:
-    """The report's `extrapolated_heights`: the observed road cells farther than `height_support_m` from every
-    point of `support_xy` ((N, 2) global metres: what the elevation was fitted to), their share of the observed
-    road cells, the farthest one's distance, and the largest such regions (8-connected, with their median
-    distance in metres), largest first."""
+    """The report's `extrapolated_heights`: the observed road cells whose `support_points`-th nearest point of
+    `support_xy` ((N, 2) global metres: what the elevation was fitted to) lies farther than `height_support_m`,
+    their share of the observed road cells, the farthest such distance, and the largest such regions (8-connected,
+    with their median distance in metres), largest first. ValueError when there are fewer points than
+    `support_points`."""
     _check_shapes(georeference, **{"observation count": count, "semantic": semantic})
+    points = np.asarray(support_xy, float).reshape(-1, 2)
+    if len(points) < config.support_points:
+        raise ValueError(
+            f"extrapolated_heights: {len(points)} support points, fewer than support_points={config.support_points}"
+        )
     road = (count > 0) & np.isin(semantic, ROAD_SURFACE_IDS)
-    supported = np.zeros(georeference.shape, dtype=bool)
-    cols, rows = (
-        np.round(georeference.pixel_from_global(np.asarray(support_xy, float))).astype(int).reshape(-1, 2).T
-    )
-    inside = (rows >= 0) & (rows < supported.shape[0]) & (cols >= 0) & (cols < supported.shape[1])
-    supported[rows[inside], cols[inside]] = True
-    if not supported.any():
-        raise ValueError("extrapolated_heights: no support point falls on the grid")
-    distance = ndimage.distance_transform_edt(~supported, sampling=georeference.resolution)
+    rows, cols = np.nonzero(road)
+    centres = georeference.global_from_pixel(np.column_stack([cols, rows]).astype(float))
+    nearest, _ = cKDTree(points).query(centres, k=[config.support_points])
+    distance = np.zeros(georeference.shape)
+    distance[rows, cols] = nearest[:, 0]
     extrapolated = road & (distance > config.height_support_m)
     regions = _regions(extrapolated, road, georeference, config, ("median_distance_m", distance))
     return {
         "height_support_m": config.height_support_m,
+        "support_points": config.support_points,
         "road_cells": int(road.sum()),
         "extrapolated_road_cells": int(extrapolated.sum()),
         "extrapolated_road_share": round(float(extrapolated.sum() / max(int(road.sum()), 1)), 4),
-        "farthest_m": round(float(distance[road].max()), 2) if road.any() else 0.0,
+        "farthest_m": round(float(distance.max()), 2),
         "regions": regions,
     }

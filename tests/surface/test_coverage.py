@@ -1,5 +1,7 @@
 """The surface report's weakly observed cells and regions."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -53,13 +55,11 @@ def test_road_cells_far_from_every_fitted_point_have_extrapolated_heights() -> N
     semantic[0, :] = int(Semantic.BACKGROUND)  # off-road: its height is no road's
     # points along the raster's row 5 (y = 47.5), columns 0-9 (x 100-104.5): the trajectory strip's kind
     support = np.column_stack([100.0 + 0.5 * np.arange(10), np.full(10, 47.5)])
-    report = extrapolated_heights(
-        support, count, semantic, GEO, CoverageConfig(height_support_m=2.0, min_region_m2=0)
-    )
+    config = CoverageConfig(height_support_m=2.0, support_points=1, min_region_m2=0)
+    report = extrapolated_heights(support, count, semantic, GEO, config)
     road = 9 * 18
-    assert report["road_cells"] == road
-    # a road cell is extrapolated when more than 2 m (4 cells) from every point: columns 14-17 of every row, and
-    # none of columns 0-9 (rows 1-9 lie within 2 m of row 5)
+    assert report["road_cells"] == road and report["support_points"] == 1
+    # with one point enough, a road cell is extrapolated when more than 2 m (4 cells) from every point
     distance = np.hypot(np.maximum(np.arange(18) - 9, 0)[None, :], np.arange(1, 10)[:, None] - 5) * 0.5
     assert report["extrapolated_road_cells"] == int((distance > 2.0).sum()) > 0
     assert report["extrapolated_road_share"] == round(int((distance > 2.0).sum()) / road, 4)
@@ -69,24 +69,44 @@ def test_road_cells_far_from_every_fitted_point_have_extrapolated_heights() -> N
     assert region["global_box_m"][2] == 108.75  # the last observed column, 17, ends at x = 108.75
 
 
-def test_points_off_the_grid_support_nothing_and_none_at_all_is_refused() -> None:
+def test_a_few_stray_points_do_not_support_a_height() -> None:
     count = np.full((10, 20), 9, np.uint16)
     semantic = np.full((10, 20), int(Semantic.ROAD), np.uint8)
-    near = np.array([[100.0, 47.5]])
-    far = np.array([[500.0, 47.5], [100.0, 900.0]])
-    alone = extrapolated_heights(near, count, semantic, GEO, CoverageConfig())
-    assert extrapolated_heights(np.vstack([near, far]), count, semantic, GEO, CoverageConfig()) == alone
-    with pytest.raises(ValueError, match="no support point falls on the grid"):
-        extrapolated_heights(far, count, semantic, GEO, CoverageConfig())
+    strip = np.column_stack([100.0 + 0.5 * np.arange(20), np.full(20, 47.5)])  # row 5, every column
+    strays = np.array([[100.0, 50.0], [100.5, 50.0]])  # two points by the north-west corner
+    config = CoverageConfig(height_support_m=1.0, support_points=3, min_region_m2=0)
+    alone = extrapolated_heights(strip, count, semantic, GEO, config)
+    strayed = extrapolated_heights(np.vstack([strip, strays]), count, semantic, GEO, config)
+    assert strayed["extrapolated_road_cells"] == alone["extrapolated_road_cells"]
+    one = replace(config, support_points=1)
+    assert (
+        extrapolated_heights(np.vstack([strip, strays]), count, semantic, GEO, one)["extrapolated_road_cells"]
+        < alone["extrapolated_road_cells"]
+    )
+    # three points within 1 m: on row 5 itself and on rows 4 and 6 (the third nearest 0.71 m away), but not at
+    # the strip's two end columns there (1.12 m): 20 + 2 * 18 of the 200 cells are held
+    assert alone["extrapolated_road_cells"] == 200 - 56
+
+
+def test_too_few_support_points_and_bad_settings_are_refused() -> None:
+    count = np.full((10, 20), 9, np.uint16)
+    semantic = np.full((10, 20), int(Semantic.ROAD), np.uint8)
+    with pytest.raises(ValueError, match="2 support points, fewer than support_points=5"):
+        extrapolated_heights(np.array([[100.0, 47.5], [101.0, 47.5]]), count, semantic, GEO, CoverageConfig())
     with pytest.raises(ValueError, match="height_support_m"):
         CoverageConfig(height_support_m=0)
+    with pytest.raises(ValueError, match="support_points"):
+        CoverageConfig(support_points=0)
     with pytest.raises(ValueError, match="differ in shape"):
-        extrapolated_heights(near, np.zeros((3, 3)), semantic, GEO, CoverageConfig())
+        extrapolated_heights(np.zeros((5, 2)), np.zeros((3, 3)), semantic, GEO, CoverageConfig())
 
 
 def test_the_command_shows_the_extrapolated_share_and_nothing_for_an_older_report() -> None:
-    shown = extrapolated_text(
-        {"extrapolated_road_share": 0.0312, "height_support_m": 2.0, "farthest_m": 7.25}
-    )
-    assert shown == "3.1 % (> 2 m from points; up to 7.25 m)"
+    report = {
+        "extrapolated_road_share": 0.0312,
+        "height_support_m": 2.0,
+        "support_points": 5,
+        "farthest_m": 7.25,
+    }
+    assert extrapolated_text(report) == "3.1 % (< 5 points within 2 m; up to 7.25 m)"
     assert extrapolated_text(None) == "-"  # a report written before the field existed
