@@ -47,6 +47,8 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -66,6 +68,8 @@ from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.site.io import read_site_ids, read_site_manifest
 from cama_pipeline.surface import SurfaceConfig, run
+from cama_pipeline.surface import stage as surface_stage
+from cama_pipeline.surface.coverage import CoverageConfig, support_distance
 from cama_pipeline.surface.outputs import read_kerb_step
 from cama_pipeline.surface.points import ego_poses
 from cama_pipeline.surface.poses import posed_views
@@ -256,6 +260,49 @@ def ego_frame_figures(
     return figures
 
 
+@contextmanager
+def captured_support() -> Iterator[dict[str, np.ndarray]]:
+    """While open, the points the stage fitted its elevation to, as it hands them to the report's
+    `extrapolated_heights`, are kept in the yielded dict under "xy" (the stage's function wrapped; nothing it
+    computes changes)."""
+    kept: dict[str, np.ndarray] = {}
+    original = surface_stage.extrapolated_heights
+
+    def capture(support_xy: np.ndarray, *args: Any, **kwargs: Any) -> dict[str, Any]:
+        kept["xy"] = np.asarray(support_xy)
+        return original(support_xy, *args, **kwargs)
+
+    surface_stage.extrapolated_heights = capture  # type: ignore[assignment]
+    try:
+        yield kept
+    finally:
+        surface_stage.extrapolated_heights = original  # type: ignore[assignment]
+
+
+def height_error_by_support(
+    ours: BevRasters, truth: BevRasters, support_xy: np.ndarray, coverage: CoverageConfig, offset_m: float
+) -> dict[str, Any]:
+    """The road's elevation error (less the surface's `offset_m`, its pose frame's height) over the cells whose
+    heights the report calls extrapolated (`cama_pipeline.surface.coverage`) and over the rest: is the report's
+    flag where the heights are off? Cells labelled and truly road."""
+    inside, tr, tc = truth_at(ours, truth)
+    semantic = ours.require("semantic")
+    true_semantic = np.where(inside, truth.require("semantic")[tr, tc], 255)
+    labelled_road = (ours.require("observation_count") > 0) & np.isin(semantic, ROAD_SURFACE_IDS)
+    road = labelled_road & np.isin(true_semantic, ROAD_SURFACE_IDS)
+    error = ours.require("elevation") - truth.require("elevation")[tr, tc] - offset_m
+    distance = support_distance(support_xy, labelled_road, ours.georeference, coverage.support_points)
+    extrapolated = road & (distance > coverage.height_support_m)
+    return {
+        "offset_m": offset_m,
+        "extrapolated": {"cells": int(extrapolated.sum()), "rmse_m": rmse(error[extrapolated])},
+        "supported": {
+            "cells": int((road & ~extrapolated).sum()),
+            "rmse_m": rmse(error[road & ~extrapolated]),
+        },
+    }
+
+
 def mask_choice(site: Path, masks: str) -> str:
     """The stage's `--masks` for a bench's `masks`: `generator` is the generator's masks that a mask-free site keeps
     in its `ground_truth/` (SystemExit naming the folder when it has none); any other value is the stage's own."""
@@ -283,15 +330,16 @@ def run_source(
         if source.stage_dir(shared).exists():
             workspace.stage_dir(shared).symlink_to(source.stage_dir(shared).absolute())
     started = time.perf_counter()
-    result = run(
-        config,
-        site / "nuscenes",
-        workspace,
-        poses=poses,
-        masks=mask_choice(site, masks),
-        overwrite=True,
-        show_progress=False,
-    ).items[0]
+    with captured_support() as support:
+        result = run(
+            config,
+            site / "nuscenes",
+            workspace,
+            poses=poses,
+            masks=mask_choice(site, masks),
+            overwrite=True,
+            show_progress=False,
+        ).items[0]
     seconds = time.perf_counter() - started
     manifest = read_site_manifest(workspace.site_manifest(result.name))
     dataset = load_dataset(site / "nuscenes")
@@ -300,7 +348,12 @@ def run_source(
     our_views = posed_views(dataset, manifest, workspace, result.name, poses)
     ours = read_bev(workspace.surface_bev(result.name))
     kerb_step = read_kerb_step(workspace.surface_kerb_step(result.name), ours.georeference.shape)
-    figures = compare(ours, truth_on_grid(site, ours.georeference), trajectory_xy, kerb_step)
+    truth = truth_on_grid(site, ours.georeference)
+    figures = compare(ours, truth, trajectory_xy, kerb_step)
+    offset = figures["elevation_median_signed_m_near_trajectory"] or 0.0
+    figures["height_error_by_support"] = height_error_by_support(
+        ours, truth, support["xy"], config.coverage, offset
+    )
     # the classes and colours again with the truth carried into the reconstruction's frame (the best 2D similarity
     # of its key frames onto the true ones): what the stage makes of its own poses, their absolute error aside
     frame = reconstruction_frame(site / "nuscenes", workspace, result.name)

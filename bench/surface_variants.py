@@ -76,6 +76,7 @@ def figures(run: dict[str, Any]) -> dict[str, Any]:
         "psnr_db": run["psnr_db"],
         "sfm_points_kept": run["points"].get("sfm_kept"),
         "extrapolated_heights": run["extrapolated_heights"],
+        "height_error_by_support": run["height_error_by_support"],
         "seconds": run["seconds"]["total"],
     }
 

@@ -135,17 +135,8 @@ def extrapolated_heights(
     with their median distance in metres), largest first. ValueError when there are fewer points than
     `support_points`."""
     _check_shapes(georeference, **{"observation count": count, "semantic": semantic})
-    points = np.asarray(support_xy, float).reshape(-1, 2)
-    if len(points) < config.support_points:
-        raise ValueError(
-            f"extrapolated_heights: {len(points)} support points, fewer than support_points={config.support_points}"
-        )
     road = (count > 0) & np.isin(semantic, ROAD_SURFACE_IDS)
-    rows, cols = np.nonzero(road)
-    centres = georeference.global_from_pixel(np.column_stack([cols, rows]).astype(float))
-    nearest, _ = cKDTree(points).query(centres, k=[config.support_points])
-    distance = np.zeros(georeference.shape)
-    distance[rows, cols] = nearest[:, 0]
+    distance = support_distance(support_xy, road, georeference, config.support_points)
     extrapolated = road & (distance > config.height_support_m)
     regions = _regions(extrapolated, road, georeference, config, ("median_distance_m", distance))
     return {
@@ -157,3 +148,19 @@ def extrapolated_heights(
         "farthest_m": round(float(distance.max()), 2),
         "regions": regions,
     }
+
+
+def support_distance(
+    support_xy: np.ndarray, cells: np.ndarray, georeference: RasterGeoreference, support_points: int
+) -> np.ndarray:
+    """(rows, cols) metres from each of the `cells` (bool mask) to its `support_points`-th nearest point of
+    `support_xy` ((N, 2) global metres), 0 elsewhere; ValueError when there are fewer points than that."""
+    points = np.asarray(support_xy, float).reshape(-1, 2)
+    if len(points) < support_points:
+        raise ValueError(f"{len(points)} support points, fewer than support_points={support_points}")
+    rows, cols = np.nonzero(cells)
+    centres = georeference.global_from_pixel(np.column_stack([cols, rows]).astype(float))
+    nearest, _ = cKDTree(points).query(centres, k=[support_points])
+    distance = np.zeros(georeference.shape)
+    distance[rows, cols] = nearest[:, 0]
+    return distance
