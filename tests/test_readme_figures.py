@@ -3632,3 +3632,23 @@ def test_photometric_split_table() -> None:
             figures = run["by_class"][name]
             assert_shows(cells[index], [figures["psnr_db"], figures["mean_over_truth"]], f"{label} {name}")
     assert len(t.rows) == 8
+
+
+def test_extrapolated_heights_table() -> None:
+    t = table("heights the report calls extrapolated, SfM poses")
+    assert_names_source(t, "surface_extrapolated.json", "bench/surface_variants.py")
+    sites = results("surface_extrapolated.json")["sites"]
+    columns = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"}
+    columns |= {seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")}
+    for column, name in columns.items():
+        (run,) = [site["runs"]["shipped"] for path, site in sites.items() if path.endswith("/" + name)]
+        flagged, split = run["extrapolated_heights"], run["height_error_by_support"]
+        index = t.header.index(column)
+        expected = [100 * flagged["extrapolated_road_share"], flagged["farthest_m"]]
+        assert_shows(
+            row(t, "road cells with extrapolated heights (farthest fifth point)")[index], expected, column
+        )
+        assert_shows(row(t, "elevation RMSE on them")[index], [100 * split["extrapolated"]["rmse_m"]], column)
+        other = row(t, "elevation RMSE on the other road cells")[index]
+        assert_shows(other, [100 * split["supported"]["rmse_m"]], column)
+        assert split["extrapolated"]["rmse_m"] > split["supported"]["rmse_m"], column  # README's reading
