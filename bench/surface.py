@@ -30,10 +30,9 @@ Baseline in the same run, ground-truth poses: the surface without the curvature 
 curb-height vote (`smoothness_weight 0, sfm_gate_m 1e6, curb_height_m 0`); and the last pose source again
 without the kerb step (`kerb_step.enabled false`), its ablation, and with the kerb's foot raised and relabelled
 (`kerb_step.kerb_band_m`, `--kerb-band`, off by default: one width along each kerb), and with the kerb line of the
-two class votes toggled (`kerb_step.kerb_line`, `variant_kerb_line_toggled`); and the first and the last pose source without the
-multi-view refinement of the road elevation (`refine.enabled false`): the observation vote on the fitted
-elevation alone, as the stage was before the refinement. Adam on the per-vertex colours
-and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
+two class votes toggled (`kerb_step.kerb_line`, `variant_kerb_line_toggled`); and the first and the last pose
+source without the multi-view refinement of the road elevation (`refine.enabled false`): the observation vote on
+the fitted elevation alone, as the stage was before the refinement. Adam on the per-vertex colours and logits (`colour_lr`, `semantic_lr` > 0) was measured before and costs 1.7 dB PSNR; not rerun here.
 
 Usage: .venv/bin/python bench/surface.py [--site data/synthetic/default] [--resolution 0.1] [--epochs 1]
        [--sources ground_truth,sfm] [--out bench/results/surface.json]
@@ -364,6 +363,7 @@ def run_source(
     return {
         "poses": poses,
         "workspace": str(workspace.root),
+        "site_id": result.name,
         "masks": masks if masks != "auto" else "dataset" if has_masks(site / "nuscenes") else "predicted",
         "refine": config.refine.enabled,
         "kerb_step": config.kerb_step.enabled,

@@ -6,8 +6,8 @@ with `sfm_gate_rounds` > 1 they are gated again against each new fit while the i
 changes past the ends of the drives (a hill that flattens), the points there lie further than a tight gate from the
 plane and never correct it. Each variant below runs the surface stage with the site's SfM poses, as the product
 does (`bench/surface.py`'s `run_source`: a fresh workspace sharing the site's sites, SfM and masks), all in one run
-per site (`bench/surface_variants.py`'s loop), and is scored as `bench/surface.py` scores a run: the road's elevation RMSE (and by distance from the
-trajectory), the class IoU against the truth in the world's frame and in the reconstruction's own, PSNR, seconds.
+per site (`bench/surface_variants.py`'s loop), and is scored as `bench/surface.py` scores a run: the road's
+elevation RMSE (and by distance from the trajectory), the class IoU against the truth in the world's frame and in the reconstruction's own, PSNR, seconds.
 
 Usage: .venv/bin/python bench/surface_gate.py --site SITE [--site SITE ...] [--variant NAME=GATE_M,ROUNDS ...]
        [--threads 2] [--out bench/results/surface_gate.json]

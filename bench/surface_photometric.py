@@ -9,11 +9,11 @@ over the cells observed in both:
                albedo);
   by class     PSNR over the cells of each true class, and the mean colour of ours over the truth's (paint that the
                views smear into the asphalt around it reads darker than it is), after the affine fit;
-  by scale     the squared error after the affine fit split into what lies at scales coarser than a Gaussian of `sigma` cells and what
-               lies finer (the error blurred, and the rest): a reconstruction whose error lies at the finest
-               scales lacks the texture's detail, one whose error is coarse has its colour or placement wrong; and
-               the PSNR the truth itself would score blurred by the same Gaussian (how much of the albedo lies at
-               those scales at all).
+  by scale     the squared error after the affine fit split into what lies at scales coarser than a Gaussian of
+               `sigma` cells and what lies finer (the error blurred, and the rest): a reconstruction whose error lies
+               at the finest scales lacks the texture's detail, one whose error is coarse has its colour or placement
+               wrong; and the PSNR the truth itself would score blurred by the same Gaussian (how much of the albedo
+               lies at those scales at all).
 
 Usage: .venv/bin/python bench/surface_photometric.py --site SITE [--site SITE ...] [--sources ground_truth,sfm]
        [--threads 2] [--out bench/results/surface_photometric.json]
@@ -85,9 +85,8 @@ def photometric_figures(ours: BevRasters, truth: BevRasters) -> dict[str, Any]:
         ours.require("photometric").astype(np.float64),
         truth.require("photometric").astype(np.float64),
     )
-    fitted = (
-        rgb.copy()
-    )  # the exposure and shading taken out, so what is left is the reconstruction's own error
+    # the exposure and shading taken out, so that what is left is the reconstruction's own error
+    fitted = rgb.copy()
     fitted[both] = affine_fit(rgb[both], true_rgb[both])
     by_class = {}
     for name, cls in CLASSES.items():
@@ -114,8 +113,7 @@ def measure(site: Path, poses: str, config: SurfaceConfig) -> dict[str, Any]:
     scratch = Path(tempfile.mkdtemp(prefix="bench-surface-photometric-"))
     try:
         run = run_source(site, poses, config, scratch)
-        workspace = Workspace(Path(run["workspace"]))
-        (site_id,) = [folder.name for folder in workspace.stage_dir("surface").iterdir() if folder.is_dir()]
+        workspace, site_id = Workspace(Path(run["workspace"])), run["site_id"]
         ours = read_bev(workspace.surface_bev(site_id))
         frame = reconstruction_frame(site / "nuscenes", workspace, site_id)
         truth = truth_on_grid(site, ours.georeference, frame.world_of)
