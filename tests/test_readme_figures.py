@@ -3523,11 +3523,16 @@ def test_segmenter_on_the_hill_table() -> None:
     )
 
 
+SURFACE_SITES = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"} | {
+    seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")
+}
+"""The surface tables' five columns: the two mask-free twins and the fresh 512x288 layouts, by site folder name."""
+
+
 def _check_variant_columns(t: MarkdownTable, sites: dict[str, Any], where: str) -> None:
     """A `bench/surface_variants.py` table over the two twins and the layouts 9301-9303: a row per variant, each
     cell the road's elevation RMSE and the own-frame curb / lane marking / crosswalk IoU."""
-    columns = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"}
-    columns |= {seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")}
+    columns = SURFACE_SITES
     for column, name in columns.items():
         (site,) = [figures for path, figures in sites.items() if path.endswith("/" + name)]
         index = t.header.index(column)
@@ -3634,12 +3639,69 @@ def test_photometric_split_table() -> None:
     assert len(t.rows) == 8
 
 
+def test_sfm_point_error_table() -> None:
+    t = table("SfM road points the surface may fit to: share: median height error, share beyond 10 cm")
+    assert_names_source(t, "sfm_point_error.json", "bench/sfm_point_error.py")
+    sites = results("sfm_point_error.json")["sites"]
+    columns = SURFACE_SITES
+
+    def shown(figures: dict[str, Any]) -> list[Expected]:
+        return [100 * figures["share"], figures["median_cm"], 100 * figures["beyond_10cm"]]
+
+    def kept_bin(site: dict[str, Any], name: str, lower: float) -> dict[str, Any]:
+        (found,) = [b for b in site["kept_by"][name] if b["from"] == lower]
+        return found
+
+    bins = {
+        f"kept, triangulated at {a}-{b} deg": ("triangulation_deg", a) for a, b in ((0, 2), (2, 3), (3, 5))
+    }
+    bins |= {
+        f"kept, triangulated at {a}-{b} deg": ("triangulation_deg", a) for a, b in ((5, 8), (8, 12), (12, 20))
+    }
+    bins["kept, triangulated at 20 deg or more"] = ("triangulation_deg", 20)
+    bins |= {
+        f"kept, nearest camera {a}-{b} m": ("range_m", a) for a, b in ((5, 8), (8, 12), (12, 16), (16, 20))
+    }
+    bins |= {"kept, reprojection error 1-1.5 px": ("reprojection_px", 1.0)}
+    bins |= {"kept, reprojection error 1.5-2 px": ("reprojection_px", 1.5)}
+    for column, name in columns.items():
+        site, index = sites[name], t.header.index(column)
+        where = f"SfM point error, {column}"
+        cameras = [site["points"], site["camera_centres_after_similarity_cm"]]
+        assert_shows(row(t, "points; camera centres after the similarity")[index], cameras, where)
+        whole = [site["median_cm"], 100 * site["beyond_10cm"]]
+        assert_shows(row(t, "all points: median, beyond 10 cm")[index], whole, where)
+        assert_shows(row(t, "off the true road")[index], shown(site["off_true_road"]), where)
+        assert_shows(row(t, "kept by the fit")[index], shown(site["kept_by_the_fit"]), where)
+        for label, (name_of_property, lower) in bins.items():
+            assert_shows(
+                row(t, label)[index], shown(kept_bin(site, name_of_property, lower)), f"{where}, {label}"
+            )
+        for label in ("road", "crosswalk"):
+            assert_shows(row(t, f"labelled {label}")[index], shown(site["by_label"][label]), where)
+        # README's reading: the flattest-triangulated kept points are the worst of the angles up to 20 degrees
+        angles = [b["median_cm"] for b in site["kept_by"]["triangulation_deg"] if b["to"] <= 20]
+        assert angles[0] == max(angles), where
+
+
+def test_sfm_reprojection_gate_table() -> None:
+    t = table("SfM reprojection gate of the surface's points, SfM poses")
+    assert_names_source(t, "surface_sfm_error_gate.json", "bench/surface_variants.py")
+    sites = results("surface_sfm_error_gate.json")["sites"]
+    _check_variant_columns(t, sites, "SfM reprojection gate table")
+    for path, site in sites.items():  # README's reading: a tighter gate costs the twins' lane marking
+        if path.endswith(("/hilly-nomasks", "/default-nomasks")):
+            lane_marking = {
+                name: run["iou_in_reconstruction_frame"]["lane_marking"] for name, run in site["runs"].items()
+            }
+            assert lane_marking["max error 1 px"] < lane_marking["shipped"], path
+
+
 def test_extrapolated_heights_table() -> None:
     t = table("heights the report calls extrapolated, SfM poses")
     assert_names_source(t, "surface_extrapolated.json", "bench/surface_variants.py")
     sites = results("surface_extrapolated.json")["sites"]
-    columns = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks"}
-    columns |= {seed: f"random512-{seed}-nomasks" for seed in ("9301", "9302", "9303")}
+    columns = SURFACE_SITES
     for column, name in columns.items():
         (run,) = [site["runs"]["shipped"] for path, site in sites.items() if path.endswith("/" + name)]
         flagged, split = run["extrapolated_heights"], run["height_error_by_support"]
