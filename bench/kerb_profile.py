@@ -16,8 +16,14 @@ shares): the decision of heights taken out, what the votes themselves allow. The
 and curb IoU near the kerbs (`band_iou`). Only vertices within `--max-distance` of a true road edge count, so
 every off-road cell counted stands on a raised sidewalk (the generator's are 2.5-4.5 m wide).
 
+`--masks` chooses the masks the stage observes through (on a mask-free site the segmenter's, or `generator`: the
+masks its `ground_truth/` keeps), so the same SfM run profiled twice says where across the kerb the segmenter's masks
+lose; `--frame own` carries the truth into the reconstruction's frame (the best 2D similarity of its key frames onto
+the true ones), taking out the SfM frame's few centimetres of placement, which is half a kerb's width.
+
 Usage: .venv/bin/python bench/kerb_profile.py [--site data/synthetic/default] [--sources ground_truth,sfm]
-       [--kerb-band M] [--kerb-line on|off] [--threads 1] [--out bench/results/kerb_profile.json]
+       [--kerb-band M] [--kerb-line on|off] [--masks auto|predicted|...|generator] [--frame world|own]
+       [--threads 1] [--out bench/results/kerb_profile.json]
 """
 
 import argparse
@@ -36,6 +42,7 @@ import torch
 from scipy import ndimage
 
 from cama_pipeline.bev import BevRasters, RasterGeoreference
+from cama_pipeline.evaluate.frame import reconstruction_frame
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
 from cama_pipeline.surface import SurfaceConfig
@@ -44,6 +51,7 @@ from cama_pipeline.surface import stage as surface_stage
 from cama_pipeline.surface.labels import shares
 from cama_pipeline.surface.steps import curb_height_agreement
 from cama_pipeline.synthetic.truth_grid import nearest_true_cells, truth_on_grid
+from cama_pipeline.workspace import Workspace
 
 # the shared conditions: `bench` is a package at the repository root
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -155,17 +163,32 @@ def captured_decisions() -> Iterator[dict[str, Any]]:
 
 
 def source_profile(
-    site: Path, poses: str, config: SurfaceConfig, scratch: Path, max_distance_m: float
+    site: Path,
+    poses: str,
+    config: SurfaceConfig,
+    scratch: Path,
+    max_distance_m: float,
+    masks: str = "auto",
+    frame: str = "world",
 ) -> dict[str, Any]:
-    """Run the stage with `poses` and profile its decisions across the kerbs of `site`."""
+    """Run the stage with `poses`, observing through `masks` (`bench/surface.py`'s `run_source`), and profile its
+    decisions across the kerbs of `site`, the truth in the world's `frame` or carried into the reconstruction's
+    `own` (`cama_pipeline.evaluate.frame`: the SfM frame's placement taken out)."""
     with captured_decisions() as kept:
-        row = run_source(site, poses, config, scratch)
+        row = run_source(site, poses, config, scratch, masks)
     grid, seen, label = kept["grid"], kept["seen"], kept["label"]
     xy = grid.vertex_xy()
     georeference = RasterGeoreference(
         origin_xy=grid.origin_xy, resolution=grid.resolution_m, width=grid.cols, height=grid.rows
     )
-    truth = truth_on_grid(site, georeference)  # at the stage's own cell centres, as bench/surface.py scores
+    # at the stage's own cell centres, as bench/surface.py scores; in the reconstruction's frame when asked
+    world_of = None
+    if frame == "own":
+        world_of = reconstruction_frame(
+            site / "nuscenes", Workspace(Path(row["workspace"])), row["site_id"]
+        ).world_of
+    truth = truth_on_grid(site, georeference, world_of)
+    scored = row if frame == "world" else row["in_reconstruction_frame"]
     inside, rows, cols = nearest_true_cells(xy, truth)
     true_class = truth.require("semantic")[rows, cols]
     distance = signed_edge_distance(truth)[rows, cols]
@@ -178,10 +201,12 @@ def source_profile(
     at_true_height = true_height_labels(true_class[use], road_level[use], curb_height[use])
     return {
         "poses": poses,
+        "masks": row["masks"],
+        "frame": frame,
         "kerb_band_m": config.kerb_step.kerb_band_m,
         "kerb_line": config.kerb_step.kerb_line,
-        "iou": row["iou"],
-        "curb_confusion": row["curb_confusion"],
+        "iou": scored["iou"],
+        "curb_confusion": scored["curb_confusion"],
         "band_iou": {
             "stage": band_iou(label[use], true_class[use]),
             "at_true_height": band_iou(at_true_height, true_class[use]),
@@ -208,6 +233,17 @@ def main() -> None:
         "--kerb-band", type=float, default=None, help="kerb_step.kerb_band_m (default: the stage's)"
     )
     parser.add_argument("--kerb-line", choices=("on", "off"), default=None, help="kerb_step.kerb_line")
+    parser.add_argument(
+        "--masks",
+        default="auto",
+        help="the masks the stage observes through: its own --masks choices, or generator (a mask-free site's)",
+    )
+    parser.add_argument(
+        "--frame",
+        choices=("world", "own"),
+        default="world",
+        help="the truth in the world's frame, or carried into the reconstruction's own",
+    )
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", type=Path, default=RESULTS / "kerb_profile.json")
     args = parser.parse_args()
@@ -220,7 +256,9 @@ def main() -> None:
     runs = {}
     try:
         for poses in args.sources.split(","):
-            runs[poses] = source_profile(args.site, poses, config, scratch, args.max_distance)
+            runs[poses] = source_profile(
+                args.site, poses, config, scratch, args.max_distance, args.masks, args.frame
+            )
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
     for poses, run in runs.items():

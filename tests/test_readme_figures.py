@@ -3030,6 +3030,38 @@ def test_kerb_profile_table() -> None:
     )
 
 
+def test_kerb_profile_masks_table() -> None:
+    t = table("across the kerb, default twin, SfM poses, own frame", "bench/kerb_profile.py")
+    assert t.header[1:7] == [f"{start:+.1f} m".replace("+-", "-") for start in KERB_BINS]
+    runs = {}
+    for masks, name in (("segmenter", "predicted"), ("generator", "generator")):
+        assert_names_source(t, f"kerb_profile_twin_own_{masks}.json", "bench/kerb_profile.py")
+        run = results(f"kerb_profile_twin_own_{masks}.json")["runs"]["sfm"]
+        assert (run["masks"], run["frame"]) == (name, "own"), masks
+        runs[masks] = run
+    rows: dict[str, list[Expected]] = {
+        "true curb share": _profile_row(runs["segmenter"], lambda b: b["true_curb_share"])
+    }
+    for masks, run in runs.items():
+        rows[f"curb-height vote: curb share, {masks}'s masks"] = _profile_row(
+            run, lambda b: b["curb_height_shares"]["curb"]
+        )
+        rows[f"labelled right, {masks}'s masks"] = [
+            *_profile_row(run, lambda b: b["right"]),
+            run["iou"]["curb"],
+        ]
+        rows[f"read at its true height, {masks}'s masks"] = [
+            *_profile_row(run, lambda b: b["right_at_true_height"]),
+            run["band_iou"]["at_true_height"]["curb"],
+        ]
+    for label, expected in rows.items():
+        assert_shows(" | ".join(row(t, label)[1:]), expected, f"kerb profile by masks, row {label!r}")
+    # README's reading: the segmenter's masks lose most at the kerb's outer edge (the bin from 0.3 m)
+    right = {masks: {b["from_m"]: b["right"] for b in run["bins"]} for masks, run in runs.items()}
+    losses = {start: right["generator"][start] - right["segmenter"][start] for start in KERB_BINS}
+    assert max(losses, key=lambda start: losses[start]) == 0.3
+
+
 KERB_LINE_ROWS = {
     "without the kerb line": ("sfm", False, 0.0),
     "kerb foot": ("variant_kerb_foot", False, 0.3),
