@@ -143,6 +143,8 @@ def measure(site: Path, config: SurfaceConfig) -> dict[str, Any]:
     for those its elevation fit keeps (module docstring)."""
     workspace = Workspace.for_dataset(site / "nuscenes")
     site_id = read_site_ids(workspace.sites_index())[0]
+    if not workspace.sfm_points(site_id).is_file():
+        raise SystemExit(f"{site}: no SfM points at {workspace.sfm_points(site_id)} (run `cama sfm` first)")
     points = read_points(workspace.sfm_points(site_id))
     model = read_model(workspace.sfm_points(site_id).parent / "model")
     usable = np.isin(points.label, ROAD_SURFACE_IDS) & (points.error_px <= config.sfm_max_error_px)
