@@ -9,7 +9,10 @@ triangulation angle (the widest angle between two of the rays that observe it), 
 nearest camera that observes it), its track length, its mean reprojection error and its label (`points.npz`); and
 its height error: the point carried into the true world by the best 3D similarity of the model's camera centres onto
 the true ones, less the true ground's height under it. The points are binned by each property: their share, and the
-median, 90th percentile and share beyond 10 cm of the absolute height error.
+median, 90th percentile and share beyond 10 cm of the absolute height error; the same for the points the stage's
+elevation fit keeps after its gate (`fit_surface` rerun on the strip under the SfM poses), per label, and for the
+points whose ground is not road at all. The camera centres' RMS distance to the true ones after the similarity says
+how much of the error the poses could explain.
 
 Usage: .venv/bin/python bench/sfm_point_error.py --site SITE [--site SITE ...]
        [--out bench/results/sfm_point_error.json]
