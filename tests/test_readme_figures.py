@@ -3062,6 +3062,36 @@ def test_kerb_profile_masks_table() -> None:
     assert max(losses, key=lambda start: losses[start]) == 0.3
 
 
+def test_annotator_seconds_by_masks_table() -> None:
+    t = table(
+        "annotator's seconds on the default twin, v0004 proposing: class, accepted / fixed / rejected / drawn"
+    )
+    assert_names_source(t, "annotator_seconds_twin_masks.json", "bench/annotator_seconds.py")
+    per_site = results("annotator_seconds_twin_masks.json")["per_site"]
+    by_masks = {run["site"].rsplit("twin-", 1)[1]: run for run in per_site}
+    for masks in ("segmenter", "generator"):
+        run, index = by_masks[masks], t.header.index(f"{masks}'s masks")
+        for label, name in (
+            ("crossings", "ped_crossing"),
+            ("dividers", "divider"),
+            ("boundaries", "boundary"),
+        ):
+            booked = run["booked"][name]
+            counts = [
+                booked.get(action, {}).get("count", 0) for action in ("accept", "fix", "reject", "drawn")
+            ]
+            seconds = sum(action["seconds"] for action in booked.values())
+            assert_shows(row(t, label)[index], [seconds, *counts], f"annotator by masks, {masks}, {label}")
+        assert_shows(row(t, "road scan")[index], [run["booked"]["road"]["scan"]["seconds"]], masks)
+        totals = [run["correction_s"], run["drawing_s"], run["drawing_s"] / run["correction_s"]]
+        assert_shows(row(t, "correction against drawing")[index], totals, masks)
+    # README's reading: the boundaries cost the same through either masks, the crossings do not
+    boundary = {
+        m: sum(a["seconds"] for a in run["booked"]["boundary"].values()) for m, run in by_masks.items()
+    }
+    assert round(boundary["segmenter"], 1) == round(boundary["generator"], 1)
+
+
 KERB_LINE_ROWS = {
     "without the kerb line": ("sfm", False, 0.0),
     "kerb foot": ("variant_kerb_foot", False, 0.3),
