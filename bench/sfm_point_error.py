@@ -31,8 +31,8 @@ import pycolmap
 import torch
 from scipy.spatial import cKDTree
 
-from cama_pipeline.cameras import site_views
-from cama_pipeline.data import load_dataset
+from cama_pipeline.cameras import CameraView, site_views
+from cama_pipeline.data import Dataset, load_dataset
 from cama_pipeline.evaluate.errors import umeyama_alignment
 from cama_pipeline.io import atomic_write_json
 from cama_pipeline.semantics import BEV_CLASSES, ROAD_SURFACE_IDS, Semantic
@@ -112,26 +112,21 @@ def binned(values: np.ndarray, errors: np.ndarray, edges: Sequence[float]) -> li
     return rows
 
 
-def camera_centres(site: Path, model: pycolmap.Reconstruction) -> tuple[np.ndarray, np.ndarray]:
+def camera_centres(
+    site: Path, dataset: Dataset, manifest: dict[str, Any], model: pycolmap.Reconstruction
+) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) twice: the model's camera centres and the true ones, for the site's key-frame images in the model."""
     from sfm import true_world_from_cam  # bench/sfm.py, on sys.path when this runs as a script
 
-    dataset = load_dataset(site / "nuscenes")
-    workspace = Workspace.for_dataset(site / "nuscenes")
-    manifest = read_site_manifest(workspace.site_manifest(read_site_ids(workspace.sites_index())[0]))
     true = true_world_from_cam(site, site_views(dataset, manifest))
     ours = {image.name: image.projection_center() for image in model.images.values() if image.name in true}
     names = sorted(ours)
     return np.array([ours[name] for name in names]), np.array([true[name][:3, 3] for name in names])
 
 
-def kept_by_fit(site: Path, site_id: str, xyz: np.ndarray, config: SurfaceConfig) -> np.ndarray:
-    """(N,) whether the surface stage's elevation fit (`fit_surface`, on the strip under the SfM poses) keeps each
-    of the SfM road points `xyz` after its gate."""
-    dataset_root = site / "nuscenes"
-    workspace = Workspace.for_dataset(dataset_root)
-    manifest = read_site_manifest(workspace.site_manifest(site_id))
-    views = posed_views(load_dataset(dataset_root), manifest, workspace, site_id, "sfm")
+def kept_by_fit(views: list[CameraView], xyz: np.ndarray, config: SurfaceConfig) -> np.ndarray:
+    """(N,) whether the surface stage's elevation fit (`fit_surface`, on the strip under `views`, the SfM-posed key
+    frames) keeps each of the SfM road points `xyz` after its gate."""
     points = surface_points(views, xyz, config)
     fitted = fit_surface(points, config, torch.device("cpu"))
     kept = fitted.points[points.strip_count :].cpu().numpy()
@@ -146,42 +141,44 @@ def measure(site: Path, config: SurfaceConfig) -> dict[str, Any]:
     for those its elevation fit keeps (module docstring)."""
     workspace = Workspace.for_dataset(site / "nuscenes")
     site_id = read_site_ids(workspace.sites_index())[0]
-    if not workspace.sfm_points(site_id).is_file():
-        raise SystemExit(f"{site}: no SfM points at {workspace.sfm_points(site_id)} (run `cama sfm` first)")
-    points = read_points(workspace.sfm_points(site_id))
-    model = read_model(workspace.sfm_points(site_id).parent / "model")
+    points_path = workspace.sfm_points(site_id)
+    if not points_path.is_file():
+        raise SystemExit(f"{site}: no SfM points at {points_path} (run `cama sfm` first)")
+    points = read_points(points_path)
+    model = read_model(points_path.parent / "model")
+    dataset = load_dataset(site / "nuscenes")
+    manifest = read_site_manifest(workspace.site_manifest(site_id))
     usable = np.isin(points.label, ROAD_SURFACE_IDS) & (points.error_px <= config.sfm_max_error_px)
     xyz = points.xyz[usable]
-    ours, true = camera_centres(site, model)
+    ours, true = camera_centres(site, dataset, manifest, model)
     rotation, translation, scale = umeyama_alignment(ours, true, with_scale=True)
     world = scale * xyz @ rotation.T + translation
     ground = TrueGround.of(site)
     error = world[:, 2] - ground.height_of(ALL_CLASSES)(world[:, :2])
-    known = np.isfinite(error)
-    on_road = np.isfinite(ground.height_of()(world[:, :2]))[known]
-    properties = {
-        **model_geometry(model, xyz),
-        "reprojection_px": points.error_px[usable],
-    }
+    known = np.isfinite(error)  # the points over the true ground; every figure below is over these
+    error, total = error[known], int(known.sum())
+    on_road = np.isfinite(ground.height_of()(world[known, :2]))
+    properties = {**model_geometry(model, xyz), "reprojection_px": points.error_px[usable]}
+    properties = {name: values[known] for name, values in properties.items()}
     labels = points.label[usable][known]
-    kept = kept_by_fit(site, site_id, xyz, config)[known]
+    views = posed_views(dataset, manifest, workspace, site_id, "sfm")
+    kept = kept_by_fit(views, xyz, config)[known]
     return {
         "site_id": site_id,
-        **summary(error[known], int(known.sum())),
-        "off_true_road": summary(error[known][~on_road], int(known.sum())),
+        **summary(error, total),
+        "off_true_road": summary(error[~on_road], total),
         "camera_centres_after_similarity_cm": round(
             float(np.sqrt(np.mean(np.sum((scale * ours @ rotation.T + translation - true) ** 2, axis=1))))
             * 100,
             2,
         ),
-        "by": {name: binned(values[known], error[known], EDGES[name]) for name, values in properties.items()},
-        "kept_by_the_fit": summary(error[known][kept], int(known.sum())),
+        "by": {name: binned(values, error, EDGES[name]) for name, values in properties.items()},
+        "kept_by_the_fit": summary(error[kept], total),
         "kept_by": {
-            name: binned(values[known][kept], error[known][kept], EDGES[name])
-            for name, values in properties.items()
+            name: binned(values[kept], error[kept], EDGES[name]) for name, values in properties.items()
         },
         "by_label": {
-            Semantic(label).name.lower(): summary(error[known][labels == label], int(known.sum()))
+            Semantic(label).name.lower(): summary(error[labels == label], total)
             for label in sorted(set(labels.tolist()))
         },
     }

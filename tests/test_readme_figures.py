@@ -3594,8 +3594,7 @@ SURFACE_SITES = {"hilly twin": "hilly-nomasks", "default twin": "default-nomasks
 def _check_variant_columns(t: MarkdownTable, sites: dict[str, Any], where: str) -> None:
     """A `bench/surface_variants.py` table over the two twins and the layouts 9301-9303: a row per variant, each
     cell the road's elevation RMSE and the own-frame curb / lane marking / crosswalk IoU."""
-    columns = SURFACE_SITES
-    for column, name in columns.items():
+    for column, name in SURFACE_SITES.items():
         (site,) = [figures for path, figures in sites.items() if path.endswith("/" + name)]
         index = t.header.index(column)
         for label, run in site["runs"].items():
@@ -3705,7 +3704,6 @@ def test_sfm_point_error_table() -> None:
     t = table("SfM road points the surface may fit to: share: median height error, share beyond 10 cm")
     assert_names_source(t, "sfm_point_error.json", "bench/sfm_point_error.py")
     sites = results("sfm_point_error.json")["sites"]
-    columns = SURFACE_SITES
 
     def shown(figures: dict[str, Any]) -> list[Expected]:
         return [100 * figures["share"], figures["median_cm"], 100 * figures["beyond_10cm"]]
@@ -3726,7 +3724,7 @@ def test_sfm_point_error_table() -> None:
     }
     bins |= {"kept, reprojection error 1-1.5 px": ("reprojection_px", 1.0)}
     bins |= {"kept, reprojection error 1.5-2 px": ("reprojection_px", 1.5)}
-    for column, name in columns.items():
+    for column, name in SURFACE_SITES.items():
         site, index = sites[name], t.header.index(column)
         where = f"SfM point error, {column}"
         cameras = [site["points"], site["camera_centres_after_similarity_cm"]]
@@ -3763,8 +3761,7 @@ def test_extrapolated_heights_table() -> None:
     t = table("heights the report calls extrapolated, SfM poses")
     assert_names_source(t, "surface_extrapolated.json", "bench/surface_variants.py")
     sites = results("surface_extrapolated.json")["sites"]
-    columns = SURFACE_SITES
-    for column, name in columns.items():
+    for column, name in SURFACE_SITES.items():
         (run,) = [site["runs"]["shipped"] for path, site in sites.items() if path.endswith("/" + name)]
         flagged, split = run["extrapolated_heights"], run["height_error_by_support"]
         index = t.header.index(column)
