@@ -22,7 +22,7 @@ mask-free site with predicted masks against the same site with the generator's m
 Make the site first, e.g. a randomised one of the default size without masks or GNSS, as real nuScenes is:
     .venv/bin/cama synth --preset default --random-seed 9001 --no-masks --out data/synthetic/random-9001
 Usage: .venv/bin/python bench/segment.py --site data/synthetic/random-9001 [--checkpoint DIR]
-       [--out bench/results/segment.json] [--skip-pipeline] [--no-ego-clip] [--flip-average]
+       [--out bench/results/segment.json] [--skip-pipeline] [--no-ego-clip] [--no-flip-average]
 """
 
 import argparse
@@ -293,8 +293,10 @@ def main() -> None:
     )
     parser.add_argument(
         "--flip-average",
-        action="store_true",
-        help="each image's probabilities averaged with its mirror image's (predicted workspace *-flip)",
+        action=argparse.BooleanOptionalAction,
+        default=SegmentConfig().flip_average,
+        help="each image's probabilities averaged with its mirror image's, the stage's default (predicted "
+        "workspace *-flip); --no-flip-average: the network's own",
     )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)

@@ -1,6 +1,9 @@
 """Segmenter speed (issue 23.6: <= 0.15 s per 512x288 image on one CPU core): each checkpoint's median seconds
 per image on one torch thread, measured in turn in one run, repeated, with the ratio to the first (the baseline).
 
+Each checkpoint runs as the segment stage runs it (`SegmentationNet.for_inference`: batch norms folded, weights
+channels-last) and, in the same rounds, as training leaves it (`as_trained_seconds`, and the stage's ratio to it).
+
 With `--flip-average` each checkpoint is also timed as the segment stage runs it with `flip_average` on (the mirror
 image's probabilities averaged in, `SegmentConfig.flip_average`), in the same rounds.
 
@@ -36,14 +39,19 @@ def main() -> None:
     args = parser.parse_args()
     checkpoints = [load_checkpoint(path) for path in args.checkpoint]
     times: dict[str, list[float]] = {c.label: [] for c in checkpoints}
+    trained: dict[str, list[float]] = {c.label: [] for c in checkpoints}
     flipped: dict[str, list[float]] = {c.label: [] for c in checkpoints}
     for _ in range(args.rounds):
         for checkpoint in checkpoints:
             times[checkpoint.label].append(cpu_seconds_per_image(checkpoint.net, repeats=15))
+            trained[checkpoint.label].append(
+                cpu_seconds_per_image(checkpoint.net, repeats=15, as_trained=True)
+            )
             if args.flip_average:
                 seconds = cpu_seconds_per_image(checkpoint.net, repeats=15, flip_average=True)
                 flipped[checkpoint.label].append(seconds)
     median = {label: float(np.median(seconds)) for label, seconds in times.items()}
+    median_trained = {label: float(np.median(seconds)) for label, seconds in trained.items()}
     baseline = median[checkpoints[0].label]
 
     def with_flip(label: str) -> dict[str, Any]:
@@ -68,6 +76,9 @@ def main() -> None:
                 "seconds_per_512x288_image": round(median[c.label], 4),
                 "ratio_to_baseline": round(median[c.label] / baseline, 2),
                 "target_met": median[c.label] <= SECONDS_PER_IMAGE_TARGET,
+                "as_trained_seconds_rounds": trained[c.label],
+                "as_trained_seconds": round(median_trained[c.label], 4),
+                "ratio_to_as_trained": round(median[c.label] / median_trained[c.label], 2),
                 **with_flip(c.label),
             }
             for c in checkpoints

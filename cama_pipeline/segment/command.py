@@ -39,7 +39,8 @@ def segment_command(
     flip_average: Annotated[
         bool,
         typer.Option(
-            help="Average each image's class probabilities with its mirror image's (twice the cost)."
+            help="Average each image's class probabilities with its mirror image's (twice the network's cost; "
+            "--no-flip-average halves it)."
         ),
     ] = SegmentConfig().flip_average,
     scene: ScenesOpt = None,

@@ -9,16 +9,22 @@ convolution of the image and a separable block over it and the upsampled decoder
 correction to the upsampled logits, because stride-2 logits cannot draw a line one or two pixels wide. About
 0.45 M parameters (under 1 MB in float16).
 
+`SegmentationNet.for_inference` is the copy the segment stage runs: each batch norm folded into the convolution
+before it and the weights in channels-last order, which oneDNN's CPU convolutions run fastest; its labels are
+the trained network's up to float rounding.
+
 `SegmentationNet.predict` takes RGB uint8 images of any size: it resizes them to the configured input width
 (aspect kept, padded to a multiple of 32), runs the network and resizes the logits back.
 """
 
+import copy
 import math
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 from cama_pipeline.segment.config import NetworkConfig
 from cama_pipeline.semantics import Semantic
@@ -50,8 +56,10 @@ class _Separable(nn.Module):
         self.residual = cin == cout
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        y = self.pointwise(F.relu(self.depthwise(x)))
-        return F.relu(y + x if self.residual else y)
+        # In-place ReLUs: on the CPU a fresh ReLU output cost a fifth of the network's time (README, "Segmenting
+        # faster"); neither the batch norm's nor the sum's backward needs the tensor they overwrite.
+        y = self.pointwise(F.relu(self.depthwise(x), inplace=True))
+        return F.relu_(y + x if self.residual else y)
 
 
 class _FullResolutionRefinement(nn.Module):
@@ -119,6 +127,16 @@ class SegmentationNet(nn.Module):
             return self.refine(image, x, self.head(x))
         return F.interpolate(self.head(x), size=size, mode="bilinear", align_corners=False)
 
+    def for_inference(self) -> "SegmentationNet":
+        """A copy for running, not training: in eval mode, every batch norm folded into the convolution before it
+        (one operation instead of two, the same function in eval mode) and the weights in channels-last memory
+        order; it stays on this network's device."""
+        net = copy.deepcopy(self).eval()
+        for module in net.modules():
+            if isinstance(module, nn.Sequential):
+                _fold_batch_norms(module)
+        return net.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+
     @torch.inference_mode()
     def predict(
         self, images: list[np.ndarray], device: torch.device | None = None, *, flip_average: bool = False
@@ -163,10 +181,20 @@ class SegmentationNet(nn.Module):
         padded_h = math.ceil(in_h / 32) * 32
         if padded_h != in_h:
             x = F.pad(x, (0, 0, 0, padded_h - in_h), mode="replicate")
-        logits = self(x)[..., :in_h, :]
+        logits = self(x.contiguous(memory_format=torch.channels_last))[..., :in_h, :]
         if (in_h, in_w) == tuple(size):
             return logits
         return F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
+
+
+def _fold_batch_norms(sequence: nn.Sequential) -> None:
+    """Fold each (eval-mode) batch norm of `sequence` that follows a convolution into it, in place; the norm's
+    slot becomes an identity, so the modules keep their indices."""
+    for i in range(len(sequence) - 1):
+        conv, norm = sequence[i], sequence[i + 1]
+        if isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d):
+            sequence[i] = fuse_conv_bn_eval(conv, norm)
+            sequence[i + 1] = nn.Identity()
 
 
 def parameter_count(net: nn.Module) -> int:

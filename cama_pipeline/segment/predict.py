@@ -97,14 +97,16 @@ def site_images(site: Path, *, night: bool = False) -> list[CameraImage]:
 def score_images(
     net: SegmentationNet, images: Iterable[CameraImage], device: torch.device, batch_size: int = 8
 ) -> dict[str, Any]:
-    """Per-class IoU of the network's masks against the images' own semantic masks (at the images' size)."""
+    """Per-class IoU of the network's masks, as the segment stage runs it (`SegmentationNet.for_inference`),
+    against the images' own semantic masks (at the images' size)."""
+    runner = net.for_inference()
     matrix = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
     batch: list[CameraImage] = []
     count = 0
 
     def flush() -> None:
         nonlocal matrix
-        for image, labels in zip(batch, net.predict([im.load_rgb() for im in batch], device), strict=True):
+        for image, labels in zip(batch, runner.predict([im.load_rgb() for im in batch], device), strict=True):
             matrix += confusion(labels, image.load_semantic())
         batch.clear()
 

@@ -91,10 +91,10 @@ def needed_images(dataset: Dataset, workspace: Workspace) -> list[str]:
 
 @lru_cache(maxsize=2)
 def _worker_net(checkpoint: str, device: str, threads: int) -> Any:
-    """The network of a checkpoint, loaded once per worker process."""
+    """The network of a checkpoint as it runs (`SegmentationNet.for_inference`), loaded once per worker process."""
     torch.set_num_threads(threads)
     cv2.setNumThreads(1)
-    return load_checkpoint(Path(checkpoint)).net.to(torch.device(device))
+    return load_checkpoint(Path(checkpoint)).net.to(torch.device(device)).for_inference()
 
 
 def segment_chunk(chunk: Chunk) -> tuple[str, ...]:

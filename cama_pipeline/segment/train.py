@@ -328,22 +328,31 @@ def fit(
 
 
 def cpu_seconds_per_image(
-    net: SegmentationNet, width: int = 512, height: int = 288, repeats: int = 5, *, flip_average: bool = False
+    net: SegmentationNet,
+    width: int = 512,
+    height: int = 288,
+    repeats: int = 5,
+    *,
+    flip_average: bool = False,
+    as_trained: bool = False,
 ) -> float:
-    """Median seconds one CPU thread takes to segment one `width` x `height` image (the stage's cost; with
-    `flip_average` as the stage runs with that setting)."""
+    """Median seconds one CPU thread takes to segment one `width` x `height` image: the stage's cost (its
+    `SegmentationNet.for_inference` copy; with `flip_average` as the stage runs with that setting), or with
+    `as_trained` the network as training leaves it (batch norms apart, contiguous weights), the baseline the
+    inference copy is measured against."""
     cpu = SegmentationNet(net.config)
     cpu.load_state_dict(net.state_dict())
     cpu.eval()
+    runner = cpu if as_trained else cpu.for_inference()
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
         image = np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
-        cpu.predict([image], torch.device("cpu"), flip_average=flip_average)
+        runner.predict([image], torch.device("cpu"), flip_average=flip_average)
         times = []
         for _ in range(repeats):
             started = time.perf_counter()
-            cpu.predict([image], torch.device("cpu"), flip_average=flip_average)
+            runner.predict([image], torch.device("cpu"), flip_average=flip_average)
             times.append(time.perf_counter() - started)
     finally:
         torch.set_num_threads(threads)

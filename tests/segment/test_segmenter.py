@@ -81,6 +81,27 @@ def test_mirror_averaged_masks_mirror_with_the_image(tiny_site: GeneratedSite) -
     assert not np.array_equal(plain, averaged)
 
 
+def test_the_inference_copy_labels_as_the_trained_network_and_leaves_it_trainable(
+    tiny_site: GeneratedSite,
+) -> None:
+    """The stage's copy has no batch norm left and gives the trained network's logits up to float rounding and
+    its labels on a site's images; the network it was copied from keeps its norms and still trains."""
+    net = load_checkpoint(shipped_checkpoint()).net.eval()
+    runner = net.for_inference()
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in runner.modules())
+    assert sum(isinstance(m, torch.nn.BatchNorm2d) for m in net.modules()) > 10
+    rgb = torch.rand(1, 3, 64, 96)
+    with torch.inference_mode():
+        assert torch.allclose(runner(rgb), net(rgb), atol=1e-3)
+    images = [im.load_rgb() for im in site_images(tiny_site.result.out_dir)[:6]]
+    for ours, theirs in zip(runner.predict(images), net.predict(images), strict=True):
+        assert np.mean(ours == theirs) > 0.9999
+    net.train()
+    loss = net(torch.rand(2, 3, 64, 96)).logsumexp(dim=1).mean()
+    loss.backward()
+    assert all(p.grad is not None for p in net.parameters())
+
+
 @pytest.mark.parametrize(
     ("make", "field"),
     [
