@@ -3062,6 +3062,20 @@ def test_kerb_profile_masks_table() -> None:
     assert max(losses, key=lambda start: losses[start]) == 0.3
 
 
+def _check_annotator_column(t: MarkdownTable, run: dict[str, Any], column: str) -> None:
+    """One column of the annotator-by-masks table: each class's seconds and its accepted / fixed / rejected /
+    drawn counts, the road scan, and correction against drawing."""
+    index = t.header.index(column)
+    for label, name in (("crossings", "ped_crossing"), ("dividers", "divider"), ("boundaries", "boundary")):
+        booked = run["booked"][name]
+        counts = [booked.get(action, {}).get("count", 0) for action in ("accept", "fix", "reject", "drawn")]
+        seconds = sum(action["seconds"] for action in booked.values())
+        assert_shows(row(t, label)[index], [seconds, *counts], f"annotator by masks, {column}, {label}")
+    assert_shows(row(t, "road scan")[index], [run["booked"]["road"]["scan"]["seconds"]], column)
+    totals = [run["correction_s"], run["drawing_s"], run["drawing_s"] / run["correction_s"]]
+    assert_shows(row(t, "correction against drawing")[index], totals, column)
+
+
 def test_annotator_seconds_by_masks_table() -> None:
     t = table(
         "annotator's seconds on the default twin, v0004 proposing: class, accepted / fixed / rejected / drawn"
@@ -3070,26 +3084,39 @@ def test_annotator_seconds_by_masks_table() -> None:
     per_site = results("annotator_seconds_twin_masks.json")["per_site"]
     by_masks = {run["site"].rsplit("twin-", 1)[1]: run for run in per_site}
     for masks in ("segmenter", "generator"):
-        run, index = by_masks[masks], t.header.index(f"{masks}'s masks")
-        for label, name in (
-            ("crossings", "ped_crossing"),
-            ("dividers", "divider"),
-            ("boundaries", "boundary"),
-        ):
-            booked = run["booked"][name]
-            counts = [
-                booked.get(action, {}).get("count", 0) for action in ("accept", "fix", "reject", "drawn")
-            ]
-            seconds = sum(action["seconds"] for action in booked.values())
-            assert_shows(row(t, label)[index], [seconds, *counts], f"annotator by masks, {masks}, {label}")
-        assert_shows(row(t, "road scan")[index], [run["booked"]["road"]["scan"]["seconds"]], masks)
-        totals = [run["correction_s"], run["drawing_s"], run["drawing_s"] / run["correction_s"]]
-        assert_shows(row(t, "correction against drawing")[index], totals, masks)
+        _check_annotator_column(t, by_masks[masks], f"{masks}'s masks")
     # README's reading: the boundaries cost the same through either masks, the crossings do not
     boundary = {
         m: sum(a["seconds"] for a in run["booked"]["boundary"].values()) for m, run in by_masks.items()
     }
     assert round(boundary["segmenter"], 1) == round(boundary["generator"], 1)
+    # the mirror-averaged masks' column, from a run that repeats the plain masks' site to the tenth of a second
+    assert_names_source(t, "annotator_seconds_twin_mirrored.json", "bench/annotator_seconds.py")
+    mirrored_runs = {
+        run["site"].rsplit("twin-", 1)[1]: run
+        for run in results("annotator_seconds_twin_mirrored.json")["per_site"]
+    }
+    assert round(mirrored_runs["segmenter"]["correction_s"], 1) == round(
+        by_masks["segmenter"]["correction_s"], 1
+    )
+    _check_annotator_column(t, mirrored_runs["flip"], "segmenter's masks, mirror averaged")
+
+
+def test_surface_through_mirrored_masks_table() -> None:
+    t = table("the default twin's surface, SfM poses, through", "The surface under those proposals")
+    assert_names_source(t, "surface_twin_mirrored.json", "bench/surface_variants.py")
+    sites = results("surface_twin_mirrored.json")["sites"]
+    for label, suffix in (
+        ("the segmenter's masks", "/default-nomasks"),
+        ("the segmenter's masks, mirror averaged", "/twin-flip"),
+    ):
+        (site,) = [figures for path, figures in sites.items() if path.endswith(suffix)]
+        run = site["runs"]["shipped"]
+        own = run["iou_in_reconstruction_frame"]
+        cells = row(t, label)
+        assert_shows(cells[1], [run["elevation_rmse_cm"]], label)
+        assert_shows(cells[2], [own[c] for c in ("road", "curb", "lane_marking", "crosswalk")], label)
+        assert_shows(cells[3], [run["psnr_db"]], label)
 
 
 KERB_LINE_ROWS = {
@@ -3677,6 +3704,67 @@ def test_segmenter_calibration_on_fresh_sites_table() -> None:
         digest = results(name)["segmentation"]["checkpoint"]["digest"]
         expected = record["weights_sha256"] if label != "gpu-long2" else shipped["weights_sha256"]
         assert digest == expected[:16], name
+
+
+def test_segmenting_faster_table() -> None:
+    """The code before the inference copy and after it, two pairs of runs: each cell its file's median, the copy's
+    ratio to the network as trained in the same rounds, and the mirror averaging under issue 23's 0.15 s now."""
+    t = table("seconds per 512x288 image on one thread, median of 15 rounds", "Segmenting faster")
+    columns = {
+        "before, first pair": "segment_speed_before_inference.json",
+        "now, first pair": "segment_speed_inference.json",
+        "before, second pair": "segment_speed_before_inference_2.json",
+        "now, second pair": "segment_speed_inference_2.json",
+    }
+    for column, name in columns.items():
+        assert_names_source(t, name, "bench/segment_speed.py")
+        figures = results(name)["checkpoints"]["gpu-long2"]
+        index = t.header.index(column)
+        assert_shows(
+            row(t, "plain: the network before, the stage's copy now")[index],
+            [figures["seconds_per_512x288_image"]],
+            column,
+        )
+        assert_shows(row(t, "mirror averaged")[index], [figures["flip_average_seconds"]], column)
+        as_trained = row(t, "plain: the network as trained")[index]
+        if column.startswith("now"):
+            assert_shows(as_trained, [figures["as_trained_seconds"], figures["ratio_to_as_trained"]], column)
+            assert figures["flip_average_target_met"] and figures["ratio_to_as_trained"] < 1
+        else:
+            assert "as_trained_seconds" not in figures and as_trained == "not timed"
+
+
+MIRRORED_SITES = {
+    "default twin": ("segment_default_twin.json", "default_twin"),
+    "hilly twin": ("segment_hilly.json", "hilly"),
+    **{seed: (f"segment_gpu_long2_{seed}.json", seed) for seed in ("9301", "9302", "9303", "9004", "9005")},
+}
+
+
+def test_segmenter_mirrored_by_default_table() -> None:
+    """The plain network against its mirror-averaged masks, the stage's default, on the calibration table's seven
+    sites; the prose's gains are the table's, and the mirrored runs are of the shipped checkpoint."""
+    columns = {}
+    for site, (plain, short) in MIRRORED_SITES.items():
+        columns[f"{site} plain"] = (plain, "gpu-long2")
+        columns[f"{site} mirrored"] = (f"segment_mirrored_{short}.json", "gpu-long2")
+    _check_segmenter_columns("class, mirror averaging by default, seven unseen 512x288 sites", columns)
+    shipped = json.loads((ROOT / "cama_pipeline/segment/shipped/checkpoint.json").read_text(encoding="utf-8"))
+    gains: dict[str, list[float]] = {}
+    for plain, short in MIRRORED_SITES.values():
+        before = results(plain)["segmentation"]
+        after = results(f"segment_mirrored_{short}.json")["segmentation"]
+        assert after["flip_average"] is True
+        assert before.get("flip_average") is not True
+        assert after["checkpoint"]["digest"] == shipped["weights_sha256"][:16]
+        for cls, value in after["per_class_iou"].items():
+            gains.setdefault(cls, []).append(round(value, 3) - round(before["per_class_iou"][cls], 3))
+    text = " ".join(readme_text().split())
+    for cls in ("lane_marking", "crosswalk", "curb", "vehicle", "road"):
+        low, high = min(gains[cls]), max(gains[cls])
+        assert low > 0, cls
+        assert f"{cls.replace('_', ' ')} +{low:.3f} to +{high:.3f}" in text, cls
+    assert max(abs(g) for g in gains["ego"]) <= 0.001 + 1e-9
 
 
 def test_photometric_split_table() -> None:
