@@ -30,7 +30,7 @@ bench/results/end_to_end/*.png; figures to bench/results/end_to_end.json (`--out
 
 Usage: .venv/bin/python bench/end_to_end.py [--site data/synthetic/default] [--proposer learned|masks|rule]
        [--checkpoint REGISTRY_OR_VERSION]
-       [--masks auto|dataset|predicted|DIR] [--out bench/results/end_to_end.json] [--measure-only]
+       [--masks auto|dataset|predicted|DIR] [--first-octave N] [--out bench/results/end_to_end.json] [--measure-only]
        [--workspace DIR (default: the data set's)]
 """
 
@@ -41,6 +41,7 @@ import platform
 import resource
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -366,6 +367,12 @@ def main() -> None:
     )
     parser.add_argument("--max-features", type=int, default=None)
     parser.add_argument(
+        "--first-octave",
+        type=int,
+        default=None,
+        help="SIFT's first octave for every image (default: the product's per-width choice, FeaturesConfig)",
+    )
+    parser.add_argument(
         "--masks",
         default="auto",
         help="the run's mask choice (cama run --masks): auto, dataset, predicted, DIR",
@@ -394,11 +401,9 @@ def main() -> None:
     workspace = Workspace.resolve(args.workspace, site / "nuscenes")
     stage_seconds: dict[str, float] = {}
     if not args.measure_only:
-        features = (
-            FeaturesConfig()
-            if args.max_features is None
-            else FeaturesConfig(max_num_features=args.max_features)
-        )
+        features = FeaturesConfig(first_octave=args.first_octave)
+        if args.max_features is not None:
+            features = replace(features, max_num_features=args.max_features)
         result = run_pipeline(
             site / "nuscenes",
             workspace.root,
@@ -418,6 +423,7 @@ def main() -> None:
         "site_id": site_id,
         "proposer": args.proposer,
         "masks": args.masks,
+        "first_octave": "per width" if args.first_octave is None else args.first_octave,
         "stage_seconds": stage_seconds,
         "keyframes": keyframes,
         "stage_seconds_per_keyframe": {

@@ -13,8 +13,15 @@ class FeaturesConfig:
 
     max_num_features: int = 4096
     """SIFT keypoints kept per image at most."""
-    first_octave: int = -1
-    """SIFT's first octave: -1 upsamples small images (512 x 288 needs it for enough road features)."""
+    first_octave: int | None = None
+    """SIFT's first octave; None: `octave_for_width` picks it per image, -1 (the image upsampled twice) for images
+    narrower than `upsample_below_px`, else 0. 512 x 288 needs the upsampling for enough road features; at
+    nuScenes' 1600 x 900 it would make SIFT search four times the image's pixels (README, "SIFT at the images' own
+    scale")."""
+    upsample_below_px: int = 1280
+    """With `first_octave` None, images narrower than this are upsampled: every size measured before the choice
+    (256 to 1024 pixels wide) keeps the upsampling it was measured with, and no image is searched at a finest scale
+    coarser than a 1280-pixel-wide one's."""
     masked_classes: tuple[int, ...] = (int(Semantic.VEHICLE), int(Semantic.EGO))
     """Semantic classes whose pixels carry no features: moving/parked vehicles and the ego body."""
     mask_dilation_px: int = 9
@@ -71,3 +78,19 @@ class FeaturesConfig:
             raise ValueError(f"FeaturesConfig.ransac_seed must be >= 0, got {self.ransac_seed}")
         if self.num_threads < 1:
             raise ValueError(f"FeaturesConfig.num_threads must be >= 1, got {self.num_threads}")
+        if self.first_octave is not None and (
+            isinstance(self.first_octave, bool)
+            or not isinstance(self.first_octave, int)
+            or self.first_octave < -1
+        ):
+            raise ValueError(
+                f"FeaturesConfig.first_octave must be None or an integer >= -1, got {self.first_octave!r}"
+            )
+        if self.upsample_below_px < 1:
+            raise ValueError(f"FeaturesConfig.upsample_below_px must be >= 1, got {self.upsample_below_px}")
+
+    def octave_for_width(self, width_px: int) -> int:
+        """SIFT's first octave for an image `width_px` wide (`first_octave`)."""
+        if self.first_octave is not None:
+            return self.first_octave
+        return -1 if width_px < self.upsample_below_px else 0

@@ -18,11 +18,18 @@ class SiftExtractor:
 
     def __init__(self, config: FeaturesConfig) -> None:
         self._config = config
-        options = pycolmap.FeatureExtractionOptions()
-        options.num_threads = config.num_threads
-        options.sift.max_num_features = config.max_num_features
-        options.sift.first_octave = config.first_octave
-        self._extractor = pycolmap.FeatureExtractor.create(options, device=pycolmap.Device.cpu)
+        self._by_octave: dict[int, pycolmap.FeatureExtractor] = {}
+
+    def _extractor(self, width_px: int) -> pycolmap.FeatureExtractor:
+        """COLMAP's extractor with the first octave for images `width_px` wide, made on first use."""
+        octave = self._config.octave_for_width(width_px)
+        if octave not in self._by_octave:
+            options = pycolmap.FeatureExtractionOptions()
+            options.num_threads = self._config.num_threads
+            options.sift.max_num_features = self._config.max_num_features
+            options.sift.first_octave = octave
+            self._by_octave[octave] = pycolmap.FeatureExtractor.create(options, device=pycolmap.Device.cpu)
+        return self._by_octave[octave]
 
     def __getstate__(self) -> FeaturesConfig:
         return self._config
@@ -32,7 +39,8 @@ class SiftExtractor:
 
     def extract(self, gray: np.ndarray) -> Features:
         """SIFT keypoints (with affine shape) and uint8 descriptors of a grey image."""
-        keypoints, descriptors = self._extractor.extract_from_uint8_array(np.ascontiguousarray(gray))
+        extractor = self._extractor(gray.shape[1])
+        keypoints, descriptors = extractor.extract_from_uint8_array(np.ascontiguousarray(gray))
         shape = np.array([[k.x, k.y, k.a11, k.a12, k.a21, k.a22] for k in keypoints], dtype=np.float32)
         data = np.asarray(descriptors.data, dtype=np.uint8).reshape(len(shape), SIFT_DIMENSIONS)
         return Features(shape.reshape(-1, 6), data)

@@ -161,6 +161,30 @@ def test_night_images_yield_fewer_features_than_day_images(dataset_root: Path) -
     assert count(night) < 0.75 * count(day)
 
 
+def test_sift_upsamples_only_images_narrower_than_the_threshold(dataset_root: Path) -> None:
+    """By default a small image is upsampled (first octave -1) and a wide one runs at its own scale: the wide
+    image's features are those of first octave 0, not -1; a set first octave applies to every width."""
+    image = load_dataset(dataset_root).scenes[0].images["CAM_FRONT"][0].load_rgb()
+    small = image.mean(axis=2).astype(np.uint8)
+    wide = np.ascontiguousarray(np.kron(small, np.ones((6, 6), np.uint8)))  # 6x the width, over 1280 px
+    assert small.shape[1] < 1280 <= wide.shape[1]
+    per_width, at_0, at_minus_1 = (
+        SiftExtractor(FeaturesConfig(first_octave=octave, max_num_features=100_000))
+        for octave in (None, 0, -1)
+    )
+    assert np.array_equal(per_width.extract(wide).keypoints, at_0.extract(wide).keypoints)
+    assert not np.array_equal(per_width.extract(wide).keypoints, at_minus_1.extract(wide).keypoints)
+    assert np.array_equal(per_width.extract(small).keypoints, at_minus_1.extract(small).keypoints)
+    assert FeaturesConfig().octave_for_width(1279) == -1 and FeaturesConfig().octave_for_width(1280) == 0
+    assert FeaturesConfig(first_octave=-1).octave_for_width(1600) == -1
+    for bad, field in (
+        ({"first_octave": -2}, "first_octave"),
+        ({"upsample_below_px": 0}, "upsample_below_px"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            FeaturesConfig(**bad)  # type: ignore[arg-type]
+
+
 def test_extraction_processes_store_what_one_process_stores(
     dataset_root: Path, workspace: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
