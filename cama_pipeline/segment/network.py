@@ -143,8 +143,8 @@ class SegmentationNet(nn.Module):
     ) -> list[np.ndarray]:
         """(H, W) uint8 class ids of each (H, W, 3) RGB uint8 image (sizes may differ; same-size images are
         run as one batch). `flip_average`: the class probabilities of the image and of its mirror image averaged
-        (twice the cost; the network trained on mirrored crops, and the two views' errors on thin paint and kerbs
-        differ)."""
+        at the network's size, then resized to the image's once (twice the network's cost; the network trained on
+        mirrored crops, and the two views' errors on thin paint and kerbs differ)."""
         device = device or next(self.parameters()).device
         out: list[np.ndarray | None] = [None] * len(images)
         by_size: dict[tuple[int, int], list[int]] = {}
@@ -155,10 +155,11 @@ class SegmentationNet(nn.Module):
         for (height, width), indices in by_size.items():
             batch = torch.from_numpy(np.stack([images[i] for i in indices])).to(device)
             rgb = batch.permute(0, 3, 1, 2).float() / 255.0
-            scores = self.logits_at_size(rgb, (height, width))
-            if flip_average:
-                mirrored = self.logits_at_size(rgb.flip(-1), (height, width)).flip(-1)
+            scores = self.input_logits(rgb)
+            if flip_average:  # averaged at the network's size: one resize, not two, of an image's scores
+                mirrored = self.input_logits(rgb.flip(-1)).flip(-1)
                 scores = scores.softmax(dim=1) + mirrored.softmax(dim=1)
+            scores = _resized(scores, (height, width))
             labels = (
                 scores.max(dim=1).indices.to(torch.uint8).cpu().numpy()
             )  # argmax(dim=1) is ~8x slower on CPU
@@ -168,6 +169,11 @@ class SegmentationNet(nn.Module):
 
     def logits_at_size(self, rgb: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
         """Logits of (B, 3, h, w) RGB in [0, 1] run at the configured input width, resized to `size`."""
+        return _resized(self.input_logits(rgb), size)
+
+    def input_logits(self, rgb: torch.Tensor) -> torch.Tensor:
+        """Logits of (B, 3, h, w) RGB in [0, 1] at the size the network runs it: `input_width_px` wide, the
+        image's aspect kept (padded to a multiple of 32 for the network, cropped back)."""
         height, width = rgb.shape[-2:]
         in_w = self.config.input_width_px
         in_h = max(32, int(round(height * in_w / width)))
@@ -181,10 +187,14 @@ class SegmentationNet(nn.Module):
         padded_h = math.ceil(in_h / 32) * 32
         if padded_h != in_h:
             x = F.pad(x, (0, 0, 0, padded_h - in_h), mode="replicate")
-        logits = self(x.contiguous(memory_format=torch.channels_last))[..., :in_h, :]
-        if (in_h, in_w) == tuple(size):
-            return logits
-        return F.interpolate(logits, size=size, mode="bilinear", align_corners=False)
+        return self(x.contiguous(memory_format=torch.channels_last))[..., :in_h, :]
+
+
+def _resized(scores: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """(B, C, h, w) scores resized bilinearly to `size` (unchanged when they have it)."""
+    if tuple(scores.shape[-2:]) == tuple(size):
+        return scores
+    return F.interpolate(scores, size=size, mode="bilinear", align_corners=False)
 
 
 def _fold_batch_norms(sequence: nn.Sequential) -> None:
