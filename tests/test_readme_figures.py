@@ -3706,6 +3706,17 @@ def test_segmenter_calibration_on_fresh_sites_table() -> None:
         assert digest == expected[:16], name
 
 
+def _check_speed_pairs(t: MarkdownTable, columns: dict[str, str], per_image: str, plain_row: str) -> None:
+    """A table of `bench/segment_speed.py` runs before and after a change: each column its file's median
+    seconds (plain, and mirror averaged) for the table's image size."""
+    for column, name in columns.items():
+        assert_names_source(t, name, "bench/segment_speed.py")
+        figures = results(name)["checkpoints"]["gpu-long2"]
+        index = t.header.index(column)
+        assert_shows(row(t, plain_row)[index], [figures[per_image]], column)
+        assert_shows(row(t, "mirror averaged")[index], [figures["flip_average_seconds"]], column)
+
+
 def test_segmenting_faster_table() -> None:
     """The code before the inference copy and after it, two pairs of runs: each cell its file's median, the copy's
     ratio to the network as trained in the same rounds, and the mirror averaging under issue 23's 0.15 s now."""
@@ -3716,22 +3727,38 @@ def test_segmenting_faster_table() -> None:
         "before, second pair": "segment_speed_before_inference_2.json",
         "now, second pair": "segment_speed_inference_2.json",
     }
+    _check_speed_pairs(
+        t, columns, "seconds_per_512x288_image", "plain: the network before, the stage's copy now"
+    )
     for column, name in columns.items():
-        assert_names_source(t, name, "bench/segment_speed.py")
         figures = results(name)["checkpoints"]["gpu-long2"]
-        index = t.header.index(column)
-        assert_shows(
-            row(t, "plain: the network before, the stage's copy now")[index],
-            [figures["seconds_per_512x288_image"]],
-            column,
-        )
-        assert_shows(row(t, "mirror averaged")[index], [figures["flip_average_seconds"]], column)
-        as_trained = row(t, "plain: the network as trained")[index]
+        as_trained = row(t, "plain: the network as trained")[t.header.index(column)]
         if column.startswith("now"):
             assert_shows(as_trained, [figures["as_trained_seconds"], figures["ratio_to_as_trained"]], column)
             assert figures["flip_average_target_met"] and figures["ratio_to_as_trained"] < 1
         else:
             assert "as_trained_seconds" not in figures and as_trained == "not timed"
+
+
+def test_segmenting_1600_averaged_once_table() -> None:
+    """Mirror averaging at 1600x900 before and after the probabilities are summed at the network's size, and the
+    prose's ranges."""
+    t = table("seconds per 1600x900 image on one thread, median of 5 rounds", "resizes the sum once")
+    columns = {
+        "before, first pair": "segment_speed_1600_before.json",
+        "now, first pair": "segment_speed_1600.json",
+        "before, second pair": "segment_speed_1600_before_2.json",
+        "now, second pair": "segment_speed_1600_2.json",
+    }
+    _check_speed_pairs(t, columns, "seconds_per_1600x900_image", "plain: the stage's copy")
+    for name in columns.values():
+        assert results(name)["image_size"] == {"width": 1600, "height": 900}
+    flip = {
+        name: results(name)["checkpoints"]["gpu-long2"]["flip_average_seconds"] for name in columns.values()
+    }
+    assert max(flip["segment_speed_1600.json"], flip["segment_speed_1600_2.json"]) < 0.5 * min(
+        flip["segment_speed_1600_before.json"], flip["segment_speed_1600_before_2.json"]
+    )
 
 
 MIRRORED_SITES = {
