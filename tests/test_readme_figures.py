@@ -551,6 +551,50 @@ def test_export_table_both_protocols() -> None:
         assert_shows(" | ".join(cells[5:9]), _sre_figures(recorded["cama"][key]), f"export cama {label!r}")
 
 
+SIFT_OCTAVE_RUNS = {
+    "tiny site: -1": "end_to_end_1600_octave_minus_1.json",
+    "tiny site: per width (0)": "end_to_end_1600_per_width.json",
+    "9401: -1": "end_to_end_1600_9401_octave_minus_1.json",
+    "9401: per width (0)": "end_to_end_1600_9401_per_width.json",
+}
+
+
+def test_sift_octave_table() -> None:
+    """The whole path at 1600x900 with SIFT's first octave forced to -1 and chosen per width, on two sites: every
+    cell its run's figure, each run of the product's predicted masks and element-mask network."""
+    t = table("whole path at 1600x900, mask-free, by SIFT's first octave", "bench/end_to_end.py")
+    for column, name in SIFT_OCTAVE_RUNS.items():
+        assert_names_source(t, name, "bench/end_to_end.py")
+        run = results(name)
+        assert run["first_octave"] == (-1 if column.endswith(": -1") else "per width")
+        assert "--masks predicted --proposer masks" in run["command"]
+        index = t.header.index(column)
+        expected: dict[str, list[Expected]] = {
+            f"{stage} (s per key frame)": [run["stage_seconds_per_keyframe"][stage]]
+            for stage in NATIVE_RESOLUTION_STAGES
+        }
+        expected["whole path (s per key frame)"] = [sum(run["stage_seconds"].values()) / run["keyframes"]]
+        expected["SfM position error, gauge-free (cm)"] = [run["poses"]["sfm"]["gauge_free_position_cm"]]
+        expected["elevation RMSE (cm)"] = [run["elevation"]["rmse_cm"]]
+        ap = run["proposals_ap"]
+        expected["proposal mAP, all truth / observed truth"] = [
+            ap["all_truth"]["mean_ap"],
+            ap["observed_truth"]["mean_ap"],
+        ]
+        expected["scripted annotator, speed-up over drawing: world / own frame"] = [
+            run["annotator"]["speed_up"],
+            run["annotator_in_reconstruction_frame"]["speed_up"],
+        ]
+        expected["SRE 960x540 of the proposals (px)"] = [run["sre"]["c1_proposals"]["sre_ref_px"]]
+        for label, values in expected.items():
+            assert_shows(row(t, label)[index], values, f"SIFT octave {column} {label!r}")
+    # the prose's reading: SIFT at the images' own scale takes 0.41 of the time on both sites
+    for site in ("tiny site", "9401"):
+        before = results(SIFT_OCTAVE_RUNS[f"{site}: -1"])["stage_seconds_per_keyframe"]["features"]
+        after = results(SIFT_OCTAVE_RUNS[f"{site}: per width (0)"])["stage_seconds_per_keyframe"]["features"]
+        assert round(after / before, 2) == 0.41, site
+
+
 NATIVE_RESOLUTION_STAGES = ("segment", "features", "sfm", "surface")
 
 
