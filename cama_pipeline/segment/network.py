@@ -14,7 +14,7 @@ before it and the weights in channels-last order, which oneDNN's CPU convolution
 the trained network's up to float rounding.
 
 `SegmentationNet.predict` takes RGB uint8 images of any size: it resizes them to the configured input width
-(aspect kept, padded to a multiple of 32), runs the network and resizes the logits back.
+(aspect kept, padded to a multiple of 32), runs the network and resizes its scores back.
 """
 
 import copy
