@@ -595,6 +595,35 @@ def test_sift_octave_table() -> None:
         assert round(after / before, 2) == 0.41, site
 
 
+def test_sift_octave_annotator_booking_sentence() -> None:
+    """The own-frame annotator's loss per width, booked by class: one divider on the tiny site, one crossing on
+    9401, each worth the seconds the prose gives."""
+    runs = {
+        run["site"].rsplit("/", 1)[1]: run
+        for run in results("annotator_seconds_1600_octave.json")["per_site"]
+    }
+
+    def seconds(folder: str, cls: str) -> float:
+        return sum(action["seconds"] for action in runs[folder]["booked"][cls].values())
+
+    def counts(folder: str, cls: str) -> dict[str, int]:
+        return {action: entry["count"] for action, entry in runs[folder]["booked"][cls].items()}
+
+    tiny, fresh = "oct-tiny-1600-", "oct-tiny-random-1600-9401-"
+    assert counts(tiny + "octave-minus-1", "divider") == {"accept": 7, "fix": 1}
+    assert counts(tiny + "per-width", "divider") == {"accept": 7, "reject": 1, "drawn": 1}
+    assert counts(fresh + "octave-minus-1", "ped_crossing") == {"fix": 3, "accept": 1}
+    assert counts(fresh + "per-width", "ped_crossing") == {"fix": 4}
+    before = runs[tiny + "octave-minus-1"]["booked"]["divider"]["fix"]["seconds"]
+    after = sum(runs[tiny + "per-width"]["booked"]["divider"][a]["seconds"] for a in ("reject", "drawn"))
+    more = seconds(fresh + "per-width", "ped_crossing") - seconds(fresh + "octave-minus-1", "ped_crossing")
+    text = " ".join(readme_text().split())
+    assert (
+        f"one divider fixed as proposed ({before:.1f} s) is rejected and drawn per width ({after:.1f} s), and on "
+        f"9401 one crossing accepted as proposed is fixed per width ({more:.1f} s more)"
+    ) in text
+
+
 NATIVE_RESOLUTION_STAGES = ("segment", "features", "sfm", "surface")
 
 
